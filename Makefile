@@ -1,0 +1,45 @@
+# SPDX-License-Identifier: MIT
+# The two commands of the README:  `make demo`  and  `make test`.  Both install missing Debian packages.
+BUILD  ?= build
+ASAN   ?= build-asan
+MESON  ?= meson
+PY     ?= /usr/bin/python3
+
+.PHONY: all deps demo test test-release test-asan bench clean
+
+all: $(BUILD)/build.ninja
+	ninja -C $(BUILD)
+
+deps:
+	@bash .ci/deps.sh
+
+$(BUILD)/build.ninja: | deps
+	$(MESON) setup $(BUILD) -Dbuildtype=release -Dwerror=true -Dlong_tests=true
+
+$(ASAN)/build.ninja: | deps
+	$(MESON) setup $(ASAN) -Dbuildtype=debugoptimized -Dwerror=true -Dlong_tests=false \
+	    -Db_sanitize=address,undefined -Db_lundef=false
+
+# The main job on the built-in default scene (paper-fig1): one force curve and its pull-off summary.
+demo: all
+	./$(BUILD)/src/cli/vafm run
+
+# Every test: the optimised build at full statistics, then the sanitizer build (ASan + UBSan).
+test: deps
+	@$(MAKE) --no-print-directory test-release test-asan; \
+	$(PY) .ci/summary.py $(BUILD) $(ASAN)
+
+test-release: all
+	-$(MESON) test -C $(BUILD) --print-errorlogs --num-processes 2
+
+test-asan: $(ASAN)/build.ninja
+	ninja -C $(ASAN)
+	-ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \
+	    $(MESON) test -C $(ASAN) --print-errorlogs --num-processes 2 --timeout-multiplier 3
+
+# Benchmarks (speed and work-precision reports under $(BUILD)/bench/).
+bench: all
+	$(MESON) test -C $(BUILD) --benchmark --verbose
+
+clean:
+	rm -rf $(BUILD) $(ASAN)

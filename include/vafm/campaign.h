@@ -1,0 +1,63 @@
+/* SPDX-License-Identifier: MIT */
+/**
+ * @file campaign.h
+ * Many curves on all cores. A campaign is a grid of points (T × v × k over a base scene) with N curves
+ * each. Curve i of point j has the global index j·N + i, which is its random stream: the results do not
+ * depend on the thread count. Results reach the caller in index order, from one thread at a time.
+ */
+#ifndef VAFM_CAMPAIGN_H
+#define VAFM_CAMPAIGN_H
+
+#include "vafm/common.h"
+#include "vafm/params.h"
+#include "vafm/sim.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** The grid. A list left NULL (count 0) means "the base scene's value". */
+typedef struct vafm_campaign_spec {
+    const double *T_K;          /**< temperatures, K */
+    size_t n_T;
+    const double *v_m_per_s;    /**< piezo speeds (approach and retract), m/s */
+    size_t n_v;
+    const double *k_N_per_m;    /**< spring constants, N/m */
+    size_t n_k;
+    uint64_t curves_per_point;  /**< N ≥ 1 */
+    uint64_t first_curve;       /**< skip global indices below this (resume); usually 0 */
+    int threads;                /**< worker threads, 0: all online cores */
+    int keep_samples;           /**< 1: hand each curve's samples to the callback */
+    uint8_t reserved[32];
+} vafm_campaign_spec;
+
+/** One finished curve. */
+typedef struct vafm_campaign_curve {
+    uint64_t index;            /**< global curve index */
+    size_t point;              /**< grid point (T index slowest, then v, then k) */
+    const vafm_params *params; /**< the scene of that point */
+    int status;                /**< 0, or the VAFM_E* code the curve ended with (e.g. VAFM_EUNSTABLE) */
+    vafm_curve_result result;  /**< observables */
+    vafm_samples samples;      /**< all samples of the curve when keep_samples, else n = 0 */
+} vafm_campaign_curve;
+
+/** Called for each curve in global index order, never concurrently. @return 0 to go on, non-zero to
+ *  stop the campaign (VAFM_EABORT) after the curves in flight. */
+typedef int (*vafm_campaign_fn)(void *user, const vafm_campaign_curve *c);
+
+/** @return the number of grid points of a spec. */
+VAFM_API size_t vafm_campaign_points(const vafm_campaign_spec *spec);
+
+/** Fill `out` with the scene of grid point `point`. */
+VAFM_API int vafm_campaign_point_params(const vafm_params *base, const vafm_campaign_spec *spec,
+                                        size_t point, vafm_params *out);
+
+/** Run a campaign. Every point's scene is validated before any curve runs (err names the point).
+ *  @return 0, VAFM_EABORT, or another negative VAFM_E* code. */
+VAFM_API int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec *spec,
+                               vafm_campaign_fn fn, void *user, vafm_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

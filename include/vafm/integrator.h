@@ -1,0 +1,46 @@
+/* SPDX-License-Identifier: MIT */
+/**
+ * @file integrator.h
+ * Integrators as type objects (GSL style). Their step loops are internal; a scene selects one by
+ * pointer (vafm_params.integrator) or by name.
+ */
+#ifndef VAFM_INTEGRATOR_H
+#define VAFM_INTEGRATOR_H
+
+#include "vafm/common.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+struct vafm_kernel;
+typedef struct vafm_integrator_type vafm_integrator_type;
+
+struct vafm_integrator_type {
+    const char *name;        /**< "gjf", "baoab", "paper-vv", "brownian" */
+    const char *description; /**< one line for --help */
+    int overdamped;          /**< 1: no inertia (the mass only sets the friction ζ = mη) */
+    /** Hard stability limit: ω_max·dt (underdamped) or K_max·dt/ζ (overdamped) must stay below it. */
+    double stability_limit;
+    /** Internal: prepare cached forces after the state changed outside the loop. */
+    void (*prepare)(struct vafm_kernel *K);
+    /** Internal: advance up to n steps; stops early after a step that changed the contact state.
+     *  Never allocates, locks or does I/O. @return the number of steps done. */
+    long (*run)(struct vafm_kernel *K, long n);
+};
+
+VAFM_API extern const vafm_integrator_type *const vafm_integrator_gjf;      /**< Grønbech-Jensen–Farago 2013 */
+VAFM_API extern const vafm_integrator_type *const vafm_integrator_baoab;    /**< Leimkuhler–Matthews 2013 */
+VAFM_API extern const vafm_integrator_type *const vafm_integrator_paper_vv; /**< the paper's VV, Eq. 7 */
+VAFM_API extern const vafm_integrator_type *const vafm_integrator_brownian; /**< overdamped Euler, Eq. 12 */
+
+/** @return the integrator named `name`, or NULL. */
+VAFM_API const vafm_integrator_type *vafm_integrator_find(const char *name);
+/** Number of integrators and access by index (for listings). */
+VAFM_API int vafm_integrator_count(void);
+VAFM_API const vafm_integrator_type *vafm_integrator_at(int i);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

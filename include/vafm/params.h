@@ -1,0 +1,131 @@
+/* SPDX-License-Identifier: MIT */
+/**
+ * @file params.h
+ * Scene parameters in SI, named presets, validation, and the field table that the CLI, JSON scene
+ * files, the daemon and the HDF5 provenance all read (one place lists names, units, ranges, docs).
+ *
+ * The core works in reduced units (units.h); conversion lives in units.c only.
+ */
+#ifndef VAFM_PARAMS_H
+#define VAFM_PARAMS_H
+
+#include "vafm/common.h"
+#include "vafm/contact.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct vafm_integrator_type vafm_integrator_type;
+
+/** How the approach ends. */
+enum vafm_trigger {
+    VAFM_TRIGGER_FORCE = 0,  /**< when the (output-filtered) force reaches setpoint_N */
+    VAFM_TRIGGER_HEIGHT = 1, /**< when the piezo height reaches trigger_height_m */
+};
+
+/** Random force distribution. */
+enum vafm_noise {
+    VAFM_NOISE_GAUSSIAN = 0, /**< normal deviates (exact for the OU steps of gjf/baoab) */
+    VAFM_NOISE_UNIFORM = 1,  /**< uniform deviates of matched variance (the paper's Eq. 7) */
+};
+
+/** How output samples are formed from the simulation steps. */
+enum vafm_antialias {
+    VAFM_ANTIALIAS_MEAN = 0,  /**< average over the sample interval (a box-car anti-alias filter) */
+    VAFM_ANTIALIAS_POINT = 1, /**< instantaneous value at the end of the interval */
+};
+
+/** A scene: sample, tip, cantilever, ramp protocol, output and numerics. All SI. */
+typedef struct vafm_params {
+    /* sample and tip */
+    double E_star_Pa;      /**< contact modulus E*, Pa */
+    double R_m;            /**< tip radius R, m */
+    double gamma_J_per_m2; /**< surface energy γ of the JKR model (the paper's γ), J/m² */
+    const vafm_contact_type *contact; /**< contact model (jkr, hertz, none) */
+    /* cantilever */
+    double k_N_per_m;      /**< spring constant k, N/m */
+    double m_kg;           /**< effective mass m, kg */
+    double eta_per_s;      /**< friction rate η of the cantilever in its medium (damping mη), 1/s */
+    double eta_cont_per_s; /**< extra friction rate while in contact (the paper's Γ_cont channel), 1/s */
+    double T_K;            /**< temperature, K (0: athermal, no random numbers drawn) */
+    /* ramp protocol */
+    double v_approach_m_per_s; /**< piezo approach speed, m/s */
+    double v_retract_m_per_s;  /**< piezo retract speed, m/s */
+    double start_height_m; /**< piezo height at t = 0 above the contact point (spring relaxed, u = 0), m */
+    int trigger;           /**< enum vafm_trigger */
+    double setpoint_N;     /**< force trigger: repulsive force that ends the approach, N */
+    double trigger_height_m; /**< height trigger: piezo height that ends the approach, m */
+    double z_range_m;      /**< approach travel limit, m (0: automatic from start height and setpoint) */
+    double dwell_s;        /**< pause between approach and retract, s */
+    double retract_margin_m; /**< retract distance after detachment before the curve ends, m */
+    double retract_max_m;  /**< retract travel limit, m (0: automatic: 4× the travel to detach) */
+    /* output */
+    double sample_rate_Hz; /**< output sample rate, Hz */
+    int antialias;         /**< enum vafm_antialias */
+    double tune_duration_s; /**< thermal tune: recorded duration, s */
+    /* numerics */
+    const vafm_integrator_type *integrator; /**< gjf (default), baoab, paper-vv, brownian */
+    int noise;             /**< enum vafm_noise */
+    double dt_s;           /**< time step, s (0: automatic from omega_dt, the paper's Eq. 8 rule) */
+    double omega_dt;       /**< automatic step: ω_max·dt at the stiffest contact reached (paper: 2π/40) */
+    int free_exact;        /**< 1: propagate the free cantilever exactly (linear SDE), 0: plain steps */
+    uint64_t seed;         /**< random seed; (seed, curve index) reproduces a curve bit for bit */
+    uint8_t reserved[32];
+} vafm_params;
+
+/** Fill p with the built-in default scene (preset "paper-fig1"). */
+VAFM_API void vafm_params_default(vafm_params *p);
+
+/** Number of presets; names and one-line descriptions by index. */
+VAFM_API int vafm_preset_count(void);
+VAFM_API const char *vafm_preset_name(int i);
+VAFM_API const char *vafm_preset_description(int i);
+
+/** Overwrite p with preset `name`. @return 0 or VAFM_ENOTFOUND (err names the known presets). */
+VAFM_API int vafm_params_preset(vafm_params *p, const char *name, vafm_error *err);
+
+/** Check every field and the combination (e.g. time step against the stability limit).
+ *  @return 0 or VAFM_EINVAL / VAFM_EUNSTABLE with err naming the field, its value and the range. */
+VAFM_API int vafm_params_validate(const vafm_params *p, vafm_error *err);
+
+/** Kind of a parameter in the field table. */
+enum vafm_param_kind {
+    VAFM_PARAM_REAL = 0, /**< double, with unit and range */
+    VAFM_PARAM_CHOICE,   /**< one of a list of names (integrator, contact, noise, trigger, ...) */
+    VAFM_PARAM_SEED,     /**< unsigned 64-bit integer */
+    VAFM_PARAM_BOOL,     /**< 0 or 1 */
+};
+
+/** One row of the field table. */
+typedef struct vafm_param_info {
+    const char *name;    /**< field name as used in JSON, CLI (--name=value) and files */
+    int kind;            /**< enum vafm_param_kind */
+    const char *unit;    /**< SI unit ("N/m"), "" if dimensionless */
+    double min, max;     /**< allowed closed range (REAL) */
+    const char *choices; /**< CHOICE: names separated by '|' */
+    const char *doc;     /**< one line of documentation */
+} vafm_param_info;
+
+/** @return the number of rows of the field table. */
+VAFM_API int vafm_param_count(void);
+/** @return row i, or NULL. */
+VAFM_API const vafm_param_info *vafm_param_at(int i);
+/** @return the row named `name`, or NULL. */
+VAFM_API const vafm_param_info *vafm_param_find(const char *name);
+
+/** Set a field from text ("6.3e-3", "gjf", "true"). Checks the field's own range.
+ *  @return 0, VAFM_ENOTFOUND (no such field) or VAFM_EINVAL, with err filled. */
+VAFM_API int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_error *err);
+
+/** Format a field's value as text into buf (REAL with %.17g). @return 0 or VAFM_ENOTFOUND. */
+VAFM_API int vafm_params_get(const vafm_params *p, const char *name, char *buf, size_t len);
+
+/** Serialise every field as one JSON object {"name": value, ...} into buf (NUL-terminated).
+ *  @return the length written, or VAFM_EINVAL when len is too small. */
+VAFM_API int vafm_params_to_json(const vafm_params *p, char *buf, size_t len);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

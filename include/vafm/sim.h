@@ -1,0 +1,110 @@
+/* SPDX-License-Identifier: MIT */
+/**
+ * @file sim.h
+ * The simulation object and its scenes: a force curve (approach → trigger → dwell → retract) and a
+ * thermal tune (free cantilever at rest). Scenes are resumable state machines so that a paced caller
+ * (the daemon) can advance them block by block; vafm_sim_curve() runs one to the end.
+ *
+ * Output channels, per sample (SI): time, piezo height (decreases toward the sample), deflection
+ * (positive away from the sample), force = k·deflection (positive repulsive), true tip position
+ * (= height + deflection, the tip's height above the undeformed surface) and segment.
+ * The simulation does no I/O: samples go to a caller's sink callback in blocks.
+ */
+#ifndef VAFM_SIM_H
+#define VAFM_SIM_H
+
+#include "vafm/common.h"
+#include "vafm/params.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct vafm_sim vafm_sim;
+
+/** Segment labels of a force curve (the afmformats convention, plus dwell = 2, vafm's choice). */
+enum vafm_segment { VAFM_SEG_APPROACH = 0, VAFM_SEG_RETRACT = 1, VAFM_SEG_DWELL = 2, VAFM_SEG_TUNE = 3 };
+
+/** A block of output samples. Arrays are owned by the simulation and valid during the callback. */
+typedef struct vafm_samples {
+    size_t n;                   /**< number of samples in the block */
+    uint64_t first;             /**< index of the first sample in the run */
+    const double *time_s;       /**< time since the run started, s */
+    const double *height_m;     /**< piezo height above the contact point, m */
+    const double *deflection_m; /**< cantilever deflection, m, positive away from the sample */
+    const double *force_N;      /**< k·deflection, N, positive repulsive */
+    const double *tip_m;        /**< true tip height above the undeformed surface, m */
+    const uint8_t *segment;     /**< enum vafm_segment */
+} vafm_samples;
+
+/** Receives sample blocks. @return 0 to go on, non-zero to stop the run (VAFM_EABORT). */
+typedef int (*vafm_sample_fn)(void *user, const vafm_samples *block);
+
+/** Flags of a curve result. */
+enum vafm_curve_flag {
+    VAFM_CURVE_NO_CONTACT = 1,      /**< the body never touched the sample */
+    VAFM_CURVE_EARLY_DETACH = 2,    /**< contact was lost before the retract began (thermal escape) */
+    VAFM_CURVE_NO_DETACH = 4,       /**< still in contact at the retract travel limit */
+    VAFM_CURVE_NO_TRIGGER = 8,      /**< the approach reached z_range_m without the trigger */
+    VAFM_CURVE_RECONTACT = 16,      /**< the body touched again during the retract after detaching */
+};
+
+/** Per-curve observables (physics notes, "what pull-off force means"). Forces: tensile magnitudes
+ *  (positive numbers), N. Heights: piezo heights above the contact point, m. */
+typedef struct vafm_curve_result {
+    uint64_t index;           /**< curve index (the RNG stream) */
+    int flags;                /**< enum vafm_curve_flag, or-ed */
+    double pulloff_sampled_N; /**< 1: most tensile output sample of the retract (what a user reads) */
+    double pulloff_spring_N;  /**< 2: most tensile spring force of any step of the retract */
+    double detach_force_N;    /**< 3: spring force when the body passed u_detach (last detachment) */
+    double detach_height_m;   /**< 3: piezo height then */
+    double detach_eq_force_N; /**< 4: noise-free equilibrium spring force at that piezo height
+                                   (NaN where no equilibrium exists: beyond the instability) */
+    double detach_time_s;     /**< time from the start of the retract to the detachment, s */
+    double touch_time_s;      /**< time of the first touch, s (NaN: none) */
+    double touch_height_m;    /**< piezo height at the first touch, m */
+    double retract_start_s;   /**< time the retract began, s */
+    double duration_s;        /**< simulated duration of the curve, s */
+    uint64_t samples;         /**< output samples written */
+    uint64_t steps;           /**< integrator steps taken (all kinds) */
+    uint64_t steps_contact;   /**< of which in contact */
+    uint64_t steps_free;      /**< of which exact free-cantilever steps */
+} vafm_curve_result;
+
+/** Create a simulation for a validated scene. @return 0, VAFM_EINVAL/VAFM_EUNSTABLE (err filled) or
+ *  VAFM_ENOMEM. On success *out is owned by the caller (vafm_sim_destroy). */
+VAFM_API int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err);
+
+/** Destroy a simulation; NULL-safe; sets *s to NULL. */
+VAFM_API void vafm_sim_destroy(vafm_sim **s);
+
+/** The scene the simulation was built with (a copy). */
+VAFM_API const vafm_params *vafm_sim_params(const vafm_sim *s);
+
+/** The time step in use, s, and whether out-of-contact steps are exact. */
+VAFM_API double vafm_sim_dt(const vafm_sim *s);
+
+/** Start force curve `index` (its random stream). Any running scene is discarded. */
+VAFM_API int vafm_sim_curve_begin(vafm_sim *s, uint64_t index);
+
+/** Start a thermal tune (free cantilever, piezo at start height) of p->tune_duration_s. */
+VAFM_API int vafm_sim_tune_begin(vafm_sim *s, uint64_t index);
+
+/** Advance the running scene by up to max_samples output samples, handing them to fn (may be NULL).
+ *  Never allocates. @return 1 while the scene goes on, 0 when it ended, or a negative VAFM_E* code. */
+VAFM_API int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user);
+
+/** The result of the last (or running) curve. */
+VAFM_API int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out);
+
+/** Run force curve `index` to the end. fn may be NULL. @return 0 or a negative VAFM_E* code. */
+VAFM_API int vafm_sim_curve(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user,
+                            vafm_curve_result *out);
+
+/** Run a thermal tune to the end. */
+VAFM_API int vafm_sim_tune(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

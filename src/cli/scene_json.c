@@ -1,0 +1,180 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * JSON scene files: parse with jansson, then hand every value to vafm_params_set as text, so that the
+ * library stays the only judge of names, ranges and choices. Values are turned into text without loss
+ * (%.17g for reals), which is what makes `vafm params --json` → --scene an exact round trip.
+ * JSON types are checked per parameter kind first: a string where a number belongs is an error here,
+ * not a silent conversion.
+ */
+#include <stdio.h>
+#include <string.h>
+
+#include <jansson.h>
+
+#include "cli/scene_json.h"
+
+void vafm_cli_param_allowed(const vafm_param_info *info, char *buf, size_t len)
+{
+    switch (info->kind) {
+    case VAFM_PARAM_REAL:
+        snprintf(buf, len, "a number in [%.6g, %.6g]%s%s", info->min, info->max, info->unit[0] ? " " : "",
+                 info->unit);
+        break;
+    case VAFM_PARAM_CHOICE: snprintf(buf, len, "one of %s", info->choices); break;
+    case VAFM_PARAM_BOOL: snprintf(buf, len, "a boolean (true|false|1|0)"); break;
+    case VAFM_PARAM_SEED: snprintf(buf, len, "an integer in [0, 2^64 - 1]"); break;
+    default: snprintf(buf, len, "(unknown kind)"); break;
+    }
+}
+
+static const char *s_type_name(const json_t *v)
+{
+    switch (json_typeof(v)) {
+    case JSON_OBJECT: return "an object";
+    case JSON_ARRAY: return "an array";
+    case JSON_STRING: return "a string";
+    case JSON_INTEGER: return "an integer";
+    case JSON_REAL: return "a real number";
+    case JSON_TRUE:
+    case JSON_FALSE: return "a boolean";
+    case JSON_NULL: return "null";
+    default: return "an unknown JSON type";
+    }
+}
+
+static void s_fail(vafm_error *err, int code, const char *field, const char *path, const char *what)
+{
+    if (!err)
+        return;
+    err->code = code;
+    snprintf(err->field, sizeof err->field, "%s", field);
+    /* The file name is cut rather than the reason when the two do not fit. */
+    int room = (int)sizeof err->message - (int)strlen(what) - 3;
+    snprintf(err->message, sizeof err->message, "%.*s: %s", room > 16 ? room : 16, path, what);
+}
+
+/* The text form of a JSON value for a parameter of kind `kind`, or NULL if the JSON type is wrong. */
+static const char *s_value_text(const json_t *v, int kind, char *buf, size_t len)
+{
+    switch (kind) {
+    case VAFM_PARAM_REAL:
+        if (json_is_real(v))
+            snprintf(buf, len, "%.17g", json_real_value(v));
+        else if (json_is_integer(v))
+            snprintf(buf, len, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
+        else
+            return NULL;
+        return buf;
+    case VAFM_PARAM_SEED:
+        /* Strings carry seeds beyond jansson's signed 64-bit integers. */
+        if (json_is_integer(v))
+            snprintf(buf, len, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
+        else if (json_is_string(v))
+            snprintf(buf, len, "%s", json_string_value(v));
+        else
+            return NULL;
+        return buf;
+    case VAFM_PARAM_BOOL:
+        if (json_is_boolean(v))
+            snprintf(buf, len, "%s", json_is_true(v) ? "true" : "false");
+        else if (json_is_integer(v))
+            snprintf(buf, len, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
+        else
+            return NULL;
+        return buf;
+    case VAFM_PARAM_CHOICE:
+        if (!json_is_string(v))
+            return NULL;
+        snprintf(buf, len, "%s", json_string_value(v));
+        return buf;
+    default: return NULL;
+    }
+}
+
+static int s_apply_key(vafm_params *p, const char *path, const char *key, const json_t *v, vafm_error *err)
+{
+    char what[sizeof err->message];
+    const vafm_param_info *info = vafm_param_find(key);
+    if (!info) {
+        snprintf(what, sizeof what, "unknown key '%.64s' (not a parameter; see vafm --help)", key);
+        s_fail(err, VAFM_ENOTFOUND, key, path, what);
+        return VAFM_ENOTFOUND;
+    }
+    char text[256], allowed[160];
+    if (!s_value_text(v, info->kind, text, sizeof text)) {
+        vafm_cli_param_allowed(info, allowed, sizeof allowed);
+        snprintf(what, sizeof what, "key '%s' is %s, but must be %s", key, s_type_name(v), allowed);
+        s_fail(err, VAFM_EINVAL, key, path, what);
+        return VAFM_EINVAL;
+    }
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    int r = vafm_params_set(p, key, text, &e);
+    if (r) {
+        snprintf(what, sizeof what, "key '%s': %.200s", key, e.message);
+        s_fail(err, r, key, path, what);
+    }
+    return r;
+}
+
+static int s_apply_preset(vafm_params *p, const char *path, const json_t *root, char *preset, size_t preset_len,
+                          vafm_error *err)
+{
+    const json_t *v = json_object_get(root, "preset");
+    if (!v)
+        return 0;
+    char what[sizeof err->message];
+    if (!json_is_string(v)) {
+        snprintf(what, sizeof what, "key 'preset' is %s, but must be a preset name (see vafm presets)",
+                 s_type_name(v));
+        s_fail(err, VAFM_EINVAL, "preset", path, what);
+        return VAFM_EINVAL;
+    }
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    int r = vafm_params_preset(p, json_string_value(v), &e);
+    if (r) {
+        snprintf(what, sizeof what, "key 'preset': %.200s", e.message);
+        s_fail(err, r, "preset", path, what);
+        return r;
+    }
+    if (preset)
+        snprintf(preset, preset_len, "%s", json_string_value(v));
+    return 0;
+}
+
+int vafm_cli_scene_load(vafm_params *p, const char *path, char *preset, size_t preset_len, vafm_error *err)
+{
+    if (preset && preset_len)
+        preset[0] = '\0';
+    json_error_t je;
+    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
+    char what[sizeof err->message];
+    if (!root) {
+        int io = json_error_code(&je) == json_error_cannot_open_file;
+        if (io)
+            snprintf(what, sizeof what, "cannot read the scene file: %.200s", je.text);
+        else
+            snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
+        s_fail(err, io ? VAFM_EIO : VAFM_EFORMAT, "scene", path, what);
+        return io ? VAFM_EIO : VAFM_EFORMAT;
+    }
+    if (!json_is_object(root)) {
+        snprintf(what, sizeof what, "a scene file must hold one JSON object {\"name\": value, ...}, not %s",
+                 s_type_name(root));
+        s_fail(err, VAFM_EFORMAT, "scene", path, what);
+        json_decref(root);
+        return VAFM_EFORMAT;
+    }
+    int r = s_apply_preset(p, path, root, preset, preset_len, err);
+    const char *key;
+    json_t *v;
+    json_object_foreach(root, key, v) {
+        if (r)
+            break;
+        if (strcmp(key, "preset") != 0)
+            r = s_apply_key(p, path, key, v, err);
+    }
+    json_decref(root);
+    return r;
+}

@@ -1,0 +1,298 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Campaigns on all cores. Workers take global curve indices from a shared counter; each keeps one
+ * vafm_sim per grid point it is working on. Finished curves land in a window of slots (index modulo
+ * the window) and are handed to the caller strictly in index order by whichever worker completes the
+ * next one, with the lock released during the callback. A worker never runs more than `window`
+ * indices ahead of delivery, so memory stays bounded. The per-curve random stream is the global index:
+ * results are identical for any thread count.
+ */
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "vafm/campaign.h"
+#include "core/internal.h"
+
+size_t vafm_campaign_points(const vafm_campaign_spec *spec)
+{
+    size_t nT = spec->n_T ? spec->n_T : 1, nv = spec->n_v ? spec->n_v : 1, nk = spec->n_k ? spec->n_k : 1;
+    return nT * nv * nk;
+}
+
+int vafm_campaign_point_params(const vafm_params *base, const vafm_campaign_spec *spec, size_t point,
+                               vafm_params *out)
+{
+    size_t nv = spec->n_v ? spec->n_v : 1, nk = spec->n_k ? spec->n_k : 1;
+    if (point >= vafm_campaign_points(spec))
+        return VAFM_EINVAL;
+    *out = *base;
+    size_t ik = point % nk, iv = (point / nk) % nv, iT = point / (nk * nv);
+    if (spec->n_T)
+        out->T_K = spec->T_K[iT];
+    if (spec->n_v)
+        out->v_approach_m_per_s = out->v_retract_m_per_s = spec->v_m_per_s[iv];
+    if (spec->n_k)
+        out->k_N_per_m = spec->k_N_per_m[ik];
+    return 0;
+}
+
+typedef struct s_buf {
+    size_t n, cap;
+    double *t, *h, *d, *f, *tip;
+    uint8_t *seg;
+} s_buf;
+
+typedef struct s_slot {
+    int done, status;
+    size_t point;
+    vafm_curve_result res;
+    s_buf buf;
+} s_slot;
+
+typedef struct s_shared {
+    const vafm_params *base;
+    const vafm_campaign_spec *spec;
+    vafm_params *point_params; /* validated scene per point */
+    vafm_campaign_fn fn;
+    void *user;
+    uint64_t N, total, next, deliver_next;
+    size_t window;
+    s_slot *slots;
+    int delivering, stop, error;
+    pthread_mutex_t mu;
+    pthread_cond_t space;
+} s_shared;
+
+static void s_buf_free(s_buf *b)
+{
+    free(b->t);
+    free(b->h);
+    free(b->d);
+    free(b->f);
+    free(b->tip);
+    free(b->seg);
+    memset(b, 0, sizeof *b);
+}
+
+static int s_collect(void *user, const vafm_samples *blk)
+{
+    s_buf *b = user;
+    if (b->n + blk->n > b->cap) {
+        size_t cap = b->cap ? b->cap : 4096;
+        while (cap < b->n + blk->n)
+            cap *= 2;
+        double *t = realloc(b->t, cap * sizeof *t);
+        if (t)
+            b->t = t;
+        double *h = realloc(b->h, cap * sizeof *h);
+        if (h)
+            b->h = h;
+        double *d = realloc(b->d, cap * sizeof *d);
+        if (d)
+            b->d = d;
+        double *f = realloc(b->f, cap * sizeof *f);
+        if (f)
+            b->f = f;
+        double *tip = realloc(b->tip, cap * sizeof *tip);
+        if (tip)
+            b->tip = tip;
+        uint8_t *seg = realloc(b->seg, cap * sizeof *seg);
+        if (seg)
+            b->seg = seg;
+        if (!t || !h || !d || !f || !tip || !seg)
+            return 1; /* out of memory: stop this curve */
+        b->cap = cap;
+    }
+    memcpy(b->t + b->n, blk->time_s, blk->n * sizeof(double));
+    memcpy(b->h + b->n, blk->height_m, blk->n * sizeof(double));
+    memcpy(b->d + b->n, blk->deflection_m, blk->n * sizeof(double));
+    memcpy(b->f + b->n, blk->force_N, blk->n * sizeof(double));
+    memcpy(b->tip + b->n, blk->tip_m, blk->n * sizeof(double));
+    memcpy(b->seg + b->n, blk->segment, blk->n);
+    b->n += blk->n;
+    return 0;
+}
+
+/* Deliver every finished curve at the head of the window. Called and returns with the lock held. */
+static void s_deliver(s_shared *sh)
+{
+    if (sh->delivering)
+        return;
+    sh->delivering = 1;
+    for (;;) {
+        s_slot *sl = &sh->slots[sh->deliver_next % sh->window];
+        if (!sl->done || sh->deliver_next >= sh->total)
+            break;
+        vafm_campaign_curve c;
+        memset(&c, 0, sizeof c);
+        c.index = sh->deliver_next;
+        c.point = sl->point;
+        c.params = &sh->point_params[sl->point];
+        c.status = sl->status;
+        c.result = sl->res;
+        if (sh->spec->keep_samples) {
+            c.samples.n = sl->buf.n;
+            c.samples.first = 0;
+            c.samples.time_s = sl->buf.t;
+            c.samples.height_m = sl->buf.h;
+            c.samples.deflection_m = sl->buf.d;
+            c.samples.force_N = sl->buf.f;
+            c.samples.tip_m = sl->buf.tip;
+            c.samples.segment = sl->buf.seg;
+        }
+        int stop = 0;
+        if (!sh->stop) {
+            pthread_mutex_unlock(&sh->mu);
+            stop = sh->fn ? sh->fn(sh->user, &c) : 0;
+            pthread_mutex_lock(&sh->mu);
+        }
+        if (stop)
+            sh->stop = 1;
+        sl->done = 0;
+        sh->deliver_next++;
+        pthread_cond_broadcast(&sh->space);
+    }
+    sh->delivering = 0;
+}
+
+static void *s_worker(void *arg)
+{
+    s_shared *sh = arg;
+    vafm_sim *sim = NULL;
+    size_t sim_point = (size_t)-1;
+    s_buf local;
+    memset(&local, 0, sizeof local);
+    pthread_mutex_lock(&sh->mu);
+    while (!sh->stop && sh->next < sh->total) {
+        uint64_t idx = sh->next;
+        if (idx >= sh->deliver_next + sh->window) {
+            pthread_cond_wait(&sh->space, &sh->mu);
+            continue;
+        }
+        sh->next++;
+        pthread_mutex_unlock(&sh->mu);
+
+        size_t point = (size_t)(idx / sh->N);
+        int status = 0;
+        vafm_curve_result res;
+        memset(&res, 0, sizeof res);
+        if (point != sim_point) {
+            vafm_sim_destroy(&sim);
+            status = vafm_sim_new(&sim, &sh->point_params[point], NULL);
+            sim_point = status ? (size_t)-1 : point;
+        }
+        local.n = 0;
+        if (!status)
+            status = vafm_sim_curve(sim, idx, sh->spec->keep_samples ? s_collect : NULL, &local, &res);
+
+        pthread_mutex_lock(&sh->mu);
+        s_slot *sl = &sh->slots[idx % sh->window];
+        s_buf tmp = sl->buf;
+        sl->buf = local;
+        local = tmp;
+        sl->res = res;
+        sl->status = status;
+        sl->point = point;
+        sl->done = 1;
+        if (status == VAFM_ENOMEM)
+            sh->error = status;
+        s_deliver(sh);
+    }
+    pthread_cond_broadcast(&sh->space);
+    pthread_mutex_unlock(&sh->mu);
+    vafm_sim_destroy(&sim);
+    s_buf_free(&local);
+    return NULL;
+}
+
+int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec *spec, vafm_campaign_fn fn, void *user,
+                      vafm_error *err)
+{
+    if (!base || !spec) {
+        vafm_err_set(err, VAFM_EINVAL, "", "vafm_campaign_run: no scene or no spec");
+        return VAFM_EINVAL;
+    }
+    if (spec->curves_per_point < 1) {
+        vafm_err_set(err, VAFM_EINVAL, "curves", "curves per point = %llu must be >= 1",
+                     (unsigned long long)spec->curves_per_point);
+        return VAFM_EINVAL;
+    }
+    size_t np = vafm_campaign_points(spec);
+    s_shared sh;
+    memset(&sh, 0, sizeof sh);
+    sh.base = base;
+    sh.spec = spec;
+    sh.fn = fn;
+    sh.user = user;
+    sh.N = spec->curves_per_point;
+    sh.total = sh.N * (uint64_t)np;
+    if (spec->first_curve > sh.total) {
+        vafm_err_set(err, VAFM_EINVAL, "first_curve", "first curve %llu is beyond the campaign's %llu curves",
+                     (unsigned long long)spec->first_curve, (unsigned long long)sh.total);
+        return VAFM_EINVAL;
+    }
+    sh.next = sh.deliver_next = spec->first_curve;
+    sh.point_params = calloc(np, sizeof *sh.point_params);
+    if (!sh.point_params)
+        return VAFM_ENOMEM;
+    for (size_t i = 0; i < np; i++) {
+        vafm_campaign_point_params(base, spec, i, &sh.point_params[i]);
+        int r = vafm_params_validate(&sh.point_params[i], err);
+        if (r) {
+            if (err) {
+                char msg[sizeof err->message + 128];
+                snprintf(msg, sizeof msg, "grid point %zu (T = %g K, v = %g m/s, k = %g N/m): %s", i,
+                         sh.point_params[i].T_K, sh.point_params[i].v_retract_m_per_s,
+                         sh.point_params[i].k_N_per_m, err->message);
+                snprintf(err->message, sizeof err->message, "%.*s", (int)(sizeof err->message - 1), msg);
+            }
+            free(sh.point_params);
+            return r;
+        }
+    }
+    int threads = spec->threads > 0 ? spec->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
+    if (threads < 1)
+        threads = 1;
+    if (threads > 256)
+        threads = 256;
+    sh.window = (size_t)threads * 4;
+    sh.slots = calloc(sh.window, sizeof *sh.slots);
+    pthread_t *tid = calloc((size_t)threads, sizeof *tid);
+    if (!sh.slots || !tid) {
+        free(sh.slots);
+        free(tid);
+        free(sh.point_params);
+        return VAFM_ENOMEM;
+    }
+    pthread_mutex_init(&sh.mu, NULL);
+    pthread_cond_init(&sh.space, NULL);
+    int started = 0;
+    for (int i = 0; i < threads; i++) {
+        if (pthread_create(&tid[i], NULL, s_worker, &sh) != 0)
+            break;
+        started++;
+    }
+    if (started == 0)
+        s_worker(&sh);
+    for (int i = 0; i < started; i++)
+        pthread_join(tid[i], NULL);
+    pthread_mutex_destroy(&sh.mu);
+    pthread_cond_destroy(&sh.space);
+    for (size_t i = 0; i < sh.window; i++)
+        s_buf_free(&sh.slots[i].buf);
+    free(sh.slots);
+    free(tid);
+    free(sh.point_params);
+    if (sh.error) {
+        vafm_err_set(err, sh.error, "", "campaign: %s", vafm_strerror(sh.error));
+        return sh.error;
+    }
+    if (sh.stop) {
+        vafm_err_set(err, VAFM_EABORT, "", "campaign stopped by the caller");
+        return VAFM_EABORT;
+    }
+    return 0;
+}

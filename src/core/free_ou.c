@@ -1,0 +1,96 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Exact propagation of the free cantilever. Out of contact the equation of motion is linear:
+ * with y = u − u_spr and z = w − v_spr (support at constant speed, friction relative to it),
+ * m z' = −k y − mη z + noise, an Ornstein–Uhlenbeck process in (y, z) whose transition over any step h
+ * is Gaussian with mean E·(y, z) and covariance Σ∞ − E Σ∞ Eᵀ, Σ∞ = diag(kT/k, kT/m). So the free flight
+ * needs no small steps: only its sampling (output rate, distance to the surface) limits h.
+ * The overdamped variant (Brownian dynamics) is the scalar OU y' = −(k/ζ) y + noise.
+ */
+#include <math.h>
+
+#include "core/kernel.h"
+
+void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int overdamped)
+{
+    const double eta = K->co[0].eta_tot; /* out of contact: the cantilever's own channel */
+    o->h = h;
+    o->overdamped = overdamped;
+    if (overdamped) {
+        double rate = K->k / K->co[0].zeta;
+        o->a = exp(-rate * h);
+        o->sd = sqrt(K->kT / K->k * -expm1(-2.0 * rate * h));
+        o->e11 = o->a;
+        o->e12 = o->e21 = o->e22 = 0.0;
+        o->l11 = o->sd;
+        o->l21 = o->l22 = 0.0;
+        return;
+    }
+    const double w2 = K->k / K->m;       /* ω0² */
+    const double lam = -0.5 * eta;       /* mean of the eigenvalues */
+    const double mu2 = 0.25 * eta * eta - w2;
+    double eC, eS; /* e^{λ̄h}·cosh(μh) and e^{λ̄h}·sinh(μh)/μ (or cos/sin for μ² < 0) */
+    if (fabs(mu2) * h * h < 1e-8) {
+        double x = mu2 * h * h;
+        eC = exp(lam * h) * (1.0 + x / 2.0 + x * x / 24.0);
+        eS = exp(lam * h) * h * (1.0 + x / 6.0 + x * x / 120.0);
+    } else if (mu2 > 0) {
+        double mu = sqrt(mu2);
+        double ep = exp((lam + mu) * h), em = exp((lam - mu) * h);
+        eC = 0.5 * (ep + em);
+        eS = 0.5 * (ep - em) / mu;
+    } else {
+        double om = sqrt(-mu2);
+        double e = exp(lam * h);
+        eC = e * cos(om * h);
+        eS = e * sin(om * h) / om;
+    }
+    o->e11 = eC + eS * 0.5 * eta;
+    o->e12 = eS;
+    o->e21 = -eS * w2;
+    o->e22 = eC - eS * 0.5 * eta;
+    const double s1 = K->kT / K->k, s2 = K->kT / K->m;
+    double q11 = s1 - (o->e11 * o->e11 * s1 + o->e12 * o->e12 * s2);
+    double q12 = -(o->e11 * o->e21 * s1 + o->e12 * o->e22 * s2);
+    double q22 = s2 - (o->e21 * o->e21 * s1 + o->e22 * o->e22 * s2);
+    o->l11 = q11 > 0 ? sqrt(q11) : 0.0;
+    o->l21 = o->l11 > 0 ? q12 / o->l11 : 0.0;
+    double r = q22 - o->l21 * o->l21;
+    o->l22 = r > 0 ? sqrt(r) : 0.0;
+}
+
+void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o)
+{
+    double y = K->u - K->u_spr, z = K->w - K->v_spr;
+    double ny, nz;
+    if (o->overdamped) {
+        ny = o->a * y;
+        if (K->thermal)
+            ny += o->sd * vafm_rng_normal_inline(&K->rng);
+        nz = 0.0;
+    } else {
+        ny = o->e11 * y + o->e12 * z;
+        nz = o->e21 * y + o->e22 * z;
+        if (K->thermal) {
+            double x1 = vafm_rng_normal_inline(&K->rng), x2 = vafm_rng_normal_inline(&K->rng);
+            ny += o->l11 * x1;
+            nz += o->l21 * x1 + o->l22 * x2;
+        }
+    }
+    K->n++;
+    double tau = (double)K->n * K->dt;
+    K->t = K->t0 + tau;
+    K->u_spr = K->uspr0 + K->v_spr * tau;
+    K->u = K->u_spr + ny;
+    K->w = K->v_spr + nz;
+    K->Fc = 0.0;
+    double fs = K->k * (K->u_spr - K->u);
+    K->f = fs;
+    K->acc_u += K->u;
+    K->acc_uspr += K->u_spr;
+    K->acc_n++;
+    if (fs < K->fs_min)
+        K->fs_min = fs;
+    K->steps++;
+    K->steps_free++;
+}

@@ -1,0 +1,44 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * GJF: Grønbech-Jensen & Farago, Mol. Phys. 111, 983 (2013). With α = mη, b = 1/(1 + α dt/2m),
+ * a = (1 − α dt/2m)·b and β ~ N(0, 2αkT dt):
+ *   u' = u + b dt w + (b dt²/2m) f + (b dt/2m) β
+ *   w' = a w + (dt/2m)(a f + f') + (b/m) β
+ * Configurational sampling of a harmonic well is exact at any dt with ω dt < 2; the overdamped limit
+ * is Brownian dynamics. Friction relative to the moving support enters as the constant force mη·v_spr.
+ */
+#include "core/kernel.h"
+
+static void s_prepare(vafm_kernel *K)
+{
+    K->f = K->k * (K->u_spr - K->u) - K->Fc;
+}
+
+static long s_run(vafm_kernel *K, long n)
+{
+    const double dt = K->dt, half_dt_m = 0.5 * dt / K->m, inv_m = 1.0 / K->m;
+    const double drift = K->m * K->v_spr;
+    for (long i = 0; i < n; i++) {
+        const vafm_kcoef *c = &K->co[K->in_contact];
+        const double f = K->f + drift;
+        const double beta = K->thermal ? c->gjf_sig * s_kernel_noise(K) : 0.0;
+        const double w = K->w;
+        K->u += c->gjf_b * (dt * w + half_dt_m * dt * f + half_dt_m * beta);
+        s_kernel_post_move(K);
+        K->w = c->gjf_a * w + half_dt_m * (c->gjf_a * f + K->f + drift) + c->gjf_b * inv_m * beta;
+        if (K->event)
+            return i + 1;
+    }
+    return n;
+}
+
+static const vafm_integrator_type s_type = {
+    .name = "gjf",
+    .description = "Gronbech-Jensen & Farago 2013 Langevin (default): exact harmonic <x^2> for omega*dt < 2",
+    .overdamped = 0,
+    .stability_limit = 2.0,
+    .prepare = s_prepare,
+    .run = s_run,
+};
+
+const vafm_integrator_type *const vafm_integrator_gjf = &s_type;

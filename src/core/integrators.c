@@ -1,0 +1,55 @@
+/* SPDX-License-Identifier: MIT */
+/* The integrator registry and the step-size dependent coefficients all integrators share. */
+#include <math.h>
+#include <string.h>
+
+#include "core/kernel.h"
+
+#define S_NINTEGRATORS 4
+
+static const vafm_integrator_type *s_get(int i)
+{
+    switch (i) {
+    case 0: return vafm_integrator_gjf;
+    case 1: return vafm_integrator_baoab;
+    case 2: return vafm_integrator_paper_vv;
+    case 3: return vafm_integrator_brownian;
+    default: return NULL;
+    }
+}
+
+int vafm_integrator_count(void)
+{
+    return S_NINTEGRATORS;
+}
+
+const vafm_integrator_type *vafm_integrator_at(int i)
+{
+    return s_get(i);
+}
+
+const vafm_integrator_type *vafm_integrator_find(const char *name)
+{
+    for (int i = 0; name && i < S_NINTEGRATORS; i++)
+        if (!strcmp(s_get(i)->name, name))
+            return s_get(i);
+    return NULL;
+}
+
+void vafm_kernel_set_dt(vafm_kernel *K, double dt)
+{
+    K->dt = dt;
+    for (int i = 0; i < 2; i++) {
+        vafm_kcoef *c = &K->co[i];
+        c->eta_tot = 1.0 + (i ? K->eta_c : 0.0);
+        c->zeta = K->m * c->eta_tot;
+        double h = 0.5 * c->eta_tot * dt;
+        c->gjf_b = 1.0 / (1.0 + h);
+        c->gjf_a = (1.0 - h) * c->gjf_b;
+        c->gjf_sig = sqrt(2.0 * c->zeta * K->kT * dt);
+        c->ou_c1 = exp(-c->eta_tot * dt);
+        c->ou_c3 = sqrt(K->kT / K->m * -expm1(-2.0 * c->eta_tot * dt));
+        c->vv_sig = sqrt(2.0 * c->zeta * K->kT / dt);
+        c->bd_sig = sqrt(2.0 * K->kT * dt / c->zeta);
+    }
+}

@@ -1,0 +1,45 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Internal helpers shared by the core's files (not installed).
+ *
+ * vafm_numerics is everything a scene derives from its SI parameters before it runs: the reduced
+ * model, the bound contact model, the stiffest contact the scene is expected to reach and from it the
+ * time step and its stability number. params.c validates a scene through vafm_numerics_check(), and
+ * sim.c builds its kernel from the same numbers, so the check and the run can never disagree.
+ */
+#ifndef VAFM_CORE_INTERNAL_H
+#define VAFM_CORE_INTERNAL_H
+
+#include "vafm/common.h"
+#include "vafm/contact.h"
+#include "vafm/params.h"
+#include "vafm/units.h"
+
+#if defined(__GNUC__)
+#define VAFM_PRINTF(a, b) __attribute__((format(printf, a, b)))
+#else
+#define VAFM_PRINTF(a, b)
+#endif
+
+/** Fill err (if not NULL) with a code, a field and a formatted message. */
+void vafm_err_set(vafm_error *err, int code, const char *field, const char *fmt, ...) VAFM_PRINTF(4, 5);
+
+typedef struct vafm_numerics {
+    vafm_reduced r;       /* the physics in reduced units */
+    vafm_scale sc;        /* reduced → SI */
+    vafm_contact contact; /* the bound contact model */
+    double Ts;            /* output sample interval (reduced time) */
+    double F_max;         /* largest repulsive contact force the scene is expected to reach */
+    double K_max;         /* k + dF/du there: the stiffest total stiffness */
+    double u_c;           /* spring travel from the turn to the quasi-static detachment */
+    double u_spr_star;    /* quasi-static instability (NaN without adhesion) */
+    double dt;            /* time step (reduced), a whole fraction of Ts */
+    long n_sub;           /* steps per output sample */
+    double stab;          /* ω_max·dt (underdamped) or K_max·dt/ζ (overdamped) */
+} vafm_numerics;
+
+/** Derive the numerics of a scene and check them (time step against the stability limit, step count).
+ *  out may be NULL. @return 0 or VAFM_EUNSTABLE / VAFM_EINVAL with err filled. */
+int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err);
+
+#endif

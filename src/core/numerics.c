@@ -1,0 +1,110 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * What a scene needs before it runs: reduced model, the stiffest contact it will reach, the time step
+ * (given, or the paper's Eq. 8 rule: a fraction of the fastest period and of the retract time to the
+ * pull-off) and the stability check against it. One function, used by validation and by vafm_sim_new.
+ */
+#include <math.h>
+
+#include "vafm/integrator.h"
+#include "vafm/theory.h"
+#include "core/internal.h"
+
+/* Stable-branch contact radius root: F = (4/3)x² − 2c·x with x = s³ ⇒ x = (3/4)(c + √(c² + 4F/3)). */
+static double s_x_at_force(double c, double F)
+{
+    return 0.75 * (c + sqrt(c * c + 4.0 * F / 3.0));
+}
+
+int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err)
+{
+    vafm_numerics nm_local, *nm = out ? out : &nm_local;
+    vafm_units_reduce(p, &nm->r);
+    nm->sc = vafm_units_scale(p);
+    const vafm_reduced *r = &nm->r;
+    if (vafm_contact_init(&nm->contact, p->contact, p->contact == vafm_contact_jkr ? r->gamma : 0.0)) {
+        vafm_err_set(err, VAFM_EINVAL, "gamma_J_per_m2", "gamma_J_per_m2 = %.6g J/m^2 is not valid for contact %s",
+                     p->gamma_J_per_m2, p->contact->name);
+        return VAFM_EINVAL;
+    }
+    const vafm_contact *c = &nm->contact;
+    const int has_contact = p->contact != vafm_contact_none;
+    nm->Ts = 1.0 / p->sample_rate_Hz / nm->sc.time_s;
+
+    /* The stiffest contact: at the largest repulsive force expected, with room for the overshoot of
+     * the jump into contact and of the trigger's latency (one sample). */
+    const double F_set = p->setpoint_N / nm->sc.force_N;
+    double u_spr_turn;
+    if (p->trigger == VAFM_TRIGGER_FORCE) {
+        nm->F_max = F_set + fmax(c->F_jkr, 0.25 * F_set) + r->k * r->v_approach * nm->Ts;
+        u_spr_turn = F_set / r->k; /* + indentation at F_set, added below */
+    } else {
+        u_spr_turn = -p->trigger_height_m / nm->sc.length_m;
+        nm->F_max = r->k * fmax(0.0, u_spr_turn - fmin(0.0, c->u_detach)) + c->F_jkr;
+    }
+    nm->K_max = r->k;
+    if (has_contact) {
+        double x = s_x_at_force(c->c, nm->F_max);
+        double s = cbrt(x);
+        nm->K_max += 2.0 * s * s * (4.0 * x - 3.0 * c->c) / (4.0 * x - c->c);
+        if (p->trigger == VAFM_TRIGGER_FORCE) {
+            double xs = s_x_at_force(c->c, F_set), ss = cbrt(xs);
+            u_spr_turn += ss * ss * ss * ss - c->c * ss;
+        }
+    }
+    nm->u_spr_star = NAN;
+    double u_end = has_contact ? fmin(0.0, c->u_detach) : 0.0;
+    if (p->contact == vafm_contact_jkr && r->gamma > 0) {
+        vafm_quasistatic q;
+        if (vafm_theory_quasistatic(r->gamma, r->k, &q) == 0) {
+            nm->u_spr_star = q.u_spr_star;
+            u_end = q.u_spr_star;
+        }
+    }
+    nm->u_c = fmax(u_spr_turn - u_end, 0.0);
+
+    const vafm_integrator_type *it = p->integrator;
+    const double zeta_min = r->m; /* out of contact ζ = mη; in contact larger */
+    double dt;
+    if (p->dt_s > 0) {
+        dt = p->dt_s / nm->sc.time_s;
+    } else {
+        if (it->overdamped)
+            dt = fmin(0.05, p->omega_dt * zeta_min / nm->K_max); /* the paper: dt = 1/(20η) */
+        else
+            dt = p->omega_dt / sqrt(nm->K_max / r->m);
+        double vmax = fmax(r->v_approach, r->v_retract);
+        if (nm->u_c > 0)
+            dt = fmin(dt, nm->u_c / (40.0 * vmax)); /* the paper's Eq. 8, second term */
+    }
+    nm->n_sub = (long)ceil(nm->Ts / dt * (1.0 - 1e-12));
+    if (nm->n_sub < 1)
+        nm->n_sub = 1;
+    if ((double)nm->n_sub > 9e15) {
+        vafm_err_set(err, VAFM_EINVAL, "sample_rate_Hz",
+                     "sample_rate_Hz = %.6g Hz needs %.3g steps per sample at dt = %.3g s; raise the sample rate",
+                     p->sample_rate_Hz, nm->Ts / dt, dt * nm->sc.time_s);
+        return VAFM_EINVAL;
+    }
+    nm->dt = nm->Ts / (double)nm->n_sub;
+    dt = nm->dt;
+    nm->stab = it->overdamped ? nm->K_max * dt / zeta_min : sqrt(nm->K_max / r->m) * dt;
+    if (!(nm->stab < it->stability_limit)) {
+        vafm_err_set(err, VAFM_EUNSTABLE, "dt_s",
+                     "dt_s = %.6g s is beyond the %s stability limit: %s = %.4g at the stiffest contact reached "
+                     "(%.4g N/m, force %.4g N) must be < %.3g; lower dt_s (or 0 for automatic)",
+                     dt * nm->sc.time_s, it->name, it->overdamped ? "K_max*dt/zeta" : "omega_max*dt", nm->stab,
+                     nm->K_max * nm->sc.stiffness_N_per_m, nm->F_max * nm->sc.force_N, it->stability_limit);
+        return VAFM_EUNSTABLE;
+    }
+    if (it == vafm_integrator_paper_vv) {
+        double eta_dt = (1.0 + (has_contact ? r->eta_cont : 0.0)) * dt;
+        if (!(eta_dt < 2.0)) {
+            vafm_err_set(err, VAFM_EUNSTABLE, "dt_s",
+                         "dt_s = %.6g s gives eta*dt = %.4g: the paper's velocity Verlet is unstable for eta*dt >= 2",
+                         dt * nm->sc.time_s, eta_dt);
+            return VAFM_EUNSTABLE;
+        }
+    }
+    return 0;
+}

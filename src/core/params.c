@@ -1,0 +1,439 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Scene parameters: defaults, presets, the field table (names, units, ranges, docs) and validation of
+ * single fields. Checks that need the physics (time step against the stability limit) live in sim.c,
+ * which vafm_params_validate() calls through s_check_numerics().
+ */
+#include <errno.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#include "vafm/integrator.h"
+#include "vafm/params.h"
+#include "vafm/units.h"
+#include "core/internal.h"
+
+enum s_choice { S_NONE = 0, S_CONTACT, S_INTEGRATOR, S_TRIGGER, S_NOISE, S_ANTIALIAS };
+
+typedef struct s_field {
+    vafm_param_info info;
+    size_t offset; /* of the double / int / uint64 member */
+    int choice;    /* enum s_choice for CHOICE fields */
+} s_field;
+
+#define REAL(name, unit, lo, hi, doc) \
+    { { #name, VAFM_PARAM_REAL, unit, lo, hi, NULL, doc }, offsetof(vafm_params, name), S_NONE }
+
+static const s_field s_fields[] = {
+    REAL(E_star_Pa, "Pa", 1e3, 1e13, "contact modulus E* of tip and sample"),
+    REAL(R_m, "m", 1e-10, 1e-3, "tip radius R"),
+    REAL(gamma_J_per_m2, "J/m^2", 0, 100, "surface energy gamma of the JKR model (0 with contact=hertz)"),
+    { { "contact", VAFM_PARAM_CHOICE, "", 0, 0, "jkr|hertz|none",
+        "contact model: jkr (adhesive), hertz (no adhesion), none (free cantilever)" }, 0, S_CONTACT },
+    REAL(k_N_per_m, "N/m", 1e-6, 1e4, "cantilever spring constant k"),
+    REAL(m_kg, "kg", 1e-20, 1e-3, "effective mass m of the cantilever"),
+    REAL(eta_per_s, "1/s", 1e-3, 1e13, "friction rate eta of the cantilever in its medium (damping m*eta)"),
+    REAL(eta_cont_per_s, "1/s", 0, 1e13, "extra friction rate while in contact (the paper's Gamma_cont)"),
+    REAL(T_K, "K", 0, 1e9, "temperature (0: athermal, no random numbers drawn)"),
+    REAL(v_approach_m_per_s, "m/s", 1e-12, 1e3, "piezo approach speed"),
+    REAL(v_retract_m_per_s, "m/s", 1e-12, 1e3, "piezo retract speed"),
+    REAL(start_height_m, "m", -1e-3, 1e-3, "piezo height at t = 0 above the contact point (negative: pressed in)"),
+    { { "trigger", VAFM_PARAM_CHOICE, "", 0, 0, "force|height",
+        "what ends the approach: the filtered force reaching setpoint_N, or the piezo reaching trigger_height_m" },
+      offsetof(vafm_params, trigger), S_TRIGGER },
+    REAL(setpoint_N, "N", 0, 1, "force trigger: repulsive force that ends the approach"),
+    REAL(trigger_height_m, "m", -1e-3, 1e-3, "height trigger: piezo height that ends the approach"),
+    REAL(z_range_m, "m", 0, 1e-2, "approach travel limit (0: automatic)"),
+    REAL(dwell_s, "s", 0, 1e4, "pause between approach and retract (rounded to whole samples)"),
+    REAL(retract_margin_m, "m", 0, 1e-2, "retract distance after the detachment before the curve ends"),
+    REAL(retract_max_m, "m", 0, 1e-1, "retract travel limit (0: automatic, 4x the quasi-static travel)"),
+    REAL(sample_rate_Hz, "Hz", 1e-3, 1e10, "output sample rate"),
+    { { "antialias", VAFM_PARAM_CHOICE, "", 0, 0, "mean|point",
+        "output samples: mean over the sample interval (box-car anti-alias) or point samples" },
+      offsetof(vafm_params, antialias), S_ANTIALIAS },
+    REAL(tune_duration_s, "s", 0, 1e5, "thermal tune: recorded duration"),
+    { { "integrator", VAFM_PARAM_CHOICE, "", 0, 0, "gjf|baoab|paper-vv|brownian",
+        "time integrator: gjf (default), baoab, paper-vv (the paper's Eq. 7 method), brownian (overdamped)" },
+      0, S_INTEGRATOR },
+    { { "noise", VAFM_PARAM_CHOICE, "", 0, 0, "gaussian|uniform",
+        "random force distribution: gaussian, or uniform of matched variance (the paper's Eq. 7)" },
+      offsetof(vafm_params, noise), S_NOISE },
+    REAL(dt_s, "s", 0, 1, "time step (0: automatic from omega_dt, as the paper's Eq. 8)"),
+    REAL(omega_dt, "", 1e-6, 1.99,
+         "automatic time step: omega_max*dt at the stiffest contact reached (paper 2*pi/40 = 0.157); "
+         "brownian: K_max*dt/zeta"),
+    { { "free_exact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
+        "propagate the free cantilever exactly (linear SDE) instead of plain steps" },
+      offsetof(vafm_params, free_exact), S_NONE },
+    { { "seed", VAFM_PARAM_SEED, "", 0, 18446744073709551615.0, NULL,
+        "random seed: (seed, curve index) reproduces a curve bit for bit" },
+      offsetof(vafm_params, seed), S_NONE },
+};
+#undef REAL
+
+#define S_NFIELDS ((int)(sizeof s_fields / sizeof s_fields[0]))
+
+void vafm_err_set(vafm_error *err, int code, const char *field, const char *fmt, ...)
+{
+    if (!err)
+        return;
+    err->code = code;
+    snprintf(err->field, sizeof err->field, "%s", field ? field : "");
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    va_end(ap);
+}
+
+/* ---- presets ---------------------------------------------------------------------------------- */
+
+typedef struct s_preset {
+    const char *name;
+    const char *description;
+    void (*fill)(vafm_params *p);
+} s_preset;
+
+static void s_common(vafm_params *p)
+{
+    memset(p, 0, sizeof *p);
+    p->contact = vafm_contact_jkr;
+    p->integrator = vafm_integrator_gjf;
+    p->trigger = VAFM_TRIGGER_FORCE;
+    p->noise = VAFM_NOISE_GAUSSIAN;
+    p->antialias = VAFM_ANTIALIAS_MEAN;
+    p->omega_dt = 2.0 * M_PI / 40.0;
+    p->free_exact = 1;
+    p->seed = 1;
+}
+
+/* The paper's Fig. 1/2 scene: m̃ = 5e-5, ṽ = 1e-4, k̃ = 2e-5, k_BT̃ = 5e-8, γ̃ = 1.2e-4 with
+ * E* = 20 GPa, R = 15.7 nm, m = 1e-12 kg (k = 6.28 mN/m, v = 196 nm/s, T ≈ 280 K; the paper rounds
+ * to 6.3 mN/m and quotes 288.4 K: reduced values are kept exact here). */
+static void s_fill_fig1(vafm_params *p)
+{
+    s_common(p);
+    p->E_star_Pa = 20e9;
+    p->R_m = 15.7e-9;
+    p->m_kg = 1e-12;
+    vafm_reduced r = { .m = 5e-5, .k = 2e-5, .kT = 5e-8, .gamma = 1.2e-4,
+                       .v_approach = 1e-4, .v_retract = 1e-4 };
+    vafm_units_from_reduced(p, &r);
+    p->start_height_m = 20e-9;
+    p->setpoint_N = 1e-9;
+    p->trigger_height_m = -100e-9;
+    p->retract_margin_m = 20e-9;
+    p->sample_rate_Hz = 2000;
+    p->tune_duration_s = 0.5;
+}
+
+/* The paper's Fig. 4–6 scene (Langevin, m̃ = 0.01): γ̃ = 0.229, k̃ = 0.1, k_BT̃ = 0.01, ṽ = 1e-3
+ * with E* = 1 GPa, R = 16 nm, m = 1e-12 kg (so ṽ = 1e-5 … 0.5 maps to 64 nm/s … 3.2 mm/s). */
+static void s_fill_fig4(vafm_params *p)
+{
+    s_common(p);
+    p->E_star_Pa = 1e9;
+    p->R_m = 16e-9;
+    p->m_kg = 1e-12;
+    vafm_reduced r = { .m = 0.01, .k = 0.1, .kT = 0.01, .gamma = 0.229,
+                       .v_approach = 1e-3, .v_retract = 1e-3 };
+    vafm_units_from_reduced(p, &r);
+    vafm_scale s = vafm_units_scale(p);
+    p->start_height_m = 2.0 * s.length_m;
+    p->setpoint_N = 0.5 * (3.0 * M_PI * r.gamma / 2.0) * s.force_N;
+    p->trigger_height_m = -1.0 * s.length_m;
+    p->retract_margin_m = 1.0 * s.length_m;
+    p->sample_rate_Hz = 1.0 / (2.0 * s.time_s); /* one sample per 2 reduced time units */
+    p->tune_duration_s = 2e4 * s.time_s;
+}
+
+/* The same with Brownian dynamics at friction ζ = mη = 1 (reduced), as the paper's Fig. 4/6. */
+static void s_fill_fig4_bd(vafm_params *p)
+{
+    s_fill_fig4(p);
+    vafm_reduced r;
+    vafm_units_reduce(p, &r);
+    r.m = 1.0;
+    vafm_units_from_reduced(p, &r);
+    vafm_scale s = vafm_units_scale(p);
+    p->integrator = vafm_integrator_brownian;
+    p->sample_rate_Hz = 1.0 / (2.0 * s.time_s);
+    p->tune_duration_s = 2e4 * s.time_s;
+}
+
+static const s_preset s_presets[] = {
+    { "paper-fig1", "the paper's Fig. 1/2 scene in SI (default): 20 GPa, 15.7 nm tip, 6.3 mN/m, ~280 K, 196 nm/s",
+      s_fill_fig1 },
+    { "paper-fig4", "the paper's Fig. 4/5 scene, Langevin: reduced gamma 0.229, k 0.1, m 0.01, kT 0.01, v 1e-3",
+      s_fill_fig4 },
+    { "paper-fig4-bd", "the paper's Fig. 4/6 scene, Brownian dynamics with zeta = m*eta = 1 (reduced)",
+      s_fill_fig4_bd },
+};
+#define S_NPRESETS ((int)(sizeof s_presets / sizeof s_presets[0]))
+
+void vafm_params_default(vafm_params *p)
+{
+    s_fill_fig1(p);
+}
+
+int vafm_preset_count(void)
+{
+    return S_NPRESETS;
+}
+
+const char *vafm_preset_name(int i)
+{
+    return i >= 0 && i < S_NPRESETS ? s_presets[i].name : NULL;
+}
+
+const char *vafm_preset_description(int i)
+{
+    return i >= 0 && i < S_NPRESETS ? s_presets[i].description : NULL;
+}
+
+int vafm_params_preset(vafm_params *p, const char *name, vafm_error *err)
+{
+    for (int i = 0; i < S_NPRESETS; i++)
+        if (name && !strcmp(name, s_presets[i].name)) {
+            s_presets[i].fill(p);
+            return 0;
+        }
+    vafm_err_set(err, VAFM_ENOTFOUND, "preset", "unknown preset '%s' (known: paper-fig1, paper-fig4, paper-fig4-bd)",
+                 name ? name : "(null)");
+    return VAFM_ENOTFOUND;
+}
+
+/* ---- field table ------------------------------------------------------------------------------ */
+
+int vafm_param_count(void)
+{
+    return S_NFIELDS;
+}
+
+const vafm_param_info *vafm_param_at(int i)
+{
+    return i >= 0 && i < S_NFIELDS ? &s_fields[i].info : NULL;
+}
+
+static const s_field *s_find(const char *name)
+{
+    for (int i = 0; i < S_NFIELDS; i++)
+        if (name && !strcmp(name, s_fields[i].info.name))
+            return &s_fields[i];
+    return NULL;
+}
+
+const vafm_param_info *vafm_param_find(const char *name)
+{
+    const s_field *f = s_find(name);
+    return f ? &f->info : NULL;
+}
+
+static const char *const s_trigger_names[] = { "force", "height" };
+static const char *const s_noise_names[] = { "gaussian", "uniform" };
+static const char *const s_antialias_names[] = { "mean", "point" };
+
+static int s_index_of(const char *const *names, int n, const char *v)
+{
+    for (int i = 0; i < n; i++)
+        if (!strcmp(names[i], v))
+            return i;
+    return -1;
+}
+
+static int s_check_real(const s_field *f, double v, vafm_error *err)
+{
+    if (!isfinite(v) || v < f->info.min || v > f->info.max) {
+        vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s = %.6g %s is outside the allowed range [%.6g, %.6g] %s",
+                     f->info.name, v, f->info.unit, f->info.min, f->info.max, f->info.unit);
+        return VAFM_EINVAL;
+    }
+    return 0;
+}
+
+int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_error *err)
+{
+    const s_field *f = s_find(name);
+    if (!f) {
+        vafm_err_set(err, VAFM_ENOTFOUND, name ? name : "", "unknown parameter '%s' (see vafm --help)",
+                     name ? name : "(null)");
+        return VAFM_ENOTFOUND;
+    }
+    if (!value)
+        value = "";
+    char *end = NULL;
+    switch (f->info.kind) {
+    case VAFM_PARAM_REAL: {
+        errno = 0;
+        double v = strtod(value, &end);
+        if (end == value || *end != '\0') {
+            vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s: '%s' is not a number (unit %s, range [%.6g, %.6g])",
+                         f->info.name, value, f->info.unit, f->info.min, f->info.max);
+            return VAFM_EINVAL;
+        }
+        int r = s_check_real(f, v, err);
+        if (r)
+            return r;
+        *(double *)((char *)p + f->offset) = v;
+        return 0;
+    }
+    case VAFM_PARAM_SEED: {
+        errno = 0;
+        if (value[0] == '-' || value[0] == '\0')
+            goto bad_seed;
+        unsigned long long v = strtoull(value, &end, 0);
+        if (*end != '\0' || errno == ERANGE)
+            goto bad_seed;
+        p->seed = (uint64_t)v;
+        return 0;
+    bad_seed:
+        vafm_err_set(err, VAFM_EINVAL, f->info.name, "seed: '%s' is not an integer in [0, 2^64 - 1]", value);
+        return VAFM_EINVAL;
+    }
+    case VAFM_PARAM_BOOL: {
+        int v;
+        if (!strcmp(value, "1") || !strcasecmp(value, "true") || !strcasecmp(value, "yes") || !strcasecmp(value, "on"))
+            v = 1;
+        else if (!strcmp(value, "0") || !strcasecmp(value, "false") || !strcasecmp(value, "no") ||
+                 !strcasecmp(value, "off"))
+            v = 0;
+        else {
+            vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s: '%s' is not a boolean (true|false|1|0)", f->info.name,
+                         value);
+            return VAFM_EINVAL;
+        }
+        *(int *)((char *)p + f->offset) = v;
+        return 0;
+    }
+    case VAFM_PARAM_CHOICE: {
+        int idx = -1;
+        switch (f->choice) {
+        case S_CONTACT: {
+            const vafm_contact_type *t = vafm_contact_type_find(value);
+            if (t) {
+                p->contact = t;
+                return 0;
+            }
+            break;
+        }
+        case S_INTEGRATOR: {
+            const vafm_integrator_type *t = vafm_integrator_find(value);
+            if (t) {
+                p->integrator = t;
+                return 0;
+            }
+            break;
+        }
+        case S_TRIGGER: idx = s_index_of(s_trigger_names, 2, value); break;
+        case S_NOISE: idx = s_index_of(s_noise_names, 2, value); break;
+        case S_ANTIALIAS: idx = s_index_of(s_antialias_names, 2, value); break;
+        default: break;
+        }
+        if (idx >= 0) {
+            *(int *)((char *)p + f->offset) = idx;
+            return 0;
+        }
+        vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s: '%s' is not one of %s", f->info.name, value,
+                     f->info.choices);
+        return VAFM_EINVAL;
+    }
+    default: return VAFM_EINVAL;
+    }
+}
+
+static const char *s_choice_value(const vafm_params *p, const s_field *f)
+{
+    int v;
+    switch (f->choice) {
+    case S_CONTACT: return p->contact ? p->contact->name : "(unset)";
+    case S_INTEGRATOR: return p->integrator ? p->integrator->name : "(unset)";
+    case S_TRIGGER: v = p->trigger; return v >= 0 && v < 2 ? s_trigger_names[v] : "(invalid)";
+    case S_NOISE: v = p->noise; return v >= 0 && v < 2 ? s_noise_names[v] : "(invalid)";
+    case S_ANTIALIAS: v = p->antialias; return v >= 0 && v < 2 ? s_antialias_names[v] : "(invalid)";
+    default: return "";
+    }
+}
+
+int vafm_params_get(const vafm_params *p, const char *name, char *buf, size_t len)
+{
+    const s_field *f = s_find(name);
+    if (!f)
+        return VAFM_ENOTFOUND;
+    switch (f->info.kind) {
+    case VAFM_PARAM_REAL: snprintf(buf, len, "%.17g", *(const double *)((const char *)p + f->offset)); break;
+    case VAFM_PARAM_SEED: snprintf(buf, len, "%" PRIu64, p->seed); break;
+    case VAFM_PARAM_BOOL: snprintf(buf, len, "%s", *(const int *)((const char *)p + f->offset) ? "true" : "false"); break;
+    default: snprintf(buf, len, "%s", s_choice_value(p, f)); break;
+    }
+    return 0;
+}
+
+int vafm_params_to_json(const vafm_params *p, char *buf, size_t len)
+{
+    size_t n = 0;
+    char val[64];
+    int w = snprintf(buf, len, "{");
+    if (w < 0 || (size_t)w >= len)
+        return VAFM_EINVAL;
+    n = (size_t)w;
+    for (int i = 0; i < S_NFIELDS; i++) {
+        const s_field *f = &s_fields[i];
+        vafm_params_get(p, f->info.name, val, sizeof val);
+        int quoted = f->info.kind == VAFM_PARAM_CHOICE;
+        w = snprintf(buf + n, len - n, "%s\"%s\": %s%s%s", i ? ", " : "", f->info.name, quoted ? "\"" : "", val,
+                     quoted ? "\"" : "");
+        if (w < 0 || (size_t)w >= len - n)
+            return VAFM_EINVAL;
+        n += (size_t)w;
+    }
+    w = snprintf(buf + n, len - n, "}");
+    if (w < 0 || (size_t)w >= len - n)
+        return VAFM_EINVAL;
+    return (int)(n + (size_t)w);
+}
+
+int vafm_params_validate(const vafm_params *p, vafm_error *err)
+{
+    if (!p) {
+        vafm_err_set(err, VAFM_EINVAL, "", "no parameters given");
+        return VAFM_EINVAL;
+    }
+    for (int i = 0; i < S_NFIELDS; i++) {
+        const s_field *f = &s_fields[i];
+        if (f->info.kind == VAFM_PARAM_REAL) {
+            int r = s_check_real(f, *(const double *)((const char *)p + f->offset), err);
+            if (r)
+                return r;
+        } else if (f->info.kind == VAFM_PARAM_CHOICE) {
+            if (!strncmp(s_choice_value(p, f), "(", 1)) {
+                vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s is not set to one of %s", f->info.name,
+                             f->info.choices);
+                return VAFM_EINVAL;
+            }
+        } else if (f->info.kind == VAFM_PARAM_BOOL) {
+            int v = *(const int *)((const char *)p + f->offset);
+            if (v != 0 && v != 1) {
+                vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s = %d is not a boolean (0 or 1)", f->info.name, v);
+                return VAFM_EINVAL;
+            }
+        }
+    }
+    if (p->contact == vafm_contact_hertz && p->gamma_J_per_m2 != 0) {
+        vafm_err_set(err, VAFM_EINVAL, "gamma_J_per_m2",
+                     "gamma_J_per_m2 = %.6g J/m^2 must be 0 with contact = hertz (use jkr for adhesion)",
+                     p->gamma_J_per_m2);
+        return VAFM_EINVAL;
+    }
+    if (p->trigger == VAFM_TRIGGER_HEIGHT && !(p->trigger_height_m < p->start_height_m)) {
+        vafm_err_set(err, VAFM_EINVAL, "trigger_height_m",
+                     "trigger_height_m = %.6g m must lie below start_height_m = %.6g m", p->trigger_height_m,
+                     p->start_height_m);
+        return VAFM_EINVAL;
+    }
+    return vafm_numerics_check(p, NULL, err);
+}

@@ -1,0 +1,544 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The simulation object and its scenes (force curve, thermal tune) as resumable state machines.
+ *
+ * A scene advances one output sample at a time. Within a sample interval the body moves either by
+ * exact free-cantilever steps (out of contact and provably far from the surface: the surface is more
+ * than the deterministic excursion bound plus 8 thermal standard deviations away for the whole
+ * interval) or by the scene's integrator at the step dt (a whole fraction of the interval). Contact
+ * events end an integrator run early and are recorded here. Phase changes (trigger, dwell, end)
+ * happen at sample boundaries, as an instrument that acts on its filtered output would.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "vafm/integrator.h"
+#include "vafm/sim.h"
+#include "vafm/theory.h"
+#include "core/internal.h"
+#include "core/kernel.h"
+
+#define S_BLOCK 512
+
+enum { S_SCENE_NONE = 0, S_SCENE_CURVE, S_SCENE_TUNE };
+enum { S_PH_APPROACH = 0, S_PH_DWELL, S_PH_RETRACT, S_PH_TUNE, S_PH_DONE };
+
+struct vafm_sim {
+    vafm_params p;
+    vafm_numerics nm;
+    const vafm_integrator_type *it;
+    vafm_kernel K;
+    vafm_free_ou ou;
+    long n_free;        /* exact free steps per sample */
+    double sigma_free;  /* √(kT/k): thermal spread of the free cantilever */
+    int mode_free;      /* the last sample interval used exact free steps */
+    int need_prepare;   /* the integrator's cached force is stale */
+    /* scene */
+    int scene, phase;
+    uint64_t index, sample_index, tune_samples;
+    long dwell_left;
+    double uspr_start, uspr_turn, uspr_trigger, uspr_zlimit, retract_travel_max, margin, F_set;
+    int touched, detached_in_retract, flags, retract_samples;
+    double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
+    double touch_t, touch_uspr;
+    /* output block */
+    size_t nblk;
+    double *bt, *bh, *bd, *bf, *btip;
+    uint8_t *bseg;
+};
+
+int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
+{
+    if (!out) {
+        vafm_err_set(err, VAFM_EINVAL, "", "vafm_sim_new: out is NULL");
+        return VAFM_EINVAL;
+    }
+    *out = NULL;
+    int r = vafm_params_validate(p, err);
+    if (r)
+        return r;
+    vafm_sim *s = calloc(1, sizeof *s);
+    if (!s)
+        return VAFM_ENOMEM;
+    s->p = *p;
+    vafm_numerics_check(p, &s->nm, NULL);
+    s->it = p->integrator;
+    void *buf = malloc(S_BLOCK * (5 * sizeof(double) + 1));
+    if (!buf) {
+        free(s);
+        return VAFM_ENOMEM;
+    }
+    s->bt = buf;
+    s->bh = s->bt + S_BLOCK;
+    s->bd = s->bh + S_BLOCK;
+    s->bf = s->bd + S_BLOCK;
+    s->btip = s->bf + S_BLOCK;
+    s->bseg = (uint8_t *)(s->btip + S_BLOCK);
+
+    vafm_kernel *K = &s->K;
+    const vafm_reduced *rd = &s->nm.r;
+    K->m = rd->m;
+    K->k = rd->k;
+    K->kT = rd->kT;
+    K->eta_c = rd->eta_cont;
+    K->contact = s->nm.contact;
+    K->cforce = K->contact.type->force;
+    K->thermal = rd->kT > 0;
+    K->uniform_noise = p->noise == VAFM_NOISE_UNIFORM;
+    vafm_kernel_set_dt(K, s->nm.dt);
+
+    const double Ts = s->nm.Ts;
+    double h_target = s->it->overdamped ? 0.25 * s->K.co[0].zeta / rd->k : 0.25 / fmax(1.0, sqrt(rd->k / rd->m));
+    long nf = (long)ceil(Ts / h_target);
+    if (nf > s->nm.n_sub)
+        nf = s->nm.n_sub;
+    s->n_free = nf < 1 ? 1 : nf;
+    vafm_free_ou_setup(&s->ou, K, Ts / (double)s->n_free, s->it->overdamped);
+    s->sigma_free = sqrt(rd->kT / rd->k);
+    *out = s;
+    return 0;
+}
+
+void vafm_sim_destroy(vafm_sim **s)
+{
+    if (!s || !*s)
+        return;
+    free((*s)->bt);
+    free(*s);
+    *s = NULL;
+}
+
+const vafm_params *vafm_sim_params(const vafm_sim *s)
+{
+    return &s->p;
+}
+
+double vafm_sim_dt(const vafm_sim *s)
+{
+    return s->nm.dt * s->nm.sc.time_s;
+}
+
+/* ---- scene start ------------------------------------------------------------------------------ */
+
+/* Equilibrium of the body on the contact branch for a support at uspr ≥ 0 (Hertz or JKR). */
+static double s_contact_equilibrium(const vafm_sim *s, double uspr, double *K_loc)
+{
+    const vafm_kernel *K = &s->K;
+    double lo = fmin(K->contact.u_detach, 0.0), hi = uspr;
+    double ueq = uspr, F_eq;
+    if (K->contact.gamma > 0 && vafm_theory_equilibrium(K->contact.gamma, K->k, uspr, &ueq, &F_eq) == 0) {
+        /* done */
+    } else {
+        for (int i = 0; i < 200 && hi - lo > 1e-15 * fmax(1.0, fabs(hi)); i++) {
+            double mid = 0.5 * (lo + hi), sq = 0.0;
+            double g = K->k * (uspr - mid) - K->cforce(&K->contact, mid, &sq, NULL);
+            if (g > 0)
+                lo = mid;
+            else
+                hi = mid;
+        }
+        ueq = 0.5 * (lo + hi);
+    }
+    double sq = 0.0, dF = 0.0;
+    K->cforce(&K->contact, ueq, &sq, &dF);
+    *K_loc = K->k + dF;
+    return ueq;
+}
+
+static void s_begin(vafm_sim *s, uint64_t index, int scene)
+{
+    vafm_kernel *K = &s->K;
+    const vafm_reduced *rd = &s->nm.r;
+    vafm_rng_init(&K->rng, s->p.seed, index);
+    s->scene = scene;
+    s->index = index;
+    s->sample_index = 0;
+    s->nblk = 0;
+    s->flags = 0;
+    s->touched = 0;
+    s->detached_in_retract = 0;
+    s->retract_samples = 0;
+    s->sample_min_force = INFINITY;
+    s->fs_min_retract = INFINITY;
+    s->touch_t = NAN;
+    s->touch_uspr = NAN;
+    s->uspr_detach = s->fs_detach = s->t_detach = NAN;
+    s->t_retract0 = NAN;
+    s->mode_free = 0;
+    s->need_prepare = 1;
+
+    const double L = s->nm.sc.length_m;
+    s->uspr_start = -s->p.start_height_m / L;
+    s->F_set = s->p.setpoint_N / s->nm.sc.force_N;
+    s->uspr_trigger = -s->p.trigger_height_m / L;
+    s->margin = s->p.retract_margin_m / L;
+    double zr = s->p.z_range_m > 0 ? s->p.z_range_m / L
+                                   : fmax(0.0, -s->uspr_start) + 2.0 * s->F_set / rd->k + 20.0 * s->sigma_free + 1.0;
+    s->uspr_zlimit = s->uspr_start + zr;
+
+    K->t = 0.0;
+    K->u_spr = s->uspr_start;
+    double v0 = scene == S_SCENE_CURVE ? rd->v_approach : 0.0;
+    s_kernel_phase(K, v0);
+    vafm_kernel_set_dt(K, s->nm.dt);
+    K->event = 0;
+    K->steps = K->steps_contact = K->steps_free = 0;
+    K->fs_min = INFINITY;
+    K->in_contact = 0;
+    K->s = 0.0;
+    const int has_contact = K->contact.type != vafm_contact_none;
+    if (has_contact && s->uspr_start >= K->contact.u_touch) {
+        double K_loc;
+        K->u = s_contact_equilibrium(s, s->uspr_start, &K_loc);
+        K->w = 0.0;
+        if (K->thermal && K_loc > 0) {
+            K->u += sqrt(K->kT / K_loc) * vafm_rng_normal_inline(&K->rng);
+            if (!s->it->overdamped)
+                K->w = sqrt(K->kT / K->m) * vafm_rng_normal_inline(&K->rng);
+        }
+        K->in_contact = K->u >= K->contact.u_detach;
+        if (K->in_contact) {
+            K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
+            s->touched = 1;
+            s->touch_t = 0.0;
+            s->touch_uspr = K->u_spr;
+        } else {
+            K->Fc = 0.0;
+        }
+    } else {
+        K->u = s->uspr_start;
+        K->w = v0;
+        if (K->thermal) {
+            K->u += s->sigma_free * vafm_rng_normal_inline(&K->rng);
+            if (!s->it->overdamped)
+                K->w += sqrt(K->kT / K->m) * vafm_rng_normal_inline(&K->rng);
+        }
+        K->Fc = 0.0;
+        if (has_contact && K->u >= K->contact.u_touch) {
+            K->in_contact = 1;
+            K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
+            s->touched = 1;
+            s->touch_t = 0.0;
+            s->touch_uspr = K->u_spr;
+        }
+    }
+    K->f = K->k * (K->u_spr - K->u) - K->Fc;
+    s->phase = scene == S_SCENE_CURVE ? S_PH_APPROACH : S_PH_TUNE;
+    if (scene == S_SCENE_TUNE)
+        s->tune_samples = (uint64_t)llround(s->p.tune_duration_s * s->p.sample_rate_Hz);
+}
+
+int vafm_sim_curve_begin(vafm_sim *s, uint64_t index)
+{
+    if (!s)
+        return VAFM_EINVAL;
+    s_begin(s, index, S_SCENE_CURVE);
+    return 0;
+}
+
+int vafm_sim_tune_begin(vafm_sim *s, uint64_t index)
+{
+    if (!s)
+        return VAFM_EINVAL;
+    s_begin(s, index, S_SCENE_TUNE);
+    return 0;
+}
+
+/* ---- one sample ------------------------------------------------------------------------------- */
+
+static int s_free_safe(const vafm_sim *s)
+{
+    const vafm_kernel *K = &s->K;
+    if (!s->p.free_exact || K->in_contact)
+        return 0;
+    if (K->contact.type == vafm_contact_none)
+        return 1;
+    double y = K->u - K->u_spr, z = s->it->overdamped ? 0.0 : K->w - K->v_spr;
+    double A = sqrt(y * y + K->m * z * z / K->k); /* energy bound of the deterministic excursion */
+    double gap0 = K->contact.u_touch - K->u_spr;
+    double gap1 = K->contact.u_touch - (K->u_spr + K->v_spr * s->nm.Ts);
+    return fmin(gap0, gap1) > A + 8.0 * s->sigma_free;
+}
+
+static void s_event(vafm_sim *s)
+{
+    vafm_kernel *K = &s->K;
+    if (K->event > 0) {
+        if (!s->touched) {
+            s->touched = 1;
+            s->touch_t = K->t;
+            s->touch_uspr = K->u_spr;
+        }
+        if (s->phase == S_PH_RETRACT && s->detached_in_retract)
+            s->flags |= VAFM_CURVE_RECONTACT;
+    } else if (K->event < 0) {
+        if (s->phase == S_PH_RETRACT) {
+            /* The body passed u_detach during the last step: go back to the crossing along the step's
+             * velocity, so the recorded spring force and position are those at the crossing itself
+             * rather than up to one step (with the body snapping fast) beyond it. */
+            double back = K->w < 0 ? (K->u - K->contact.u_detach) / K->w : 0.0;
+            if (!(back >= 0.0))
+                back = 0.0;
+            if (back > K->dt)
+                back = K->dt;
+            double uspr_x = K->u_spr - K->v_spr * back;
+            s->detached_in_retract = 1;
+            s->uspr_detach = uspr_x;
+            s->fs_detach = K->k * (uspr_x - K->contact.u_detach);
+            s->t_detach = K->t - back - s->t_retract0;
+        } else {
+            s->flags |= VAFM_CURVE_EARLY_DETACH;
+        }
+    }
+    K->event = 0;
+}
+
+static int s_step_interval(vafm_sim *s)
+{
+    vafm_kernel *K = &s->K;
+    K->acc_u = K->acc_uspr = 0.0;
+    K->acc_n = 0;
+    if (s_free_safe(s)) {
+        if (!s->mode_free) {
+            s_kernel_phase(K, K->v_spr);
+            K->dt = s->ou.h;
+            s->mode_free = 1;
+        }
+        for (long i = 0; i < s->n_free; i++)
+            vafm_free_ou_step(K, &s->ou);
+    } else {
+        if (s->mode_free) {
+            s_kernel_phase(K, K->v_spr);
+            K->dt = s->nm.dt;
+            s->mode_free = 0;
+            s->need_prepare = 1;
+        }
+        if (s->need_prepare) {
+            s->it->prepare(K);
+            s->need_prepare = 0;
+        }
+        long left = s->nm.n_sub;
+        while (left > 0) {
+            long d = s->it->run(K, left);
+            left -= d;
+            if (K->event)
+                s_event(s);
+        }
+    }
+    if (!isfinite(K->u) || !isfinite(K->w))
+        return VAFM_EUNSTABLE;
+    if (K->in_contact) {
+        /* runtime guard: the contact reached may be stiffer than the scene predicted */
+        double sq = K->s, dF = 0.0;
+        K->cforce(&K->contact, K->u, &sq, &dF);
+        double Kl = K->k + dF;
+        if (Kl > 0) {
+            double stab = s->it->overdamped ? Kl * s->nm.dt / K->co[1].zeta : sqrt(Kl / K->m) * s->nm.dt;
+            if (!(stab < s->it->stability_limit))
+                return VAFM_EUNSTABLE;
+        }
+    }
+    return 0;
+}
+
+static void s_flush(vafm_sim *s, vafm_sample_fn fn, void *user, int *stop)
+{
+    if (s->nblk == 0)
+        return;
+    if (fn) {
+        vafm_samples b = { s->nblk, s->sample_index - s->nblk, s->bt, s->bh, s->bd, s->bf, s->btip, s->bseg };
+        if (fn(user, &b))
+            *stop = 1;
+    }
+    s->nblk = 0;
+}
+
+static void s_start_retract(vafm_sim *s)
+{
+    vafm_kernel *K = &s->K;
+    s_kernel_phase(K, -s->nm.r.v_retract);
+    s->need_prepare = 1; /* the drift term changed with v_spr */
+    s->t_retract0 = K->t;
+    s->uspr_turn = K->u_spr;
+    K->fs_min = INFINITY;
+    s->phase = S_PH_RETRACT;
+    double end = isfinite(s->nm.u_spr_star) ? s->nm.u_spr_star : fmin(0.0, K->contact.u_detach);
+    s->retract_travel_max = s->p.retract_max_m > 0 ? s->p.retract_max_m / s->nm.sc.length_m
+                                                   : 4.0 * fmax(s->uspr_turn - end, 0.0) + s->margin + 1.0;
+}
+
+static void s_phase_logic(vafm_sim *s, double force)
+{
+    vafm_kernel *K = &s->K;
+    switch (s->phase) {
+    case S_PH_APPROACH: {
+        int trig = s->p.trigger == VAFM_TRIGGER_FORCE ? force >= s->F_set : K->u_spr >= s->uspr_trigger;
+        if (!trig && K->u_spr >= s->uspr_zlimit) {
+            s->flags |= VAFM_CURVE_NO_TRIGGER;
+            trig = 1;
+        }
+        if (trig) {
+            s->dwell_left = lround(s->p.dwell_s * s->p.sample_rate_Hz);
+            if (s->dwell_left > 0) {
+                s_kernel_phase(K, 0.0);
+                s->need_prepare = 1;
+                s->phase = S_PH_DWELL;
+            } else {
+                s_start_retract(s);
+            }
+        }
+        break;
+    }
+    case S_PH_DWELL:
+        if (--s->dwell_left <= 0)
+            s_start_retract(s);
+        break;
+    case S_PH_RETRACT: {
+        double travel = s->uspr_turn - K->u_spr;
+        if (!K->in_contact && s->detached_in_retract && s->uspr_detach - K->u_spr >= s->margin)
+            s->phase = S_PH_DONE;
+        else if (!K->in_contact && !s->detached_in_retract &&
+                 K->u_spr <= fmin(s->uspr_start, s->uspr_turn) - s->margin)
+            s->phase = S_PH_DONE;
+        else if (travel >= s->retract_travel_max) {
+            if (K->in_contact)
+                s->flags |= VAFM_CURVE_NO_DETACH;
+            s->phase = S_PH_DONE;
+        }
+        break;
+    }
+    case S_PH_TUNE:
+        if (s->sample_index >= s->tune_samples)
+            s->phase = S_PH_DONE;
+        break;
+    default: break;
+    }
+}
+
+int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user)
+{
+    if (!s)
+        return VAFM_EINVAL;
+    if (s->scene == S_SCENE_NONE)
+        return VAFM_ESTATE;
+    vafm_kernel *K = &s->K;
+    const vafm_scale *sc = &s->nm.sc;
+    int stop = 0;
+    for (size_t i = 0; i < max_samples && s->phase != S_PH_DONE && !stop; i++) {
+        if (s->phase == S_PH_TUNE && s->sample_index >= s->tune_samples) {
+            s->phase = S_PH_DONE;
+            break;
+        }
+        int seg = s->phase == S_PH_APPROACH ? VAFM_SEG_APPROACH
+                  : s->phase == S_PH_DWELL  ? VAFM_SEG_DWELL
+                  : s->phase == S_PH_TUNE   ? VAFM_SEG_TUNE
+                                            : VAFM_SEG_RETRACT;
+        int r = s_step_interval(s);
+        if (r) {
+            s_flush(s, fn, user, &stop);
+            s->phase = S_PH_DONE;
+            return r;
+        }
+        double u_m, uspr_m, t_m;
+        if (s->p.antialias == VAFM_ANTIALIAS_MEAN && K->acc_n > 0) {
+            u_m = K->acc_u / (double)K->acc_n;
+            uspr_m = K->acc_uspr / (double)K->acc_n;
+            t_m = K->t - 0.5 * s->nm.Ts;
+        } else {
+            u_m = K->u;
+            uspr_m = K->u_spr;
+            t_m = K->t;
+        }
+        double defl = uspr_m - u_m, force = K->k * defl;
+        size_t j = s->nblk++;
+        s->bt[j] = t_m * sc->time_s;
+        s->bh[j] = -uspr_m * sc->length_m;
+        s->bd[j] = defl * sc->length_m;
+        s->bf[j] = force * sc->force_N;
+        s->btip[j] = -u_m * sc->length_m;
+        s->bseg[j] = (uint8_t)seg;
+        s->sample_index++;
+        if (seg == VAFM_SEG_RETRACT) {
+            s->retract_samples++;
+            if (force < s->sample_min_force)
+                s->sample_min_force = force;
+        }
+        s_phase_logic(s, force);
+        if (s->nblk == S_BLOCK)
+            s_flush(s, fn, user, &stop);
+    }
+    s_flush(s, fn, user, &stop);
+    if (stop) {
+        s->phase = S_PH_DONE;
+        return VAFM_EABORT;
+    }
+    return s->phase == S_PH_DONE ? 0 : 1;
+}
+
+int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)
+{
+    if (!s || !out)
+        return VAFM_EINVAL;
+    const vafm_kernel *K = &s->K;
+    const vafm_scale *sc = &s->nm.sc;
+    memset(out, 0, sizeof *out);
+    out->index = s->index;
+    out->flags = s->flags;
+    if (!s->touched)
+        out->flags |= VAFM_CURVE_NO_CONTACT;
+    out->pulloff_sampled_N = s->retract_samples ? -s->sample_min_force * sc->force_N : NAN;
+    out->pulloff_spring_N = s->phase == S_PH_RETRACT || (s->phase == S_PH_DONE && isfinite(s->t_retract0))
+                                ? -K->fs_min * sc->force_N
+                                : NAN;
+    if (s->detached_in_retract) {
+        out->detach_force_N = -s->fs_detach * sc->force_N;
+        out->detach_height_m = -s->uspr_detach * sc->length_m;
+        out->detach_time_s = s->t_detach * sc->time_s;
+        double ueq, Feq;
+        if (K->contact.type == vafm_contact_jkr && K->contact.gamma > 0 &&
+            vafm_theory_equilibrium(K->contact.gamma, K->k, s->uspr_detach, &ueq, &Feq) == 0)
+            out->detach_eq_force_N = -Feq * sc->force_N;
+        else
+            out->detach_eq_force_N = NAN;
+    } else {
+        out->detach_force_N = out->detach_height_m = out->detach_time_s = out->detach_eq_force_N = NAN;
+    }
+    out->touch_time_s = s->touch_t * sc->time_s;
+    out->touch_height_m = -s->touch_uspr * sc->length_m;
+    out->retract_start_s = s->t_retract0 * sc->time_s;
+    out->duration_s = K->t * sc->time_s;
+    out->samples = s->sample_index;
+    out->steps = K->steps;
+    out->steps_contact = K->steps_contact;
+    out->steps_free = K->steps_free;
+    return 0;
+}
+
+static int s_run_all(vafm_sim *s, vafm_sample_fn fn, void *user)
+{
+    int r;
+    do
+        r = vafm_sim_advance(s, 1u << 20, fn, user);
+    while (r == 1);
+    return r;
+}
+
+int vafm_sim_curve(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user, vafm_curve_result *out)
+{
+    int r = vafm_sim_curve_begin(s, index);
+    if (r)
+        return r;
+    r = s_run_all(s, fn, user);
+    if (out)
+        vafm_sim_result(s, out);
+    return r;
+}
+
+int vafm_sim_tune(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user)
+{
+    int r = vafm_sim_tune_begin(s, index);
+    if (r)
+        return r;
+    return s_run_all(s, fn, user);
+}

@@ -1,0 +1,33 @@
+/* SPDX-License-Identifier: MIT */
+#include "vafm/common.h"
+#include "vafm/version.h"
+
+const char *vafm_strerror(int code)
+{
+    switch (code) {
+    case VAFM_OK: return "success";
+    case VAFM_EINVAL: return "invalid argument: a parameter is outside its allowed range";
+    case VAFM_ENOMEM: return "out of memory";
+    case VAFM_EUNSTABLE: return "time step at or beyond the integrator's stability limit";
+    case VAFM_EIO: return "input/output error";
+    case VAFM_EFORMAT: return "file or message does not follow its format";
+    case VAFM_ENOTSUP: return "not supported (yet)";
+    case VAFM_EABORT: return "stopped by the caller";
+    case VAFM_ESTATE: return "call does not fit the current state";
+    case VAFM_ENOTFOUND: return "no such item";
+    default: return "unknown error code";
+    }
+}
+
+#define S_STR2(x) #x
+#define S_STR(x) S_STR2(x)
+
+const char *vafm_version(void)
+{
+    return S_STR(VAFM_API_VERSION_MAJOR) "." S_STR(VAFM_API_VERSION_MINOR) "." S_STR(VAFM_API_VERSION_PATCH);
+}
+
+unsigned vafm_version_api(void)
+{
+    return (VAFM_API_VERSION_MAJOR << 16) | (VAFM_API_VERSION_MINOR << 8) | VAFM_API_VERSION_PATCH;
+}
