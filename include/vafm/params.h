@@ -70,6 +70,7 @@ typedef struct vafm_params {
     double dt_s;           /**< time step, s (0: automatic from omega_dt, the paper's Eq. 8 rule) */
     double omega_dt;       /**< automatic step: ω_max·dt at the stiffest contact reached (paper: 2π/40) */
     int free_exact;        /**< 1: propagate the free cantilever exactly (linear SDE), 0: plain steps */
+    int contact_table;     /**< 1: tabulated JKR branch in the step (error < 1e-13), 0: Newton solve */
     uint64_t seed;         /**< random seed; (seed, curve index) reproduces a curve bit for bit */
     uint8_t reserved[32];
 } vafm_params;

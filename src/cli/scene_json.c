@@ -8,6 +8,7 @@
  */
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include <jansson.h>
 
@@ -50,7 +51,8 @@ static void s_fail(vafm_error *err, int code, const char *field, const char *pat
     snprintf(err->field, sizeof err->field, "%s", field);
     /* The file name is cut rather than the reason when the two do not fit. */
     int room = (int)sizeof err->message - (int)strlen(what) - 3;
-    snprintf(err->message, sizeof err->message, "%.*s: %s", room > 16 ? room : 16, path, what);
+    if (snprintf(err->message, sizeof err->message, "%.*s: %s", room > 16 ? room : 16, path, what) < 0)
+        err->message[0] = '\0';
 }
 
 /* The text form of a JSON value for a parameter of kind `kind`, or NULL if the JSON type is wrong. */
@@ -147,9 +149,14 @@ int vafm_cli_scene_load(vafm_params *p, const char *path, char *preset, size_t p
 {
     if (preset && preset_len)
         preset[0] = '\0';
+    char what[sizeof err->message];
+    struct stat st;
+    if (stat(path, &st) == 0 && S_ISDIR(st.st_mode)) {
+        s_fail(err, VAFM_EIO, "scene", path, "is a directory, not a JSON scene file");
+        return VAFM_EIO;
+    }
     json_error_t je;
     json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
-    char what[sizeof err->message];
     if (!root) {
         int io = json_error_code(&je) == json_error_cannot_open_file;
         if (io)

@@ -31,6 +31,7 @@ typedef struct vafm_numerics {
     double Ts;            /* output sample interval (reduced time) */
     double F_max;         /* largest repulsive contact force the scene is expected to reach */
     double K_max;         /* k + dF/du there: the stiffest total stiffness */
+    double u_deep;        /* indentation at 4·F_max: the range the contact table covers */
     double u_c;           /* spring travel from the turn to the quasi-static detachment */
     double u_spr_star;    /* quasi-static instability (NaN without adhesion) */
     double dt;            /* time step (reduced), a whole fraction of Ts */

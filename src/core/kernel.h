@@ -25,6 +25,8 @@
 #include "vafm/contact.h"
 #include "vafm/integrator.h"
 #include "vafm/params.h"
+#include "core/jkr_inline.h"
+#include "core/jkr_table.h"
 #include "core/rng_philox.h"
 
 typedef struct vafm_kcoef {
@@ -41,6 +43,8 @@ typedef struct vafm_kernel {
     double m, k, kT, eta_c;
     vafm_contact contact;
     double (*cforce)(const vafm_contact *c, double u, double *s_io, double *dFdu);
+    int is_jkr;        /* contact is JKR: the kernel calls the inline solver, not cforce */
+    const vafm_jkr_table *jtab; /* tabulated JKR branch (NULL: solve exactly every step) */
     int thermal;       /* kT > 0: draw random numbers */
     int uniform_noise; /* VAFM_NOISE_UNIFORM */
     vafm_rng rng;
@@ -89,7 +93,12 @@ static inline void s_kernel_contact(vafm_kernel *K)
         K->event = 1;
         K->s = 0.0; /* cold start of the solver */
     }
-    K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
+    if (K->jtab)
+        K->Fc = vafm_jkr_table_force(K->jtab, &K->contact, K->u, &K->s);
+    else if (K->is_jkr)
+        K->Fc = vafm_jkr_force_inline(&K->contact, K->u, &K->s, NULL);
+    else
+        K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
 }
 
 /** The tail of every step: time, support, contact, force, accumulation. Returns the spring force. */

@@ -43,7 +43,10 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
         nm->F_max = r->k * fmax(0.0, u_spr_turn - fmin(0.0, c->u_detach)) + c->F_jkr;
     }
     nm->K_max = r->k;
+    nm->u_deep = 0.0;
     if (has_contact) {
+        double xd = s_x_at_force(c->c, 4.0 * nm->F_max + c->F_jkr), sd = cbrt(xd);
+        nm->u_deep = sd * sd * sd * sd - c->c * sd;
         double x = s_x_at_force(c->c, nm->F_max);
         double s = cbrt(x);
         nm->K_max += 2.0 * s * s * (4.0 * x - 3.0 * c->c) / (4.0 * x - c->c);
@@ -90,11 +93,15 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
     dt = nm->dt;
     nm->stab = it->overdamped ? nm->K_max * dt / zeta_min : sqrt(nm->K_max / r->m) * dt;
     if (!(nm->stab < it->stability_limit)) {
+        double dt_stable = (it->overdamped ? it->stability_limit * zeta_min / nm->K_max
+                                           : it->stability_limit / sqrt(nm->K_max / r->m)) * nm->sc.time_s;
         vafm_err_set(err, VAFM_EUNSTABLE, "dt_s",
-                     "dt_s = %.6g s is beyond the %s stability limit: %s = %.4g at the stiffest contact reached "
-                     "(%.4g N/m, force %.4g N) must be < %.3g; lower dt_s (or 0 for automatic)",
-                     dt * nm->sc.time_s, it->name, it->overdamped ? "K_max*dt/zeta" : "omega_max*dt", nm->stab,
-                     nm->K_max * nm->sc.stiffness_N_per_m, nm->F_max * nm->sc.force_N, it->stability_limit);
+                     "dt_s = %.6g s (step used %.6g s) is beyond the %s stability limit: %s = %.4g at the stiffest "
+                     "contact reached (%.4g N/m, force %.4g N) must be < %.3g, i.e. dt_s < %.4g s; "
+                     "lower dt_s (or 0 for automatic)",
+                     p->dt_s, dt * nm->sc.time_s, it->name, it->overdamped ? "K_max*dt/zeta" : "omega_max*dt",
+                     nm->stab, nm->K_max * nm->sc.stiffness_N_per_m, nm->F_max * nm->sc.force_N,
+                     it->stability_limit, dt_stable);
         return VAFM_EUNSTABLE;
     }
     if (it == vafm_integrator_paper_vv) {

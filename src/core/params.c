@@ -71,6 +71,9 @@ static const s_field s_fields[] = {
     { { "free_exact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
         "propagate the free cantilever exactly (linear SDE) instead of plain steps" },
       offsetof(vafm_params, free_exact), S_NONE },
+    { { "contact_table", VAFM_PARAM_BOOL, "", 0, 1, NULL,
+        "tabulate the JKR branch for the step (relative error < 1e-13) instead of a Newton solve per step" },
+      offsetof(vafm_params, contact_table), S_NONE },
     { { "seed", VAFM_PARAM_SEED, "", 0, 18446744073709551615.0, NULL,
         "random seed: (seed, curve index) reproduces a curve bit for bit" },
       offsetof(vafm_params, seed), S_NONE },
@@ -109,6 +112,7 @@ static void s_common(vafm_params *p)
     p->antialias = VAFM_ANTIALIAS_MEAN;
     p->omega_dt = 2.0 * M_PI / 40.0;
     p->free_exact = 1;
+    p->contact_table = 1;
     p->seed = 1;
 }
 
@@ -284,7 +288,8 @@ int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_er
     }
     case VAFM_PARAM_SEED: {
         errno = 0;
-        if (value[0] == '-' || value[0] == '\0')
+        /* strtoull would skip white space and wrap a minus sign around: accept plain digits only */
+        if (value[0] < '0' || value[0] > '9')
             goto bad_seed;
         unsigned long long v = strtoull(value, &end, 0);
         if (*end != '\0' || errno == ERANGE)
@@ -384,7 +389,8 @@ int vafm_params_to_json(const vafm_params *p, char *buf, size_t len)
     for (int i = 0; i < S_NFIELDS; i++) {
         const s_field *f = &s_fields[i];
         vafm_params_get(p, f->info.name, val, sizeof val);
-        int quoted = f->info.kind == VAFM_PARAM_CHOICE;
+        /* seeds are quoted: JSON readers (jansson) reject integers above INT64_MAX */
+        int quoted = f->info.kind == VAFM_PARAM_CHOICE || f->info.kind == VAFM_PARAM_SEED;
         w = snprintf(buf + n, len - n, "%s\"%s\": %s%s%s", i ? ", " : "", f->info.name, quoted ? "\"" : "", val,
                      quoted ? "\"" : "");
         if (w < 0 || (size_t)w >= len - n)

@@ -30,6 +30,7 @@ struct vafm_sim {
     const vafm_integrator_type *it;
     vafm_kernel K;
     vafm_free_ou ou;
+    vafm_jkr_table jtab;
     long n_free;        /* exact free steps per sample */
     double sigma_free;  /* √(kT/k): thermal spread of the free cantilever */
     int mode_free;      /* the last sample interval used exact free steps */
@@ -84,6 +85,18 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
     K->eta_c = rd->eta_cont;
     K->contact = s->nm.contact;
     K->cforce = K->contact.type->force;
+    K->is_jkr = K->contact.type == vafm_contact_jkr;
+    K->jtab = NULL;
+    if (p->contact_table && K->is_jkr && K->contact.gamma > 0) {
+        int rt = vafm_jkr_table_init(&s->jtab, &K->contact, s->nm.u_deep);
+        if (rt == VAFM_ENOMEM) {
+            free(buf);
+            free(s);
+            return VAFM_ENOMEM;
+        }
+        if (rt == 0)
+            K->jtab = &s->jtab;
+    }
     K->thermal = rd->kT > 0;
     K->uniform_noise = p->noise == VAFM_NOISE_UNIFORM;
     vafm_kernel_set_dt(K, s->nm.dt);
@@ -105,6 +118,7 @@ void vafm_sim_destroy(vafm_sim **s)
     if (!s || !*s)
         return;
     free((*s)->bt);
+    vafm_jkr_table_free(&(*s)->jtab);
     free(*s);
     *s = NULL;
 }

@@ -1,0 +1,104 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The stepping kernel's shortcuts against the plain computation they replace:
+ * - the tabulated JKR branch (jkr_table.h) against the exact Newton solver, over the whole table,
+ *   near the branch end u_min, and beyond the table (fallback);
+ * - a force curve with the table against one without: athermal results agree to ~1e-9 relative
+ *   (the trajectories differ only by the interpolation error, ~1e-13, amplified by the snap).
+ */
+#include "harness.h"
+
+#include "vafm/sim.h"
+#include "vafm/theory.h"
+#include "vafm/units.h"
+#include "core/internal.h"
+#include "core/jkr_table.h"
+
+static void test_table_accuracy(void)
+{
+    const double gammas[] = { 1.2e-4, 0.01, 0.229, 3.0 };
+    for (size_t g = 0; g < sizeof gammas / sizeof gammas[0]; g++) {
+        vafm_contact c;
+        ENSURE(vafm_contact_init(&c, vafm_contact_jkr, gammas[g]) == 0);
+        double u_max = 10.0 * c.a0 * c.a0;
+        vafm_jkr_table T;
+        ENSURE(vafm_jkr_table_init(&T, &c, u_max) == 0);
+        ENSURE_MSG(T.max_err < 1e-13, "gamma %g: build error %g with %d nodes", gammas[g], T.max_err, T.n);
+        /* a dense sweep, not only the midpoints the builder checked: uniform in ξ and log-spaced near u_min */
+        double worst = 0.0;
+        for (int i = 0; i <= 200000; i++) {
+            double xi = T.xi_max * i / 200000.0;
+            double u = c.u_detach + xi * xi;
+            double s_tab = 0.0, s_ex = 0.0;
+            double F_tab = vafm_jkr_table_force(&T, &c, u, &s_tab);
+            double F_ex = c.type->force(&c, u, &s_ex, NULL);
+            double scale = c.F_jkr; /* F crosses zero: judge against the force scale */
+            double e = fabs(F_tab - F_ex) / scale;
+            if (e > worst)
+                worst = e;
+        }
+        ENSURE_MSG(worst < 1e-12, "gamma %g: worst force error %g F_JKR", gammas[g], worst);
+        for (int k = 1; k <= 16; k++) {
+            double u = c.u_detach + pow(10.0, -k) * c.a0 * c.a0;
+            double s_tab = 0.0, s_ex = 0.0;
+            double F_tab = vafm_jkr_table_force(&T, &c, u, &s_tab);
+            double F_ex = c.type->force(&c, u, &s_ex, NULL);
+            ENSURE_ABS(F_tab / c.F_jkr, F_ex / c.F_jkr, 1e-12);
+        }
+        /* exactly at u_min: F = −(5/9) F_JKR */
+        double s0 = 0.0;
+        ENSURE_REL(vafm_jkr_table_force(&T, &c, c.u_detach, &s0), -5.0 / 9.0 * c.F_jkr, 1e-12);
+        /* beyond the table: the exact solver takes over */
+        double u_far = 4.0 * u_max, s_tab = 0.0, s_ex = 0.0;
+        ENSURE_REL(vafm_jkr_table_force(&T, &c, u_far, &s_tab), c.type->force(&c, u_far, &s_ex, NULL), 1e-14);
+        vafm_jkr_table_free(&T);
+        ENSURE(T.node == NULL);
+    }
+    vafm_contact h;
+    vafm_jkr_table T;
+    ENSURE(vafm_contact_init(&h, vafm_contact_hertz, 0.0) == 0);
+    ENSURE(vafm_jkr_table_init(&T, &h, 1.0) == VAFM_EINVAL);
+}
+
+static void s_fig4(vafm_params *p, double k_red, int table)
+{
+    vafm_params_preset(p, "paper-fig4", NULL);
+    vafm_reduced r;
+    vafm_units_reduce(p, &r);
+    r.kT = 0.0;
+    r.k = k_red;
+    vafm_units_from_reduced(p, &r);
+    p->contact_table = table;
+}
+
+static void test_table_vs_solver_curve(void)
+{
+    const double ks[] = { 0.1, 0.8 };
+    for (size_t i = 0; i < 2; i++) {
+        vafm_params p0, p1;
+        s_fig4(&p0, ks[i], 0);
+        s_fig4(&p1, ks[i], 1);
+        vafm_sim *s0 = NULL, *s1 = NULL;
+        vafm_curve_result r0, r1;
+        ENSURE(vafm_sim_new(&s0, &p0, NULL) == 0);
+        ENSURE(vafm_sim_new(&s1, &p1, NULL) == 0);
+        ENSURE(vafm_sim_curve(s0, 0, NULL, NULL, &r0) == 0);
+        ENSURE(vafm_sim_curve(s1, 0, NULL, NULL, &r1) == 0);
+        ENSURE(r0.flags == 0 && r1.flags == 0);
+        ENSURE(r0.steps == r1.steps);
+        ENSURE_REL(r1.detach_force_N, r0.detach_force_N, 1e-9);
+        ENSURE_REL(r1.detach_height_m, r0.detach_height_m, 1e-9);
+        ENSURE_REL(r1.pulloff_spring_N, r0.pulloff_spring_N, 1e-9);
+        ENSURE_REL(r1.pulloff_sampled_N, r0.pulloff_sampled_N, 1e-9);
+        vafm_sim_destroy(&s0);
+        vafm_sim_destroy(&s1);
+        ENSURE(s0 == NULL && s1 == NULL);
+    }
+}
+
+int main(void)
+{
+    RUN_TEST(test_table_accuracy);
+    RUN_TEST(test_table_vs_solver_curve);
+    return harness_done();
+}

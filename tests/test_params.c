@@ -1,0 +1,544 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The scene parameters (params.h, units.h): the field table every front end reads, the presets, text
+ * set/get, JSON export, the refusal of bad values (each naming its field and range), the unit
+ * conversion, the paper's Fig. 1 scene in SI (physics notes, "Units") and the status strings.
+ *
+ * Nothing here is stochastic; all checks are exact or at rounding level.
+ */
+#include "harness.h"
+
+#include <float.h>
+#include <inttypes.h>
+#include <stddef.h>
+
+#include "vafm/common.h"
+#include "vafm/contact.h"
+#include "vafm/integrator.h"
+#include "vafm/params.h"
+#include "vafm/units.h"
+
+/* REAL fields that are dimensionless by design (a ratio): everything else must carry an SI unit. */
+static int t_dimensionless(const char *name)
+{
+    return !strcmp(name, "omega_dt");
+}
+
+/* The range as the library formats it in its messages ("[%.6g, %.6g]"). */
+static void t_range_text(const vafm_param_info *f, char *buf, size_t len)
+{
+    snprintf(buf, len, "[%.6g, %.6g]", f->min, f->max);
+}
+
+static double t_get_real(const vafm_params *p, const char *name)
+{
+    char buf[128];
+    if (vafm_params_get(p, name, buf, sizeof buf))
+        return NAN;
+    return strtod(buf, NULL);
+}
+
+static void test_field_table(void)
+{
+    const int n = vafm_param_count();
+    ENSURE(n >= 20);
+    ENSURE(vafm_param_at(-1) == NULL);
+    ENSURE(vafm_param_at(n) == NULL);
+    for (int i = 0; i < n; i++) {
+        const vafm_param_info *f = vafm_param_at(i);
+        ENSURE(f != NULL);
+        if (!f)
+            continue;
+        ENSURE_MSG(f->name && f->name[0], "row %d has no name", i);
+        ENSURE_MSG(f->doc && strlen(f->doc) >= 10, "%s: doc missing", f->name);
+        ENSURE_MSG(f->unit != NULL, "%s: unit is NULL", f->name);
+        ENSURE_MSG(vafm_param_find(f->name) == f, "%s: find does not return its own row", f->name);
+        for (int j = 0; j < i; j++)
+            ENSURE_MSG(strcmp(vafm_param_at(j)->name, f->name) != 0, "duplicate field %s", f->name);
+        switch (f->kind) {
+        case VAFM_PARAM_REAL:
+            ENSURE_MSG(f->min <= f->max, "%s: min %g > max %g", f->name, f->min, f->max);
+            ENSURE_MSG(isfinite(f->min) && isfinite(f->max), "%s: range not finite", f->name);
+            if (t_dimensionless(f->name))
+                ENSURE_MSG(f->unit[0] == '\0', "%s is dimensionless but has unit '%s'", f->name, f->unit);
+            else
+                ENSURE_MSG(f->unit[0] != '\0', "%s has no unit", f->name);
+            break;
+        case VAFM_PARAM_CHOICE:
+            ENSURE_MSG(f->choices && strchr(f->choices, '|'), "%s: choices '%s'", f->name,
+                       f->choices ? f->choices : "(null)");
+            break;
+        case VAFM_PARAM_SEED:
+        case VAFM_PARAM_BOOL:
+            ENSURE_MSG(f->min <= f->max, "%s: min > max", f->name);
+            break;
+        default: ENSURE_MSG(0, "%s: unknown kind %d", f->name, f->kind);
+        }
+    }
+    ENSURE(vafm_param_find("no_such_field") == NULL);
+    ENSURE(vafm_param_find(NULL) == NULL);
+    /* the fields the rest of the code relies on exist */
+    const char *must[] = {"E_star_Pa", "R_m", "gamma_J_per_m2", "contact", "k_N_per_m", "m_kg", "eta_per_s",
+                          "T_K", "v_approach_m_per_s", "v_retract_m_per_s", "start_height_m", "trigger",
+                          "setpoint_N", "dwell_s", "sample_rate_Hz", "integrator", "noise", "dt_s",
+                          "omega_dt", "free_exact", "seed", "antialias"};
+    for (size_t i = 0; i < sizeof must / sizeof must[0]; i++)
+        ENSURE_MSG(vafm_param_find(must[i]) != NULL, "field %s missing", must[i]);
+}
+
+static void test_presets(void)
+{
+    const int np = vafm_preset_count();
+    ENSURE(np >= 3);
+    ENSURE(vafm_preset_name(np) == NULL && vafm_preset_name(-1) == NULL);
+    for (int i = 0; i < np; i++) {
+        const char *name = vafm_preset_name(i);
+        ENSURE(name != NULL);
+        ENSURE(vafm_preset_description(i) && vafm_preset_description(i)[0]);
+        vafm_params p;
+        vafm_error err = {0};
+        ENSURE(vafm_params_preset(&p, name, &err) == 0);
+        int r = vafm_params_validate(&p, &err);
+        ENSURE_MSG(r == 0, "preset %s does not validate: %s (%s)", name, err.field, err.message);
+        /* every REAL value of the preset lies in its field's range */
+        for (int j = 0; j < vafm_param_count(); j++) {
+            const vafm_param_info *f = vafm_param_at(j);
+            if (f->kind != VAFM_PARAM_REAL)
+                continue;
+            double v = t_get_real(&p, f->name);
+            ENSURE_MSG(v >= f->min && v <= f->max, "preset %s: %s = %g outside [%g, %g]", name, f->name, v, f->min,
+                       f->max);
+        }
+    }
+    vafm_params d, f1;
+    vafm_params_default(&d);
+    ENSURE(vafm_params_preset(&f1, "paper-fig1", NULL) == 0);
+    ENSURE(memcmp(&d, &f1, sizeof d) == 0); /* the default is paper-fig1 */
+    ENSURE(vafm_params_validate(&d, NULL) == 0);
+
+    vafm_error err = {0};
+    ENSURE(vafm_params_preset(&d, "no-such-preset", &err) == VAFM_ENOTFOUND);
+    ENSURE(err.code == VAFM_ENOTFOUND);
+    ENSURE(strstr(err.message, "no-such-preset") != NULL);
+    ENSURE(strstr(err.message, "paper-fig1") != NULL); /* names the known ones */
+    ENSURE(vafm_params_validate(NULL, &err) == VAFM_EINVAL);
+}
+
+/* get → set → get gives identical text for every field of every preset (REAL with %.17g is exact). */
+static void test_set_get_roundtrip(void)
+{
+    for (int i = 0; i < vafm_preset_count(); i++) {
+        vafm_params p, q;
+        vafm_params_preset(&p, vafm_preset_name(i), NULL);
+        vafm_params_preset(&q, "paper-fig1", NULL);
+        for (int j = 0; j < vafm_param_count(); j++) {
+            const vafm_param_info *f = vafm_param_at(j);
+            char a[128], b[128];
+            ENSURE(vafm_params_get(&p, f->name, a, sizeof a) == 0);
+            vafm_error err = {0};
+            int r = vafm_params_set(&q, f->name, a, &err);
+            ENSURE_MSG(r == 0, "%s: set('%s') = %d: %s", f->name, a, r, err.message);
+            ENSURE(vafm_params_get(&q, f->name, b, sizeof b) == 0);
+            ENSURE_MSG(!strcmp(a, b), "%s: '%s' != '%s'", f->name, a, b);
+        }
+        /* after copying every field through text, q is p (reserved bytes are zero in both) */
+        ENSURE_MSG(memcmp(&p, &q, sizeof p) == 0, "preset %s: text copy differs", vafm_preset_name(i));
+    }
+    /* every choice of every CHOICE field round-trips */
+    vafm_params p;
+    vafm_params_default(&p);
+    for (int j = 0; j < vafm_param_count(); j++) {
+        const vafm_param_info *f = vafm_param_at(j);
+        if (f->kind != VAFM_PARAM_CHOICE)
+            continue;
+        char list[256], got[64];
+        snprintf(list, sizeof list, "%s", f->choices);
+        for (char *tok = strtok(list, "|"); tok; tok = strtok(NULL, "|")) {
+            ENSURE_MSG(vafm_params_set(&p, f->name, tok, NULL) == 0, "%s = %s", f->name, tok);
+            vafm_params_get(&p, f->name, got, sizeof got);
+            ENSURE_MSG(!strcmp(got, tok), "%s: set %s, got %s", f->name, tok, got);
+        }
+    }
+    /* boolean spellings; seeds at the ends of their range */
+    const char *yes[] = {"1", "true", "TRUE", "yes", "on"}, *no[] = {"0", "false", "No", "off"};
+    char got[64];
+    for (size_t i = 0; i < 5; i++) {
+        ENSURE(vafm_params_set(&p, "free_exact", yes[i], NULL) == 0 && p.free_exact == 1);
+    }
+    for (size_t i = 0; i < 4; i++) {
+        ENSURE(vafm_params_set(&p, "free_exact", no[i], NULL) == 0 && p.free_exact == 0);
+    }
+    ENSURE(vafm_params_set(&p, "seed", "18446744073709551615", NULL) == 0 && p.seed == UINT64_MAX);
+    vafm_params_get(&p, "seed", got, sizeof got);
+    ENSURE(!strcmp(got, "18446744073709551615"));
+    ENSURE(vafm_params_set(&p, "seed", "0", NULL) == 0 && p.seed == 0);
+    ENSURE(vafm_params_set(&p, "k_N_per_m", "6.3e-3", NULL) == 0 && p.k_N_per_m == 6.3e-3);
+}
+
+/* Find "name": value in a flat JSON object and copy the value text (quotes stripped). */
+static int t_json_value(const char *json, const char *name, char *out, size_t len)
+{
+    char key[96];
+    snprintf(key, sizeof key, "\"%s\":", name);
+    const char *p = strstr(json, key);
+    if (!p)
+        return -1;
+    p += strlen(key);
+    while (*p == ' ')
+        p++;
+    int quoted = *p == '"';
+    if (quoted)
+        p++;
+    size_t n = 0;
+    while (*p && n + 1 < len) {
+        if (quoted ? *p == '"' : (*p == ',' || *p == '}' || *p == ' '))
+            break;
+        out[n++] = *p++;
+    }
+    out[n] = '\0';
+    return 0;
+}
+
+static void test_json(void)
+{
+    for (int i = 0; i < vafm_preset_count(); i++) {
+        vafm_params p;
+        vafm_params_preset(&p, vafm_preset_name(i), NULL);
+        char json[8192];
+        int n = vafm_params_to_json(&p, json, sizeof json);
+        ENSURE(n > 0 && (size_t)n == strlen(json));
+        ENSURE(json[0] == '{' && json[n - 1] == '}');
+        for (int j = 0; j < vafm_param_count(); j++) {
+            const vafm_param_info *f = vafm_param_at(j);
+            char a[128], b[128];
+            vafm_params_get(&p, f->name, a, sizeof a);
+            ENSURE_MSG(t_json_value(json, f->name, b, sizeof b) == 0, "%s missing from JSON", f->name);
+            ENSURE_MSG(!strcmp(a, b), "%s: JSON '%s' vs get '%s'", f->name, b, a);
+        }
+        /* too small a buffer: an error, never a truncated object */
+        char small[32];
+        ENSURE(vafm_params_to_json(&p, small, sizeof small) == VAFM_EINVAL);
+        ENSURE(vafm_params_to_json(&p, json, (size_t)n) == VAFM_EINVAL); /* no room for the NUL */
+        ENSURE(vafm_params_to_json(&p, json, (size_t)n + 1) == n);
+    }
+}
+
+/* One bad text value: the error code, the field named in err and (REAL) the range in the message. */
+static void t_bad(const vafm_param_info *f, const char *value, int want_range)
+{
+    vafm_params p, before;
+    vafm_params_default(&p);
+    before = p;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_params_set(&p, f->name, value, &err);
+    ENSURE_MSG(r == VAFM_EINVAL, "%s = '%s' accepted (%d)", f->name, value, r);
+    ENSURE_MSG(err.code == VAFM_EINVAL, "%s = '%s': err.code %d", f->name, value, err.code);
+    ENSURE_MSG(!strcmp(err.field, f->name), "%s = '%s': err.field '%s'", f->name, value, err.field);
+    ENSURE_MSG(strstr(err.message, f->name) != NULL, "%s: message '%s'", f->name, err.message);
+    ENSURE_MSG(memcmp(&p, &before, sizeof p) == 0, "%s = '%s': refused value changed the scene", f->name, value);
+    if (want_range) {
+        char range[96];
+        t_range_text(f, range, sizeof range);
+        ENSURE_MSG(strstr(err.message, range) != NULL, "%s = '%s': message '%s' lacks range %s", f->name, value,
+                   err.message, range);
+    }
+}
+
+static void test_bad_text_values(void)
+{
+    for (int j = 0; j < vafm_param_count(); j++) {
+        const vafm_param_info *f = vafm_param_at(j);
+        char buf[64];
+        switch (f->kind) {
+        case VAFM_PARAM_REAL:
+            /* the nearest doubles outside the closed range, written exactly */
+            snprintf(buf, sizeof buf, "%.17g", nextafter(f->min, -INFINITY));
+            t_bad(f, buf, 1);
+            snprintf(buf, sizeof buf, "%.17g", nextafter(f->max, INFINITY));
+            t_bad(f, buf, 1);
+            t_bad(f, "nan", 1);
+            t_bad(f, "inf", 1);
+            t_bad(f, "-inf", 1);
+            t_bad(f, "abc", 1);
+            t_bad(f, "1.5x", 1);
+            t_bad(f, "", 1);
+            /* the ends themselves are allowed */
+            {
+                vafm_params p;
+                vafm_params_default(&p);
+                snprintf(buf, sizeof buf, "%.17g", f->min);
+                ENSURE_MSG(vafm_params_set(&p, f->name, buf, NULL) == 0, "%s = min refused", f->name);
+                snprintf(buf, sizeof buf, "%.17g", f->max);
+                ENSURE_MSG(vafm_params_set(&p, f->name, buf, NULL) == 0, "%s = max refused", f->name);
+            }
+            break;
+        case VAFM_PARAM_CHOICE:
+            t_bad(f, "bogus", 0);
+            t_bad(f, "", 0);
+            t_bad(f, "GJF ", 0);
+            break;
+        case VAFM_PARAM_BOOL:
+            t_bad(f, "maybe", 0);
+            t_bad(f, "2", 0);
+            t_bad(f, "", 0);
+            t_bad(f, "-1", 0);
+            break;
+        case VAFM_PARAM_SEED:
+            t_bad(f, "-1", 0);
+            t_bad(f, " -1", 0); /* strtoull would wrap a negated value to 2^64 - 1 */
+            t_bad(f, "18446744073709551616", 0); /* 2^64: overflow */
+            t_bad(f, "99999999999999999999999", 0);
+            t_bad(f, "12x", 0);
+            t_bad(f, "1.5", 0);
+            t_bad(f, "", 0);
+            break;
+        default: break;
+        }
+    }
+    /* unknown field: VAFM_ENOTFOUND from set (naming it) and get */
+    vafm_params p;
+    vafm_params_default(&p);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    char buf[64];
+    ENSURE(vafm_params_set(&p, "no_such_field", "1", &err) == VAFM_ENOTFOUND);
+    ENSURE(err.code == VAFM_ENOTFOUND && !strcmp(err.field, "no_such_field"));
+    ENSURE(strstr(err.message, "no_such_field") != NULL);
+    ENSURE(vafm_params_get(&p, "no_such_field", buf, sizeof buf) == VAFM_ENOTFOUND);
+    ENSURE(vafm_params_set(&p, NULL, "1", &err) == VAFM_ENOTFOUND);
+    ENSURE(vafm_params_set(&p, "k_N_per_m", "1e-3", NULL) == 0); /* err may be NULL */
+    ENSURE(vafm_params_set(&p, "k_N_per_m", "-1", NULL) == VAFM_EINVAL);
+}
+
+/* The REAL members of vafm_params by name: the test's own map, checked against the field table so
+ * that a field added to one and not the other fails here. */
+static const struct {
+    const char *name;
+    size_t off;
+} t_real_members[] = {
+#define M(x) {#x, offsetof(vafm_params, x)}
+    M(E_star_Pa), M(R_m), M(gamma_J_per_m2), M(k_N_per_m), M(m_kg), M(eta_per_s), M(eta_cont_per_s), M(T_K),
+    M(v_approach_m_per_s), M(v_retract_m_per_s), M(start_height_m), M(setpoint_N), M(trigger_height_m),
+    M(z_range_m), M(dwell_s), M(retract_margin_m), M(retract_max_m), M(sample_rate_Hz), M(tune_duration_s),
+    M(dt_s), M(omega_dt),
+#undef M
+};
+#define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])
+
+static double *t_member(vafm_params *p, const char *name)
+{
+    for (size_t i = 0; i < T_NREAL; i++)
+        if (!strcmp(t_real_members[i].name, name))
+            return (double *)((char *)p + t_real_members[i].off);
+    return NULL;
+}
+
+/* vafm_params_validate on a valid scene with one REAL member out of range (below, above, NaN, ±inf):
+ * VAFM_EINVAL, err.field = that field, the range in the message. */
+static void t_validate_bad(const vafm_param_info *f, double v)
+{
+    vafm_params p;
+    vafm_params_preset(&p, "paper-fig4", NULL);
+    double *slot = t_member(&p, f->name);
+    ENSURE_MSG(slot != NULL, "%s: not in the test's member map", f->name);
+    if (!slot)
+        return;
+    *slot = v;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_params_validate(&p, &err);
+    ENSURE_MSG(r == VAFM_EINVAL, "validate %s = %g: %d", f->name, v, r);
+    ENSURE_MSG(err.code == VAFM_EINVAL, "validate %s = %g: err.code %d", f->name, v, err.code);
+    ENSURE_MSG(!strcmp(err.field, f->name), "validate %s = %g: field '%s'", f->name, v, err.field);
+    char range[96];
+    t_range_text(f, range, sizeof range);
+    ENSURE_MSG(strstr(err.message, range) != NULL, "validate %s: message '%s' lacks %s", f->name, err.message,
+               range);
+}
+
+static void test_validate_fields(void)
+{
+    int n_real = 0;
+    for (int j = 0; j < vafm_param_count(); j++)
+        n_real += vafm_param_at(j)->kind == VAFM_PARAM_REAL;
+    ENSURE_MSG(n_real == (int)T_NREAL, "field table has %d REAL fields, the test knows %zu", n_real, T_NREAL);
+    /* the member map really addresses the named fields: set through text, read the member */
+    for (size_t i = 0; i < T_NREAL; i++) {
+        const vafm_param_info *f = vafm_param_find(t_real_members[i].name);
+        ENSURE_MSG(f && f->kind == VAFM_PARAM_REAL, "%s is not a REAL field", t_real_members[i].name);
+        if (!f)
+            continue;
+        vafm_params p;
+        vafm_params_default(&p);
+        char buf[64];
+        snprintf(buf, sizeof buf, "%.17g", f->max);
+        ENSURE(vafm_params_set(&p, f->name, buf, NULL) == 0);
+        ENSURE_MSG(*t_member(&p, f->name) == f->max, "%s: member map wrong", f->name);
+    }
+    for (int j = 0; j < vafm_param_count(); j++) {
+        const vafm_param_info *f = vafm_param_at(j);
+        if (f->kind != VAFM_PARAM_REAL)
+            continue;
+        t_validate_bad(f, nextafter(f->min, -INFINITY));
+        t_validate_bad(f, nextafter(f->max, INFINITY));
+        t_validate_bad(f, NAN);
+        t_validate_bad(f, INFINITY);
+        t_validate_bad(f, -INFINITY);
+    }
+    /* CHOICE / BOOL members with impossible values */
+    vafm_params p;
+    vafm_error err;
+    struct { const char *field; int *member; int bad; } ints[] = {
+        {"trigger", &p.trigger, 2}, {"noise", &p.noise, -1}, {"antialias", &p.antialias, 7},
+        {"free_exact", &p.free_exact, 2},
+    };
+    for (size_t i = 0; i < sizeof ints / sizeof ints[0]; i++) {
+        vafm_params_default(&p);
+        *ints[i].member = ints[i].bad;
+        memset(&err, 0, sizeof err);
+        ENSURE_MSG(vafm_params_validate(&p, &err) == VAFM_EINVAL, "%s = %d accepted", ints[i].field, ints[i].bad);
+        ENSURE_MSG(!strcmp(err.field, ints[i].field), "%s: field '%s'", ints[i].field, err.field);
+    }
+    vafm_params_default(&p);
+    p.contact = NULL;
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_validate(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "contact"));
+    vafm_params_default(&p);
+    p.integrator = NULL;
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_validate(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "integrator"));
+    /* combinations: hertz with adhesion; a height trigger above the start */
+    vafm_params_default(&p);
+    p.contact = vafm_contact_hertz;
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_validate(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "gamma_J_per_m2"));
+    p.gamma_J_per_m2 = 0.0;
+    ENSURE(vafm_params_validate(&p, &err) == 0);
+    vafm_params_default(&p);
+    p.trigger = VAFM_TRIGGER_HEIGHT;
+    p.trigger_height_m = p.start_height_m;
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_validate(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "trigger_height_m"));
+}
+
+/* reduce ∘ from_reduced is the identity on the reduced model, and from_reduced ∘ reduce on the SI
+ * scene (E*, R and m are kept): rounding only, a few ulps per product/quotient → 1e-14. */
+static void test_units_roundtrip(void)
+{
+    const vafm_reduced cases[] = {
+        {.m = 5e-5, .eta_cont = 0.0, .k = 2e-5, .kT = 5e-8, .gamma = 1.2e-4, .v_approach = 1e-4, .v_retract = 1e-4},
+        {.m = 0.01, .eta_cont = 3.0, .k = 0.1, .kT = 0.01, .gamma = 0.229, .v_approach = 1e-3, .v_retract = 0.5},
+        {.m = 1.0, .eta_cont = 0.5, .k = 1e3, .kT = 0.0, .gamma = 0.0, .v_approach = 1e-7, .v_retract = 2e-7},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const vafm_reduced *r = &cases[i];
+        for (int pre = 0; pre < vafm_preset_count(); pre++) {
+            vafm_params p;
+            vafm_params_preset(&p, vafm_preset_name(pre), NULL);
+            vafm_units_from_reduced(&p, r);
+            vafm_reduced b;
+            vafm_units_reduce(&p, &b);
+            ENSURE_REL(b.m, r->m, 1e-14);
+            ENSURE_REL(b.k, r->k, 1e-14);
+            ENSURE_REL(b.v_approach, r->v_approach, 1e-14);
+            ENSURE_REL(b.v_retract, r->v_retract, 1e-14);
+            ENSURE_ABS(b.kT, r->kT, 1e-14 * r->kT);
+            ENSURE_ABS(b.gamma, r->gamma, 1e-14 * r->gamma);
+            ENSURE_ABS(b.eta_cont, r->eta_cont, 1e-14 * r->eta_cont);
+            /* and back: the SI scene is a fixed point */
+            vafm_params q = p;
+            vafm_units_from_reduced(&q, &b);
+            ENSURE_REL(q.eta_per_s, p.eta_per_s, 1e-14);
+            ENSURE_REL(q.k_N_per_m, p.k_N_per_m, 1e-14);
+            ENSURE_REL(q.v_retract_m_per_s, p.v_retract_m_per_s, 1e-14);
+            ENSURE_ABS(q.T_K, p.T_K, 1e-14 * p.T_K);
+            ENSURE_ABS(q.gamma_J_per_m2, p.gamma_J_per_m2, 1e-14 * p.gamma_J_per_m2);
+        }
+    }
+    /* the scale factors are the notes' units: length R, time 1/η, force E*R², energy E*R³ */
+    vafm_params p;
+    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_scale s = vafm_units_scale(&p);
+    ENSURE_REL(s.length_m, p.R_m, 1e-15);
+    ENSURE_REL(s.time_s, 1.0 / p.eta_per_s, 1e-15);
+    ENSURE_REL(s.force_N, p.E_star_Pa * p.R_m * p.R_m, 1e-15);
+    ENSURE_REL(s.energy_J, p.E_star_Pa * p.R_m * p.R_m * p.R_m, 1e-15);
+    ENSURE_REL(s.speed_m_per_s, p.R_m * p.eta_per_s, 1e-15);
+    ENSURE_REL(s.stiffness_N_per_m, p.E_star_Pa * p.R_m, 1e-15);
+}
+
+/* The paper's Fig. 1/2 scene (physics notes, "Units"): reduced m̃ = 5e-5, ṽ = 1e-4, k̃ = 2e-5,
+ * k_BT̃ = 5e-8, γ̃ = 1.2e-4 with E* = 20 GPa, R = 15.7 nm, m = 1e-12 kg; k ≈ 6.3 mN/m and v ≈ 196.3 nm/s
+ * as the notes round them (0.5%). */
+static void test_paper_fig1(void)
+{
+    vafm_params p;
+    ENSURE(vafm_params_preset(&p, "paper-fig1", NULL) == 0);
+    ENSURE_REL(p.E_star_Pa, 20e9, 1e-15);
+    ENSURE_REL(p.R_m, 15.7e-9, 1e-15);
+    ENSURE_REL(p.m_kg, 1e-12, 1e-15);
+    ENSURE_REL(p.k_N_per_m, 6.3e-3, 5e-3);
+    ENSURE_REL(p.v_approach_m_per_s, 196.3e-9, 5e-3);
+    ENSURE_REL(p.v_retract_m_per_s, 196.3e-9, 5e-3);
+    ENSURE(p.contact == vafm_contact_jkr);
+    ENSURE(p.integrator == vafm_integrator_gjf);
+    vafm_reduced r;
+    vafm_units_reduce(&p, &r);
+    ENSURE_REL(r.m, 5e-5, 1e-14);
+    ENSURE_REL(r.v_approach, 1e-4, 1e-14);
+    ENSURE_REL(r.k, 2e-5, 1e-14);
+    ENSURE_REL(r.kT, 5e-8, 1e-14);
+    ENSURE_REL(r.gamma, 1.2e-4, 1e-14);
+    /* the SI values that follow (the notes quote γ = 0.036 J/m² and T = 288.4 K, rounded from a
+     * slightly different k; the exact reduced values give these) */
+    const double ER = 20e9 * 15.7e-9;
+    ENSURE_REL(p.gamma_J_per_m2, 1.2e-4 * ER, 1e-14);
+    ENSURE_REL(p.T_K, 5e-8 * ER * 15.7e-9 * 15.7e-9 / VAFM_KB_J_PER_K, 1e-14);
+    ENSURE_REL(p.eta_per_s, sqrt(5e-5 * ER / 1e-12), 1e-14);
+
+    /* paper-fig4: γ̃ = 0.229, k̃ = 0.1, m̃ = 0.01, k_BT̃ = 0.01, ṽ = 1e-3 (E* = 1 GPa, R = 16 nm) */
+    ENSURE(vafm_params_preset(&p, "paper-fig4", NULL) == 0);
+    vafm_units_reduce(&p, &r);
+    ENSURE_REL(r.gamma, 0.229, 1e-14);
+    ENSURE_REL(r.k, 0.1, 1e-14);
+    ENSURE_REL(r.m, 0.01, 1e-14);
+    ENSURE_REL(r.kT, 0.01, 1e-14);
+    ENSURE_REL(r.v_retract, 1e-3, 1e-14);
+    ENSURE(vafm_params_preset(&p, "paper-fig4-bd", NULL) == 0);
+    vafm_units_reduce(&p, &r);
+    ENSURE(p.integrator == vafm_integrator_brownian);
+    ENSURE_REL(r.m, 1.0, 1e-14); /* ζ = mη = 1 reduced */
+}
+
+static void test_strerror(void)
+{
+    const int codes[] = {VAFM_OK, VAFM_EINVAL, VAFM_ENOMEM, VAFM_EUNSTABLE, VAFM_EIO, VAFM_EFORMAT,
+                         VAFM_ENOTSUP, VAFM_EABORT, VAFM_ESTATE, VAFM_ENOTFOUND};
+    const int n = (int)(sizeof codes / sizeof codes[0]);
+    const char *unknown = vafm_strerror(12345);
+    ENSURE(unknown != NULL && unknown[0]);
+    ENSURE(vafm_strerror(-10) != NULL && !strcmp(vafm_strerror(-10), unknown));
+    for (int i = 0; i < n; i++) {
+        const char *s = vafm_strerror(codes[i]);
+        ENSURE(s != NULL && s[0]);
+        ENSURE_MSG(strcmp(s, unknown) != 0, "code %d has no description", codes[i]);
+        for (int j = 0; j < i; j++)
+            ENSURE_MSG(strcmp(s, vafm_strerror(codes[j])) != 0, "codes %d and %d share '%s'", codes[i], codes[j], s);
+    }
+    ENSURE(vafm_version() && vafm_version()[0]);
+}
+
+int main(void)
+{
+    RUN_TEST(test_field_table);
+    RUN_TEST(test_presets);
+    RUN_TEST(test_set_get_roundtrip);
+    RUN_TEST(test_json);
+    RUN_TEST(test_bad_text_values);
+    RUN_TEST(test_validate_fields);
+    RUN_TEST(test_units_roundtrip);
+    RUN_TEST(test_paper_fig1);
+    RUN_TEST(test_strerror);
+    return harness_done();
+}
