@@ -4,7 +4,11 @@
  * - the tabulated JKR branch (jkr_table.h) against the exact Newton solver, over the whole table,
  *   near the branch end u_min, and beyond the table (fallback);
  * - a force curve with the table against one without: athermal results agree to ~1e-9 relative
- *   (the trajectories differ only by the interpolation error, ~1e-13, amplified by the snap).
+ *   (the trajectories differ only by the interpolation error, ~1e-13, amplified by the snap);
+ * - the adaptive step (omega_dt_far) against the plain one: athermal pull-off observables agree to
+ *   1e-4 relative (the far zone is the deep, nearly harmonic well, where GJF's configurational error is
+ *   nil for a harmonic well) while the step count falls. Its thermal accuracy is judged by the
+ *   work-precision benchmark, not here.
  */
 #include "harness.h"
 
@@ -96,9 +100,35 @@ static void test_table_vs_solver_curve(void)
     }
 }
 
+static void test_adaptive_vs_plain(void)
+{
+    const double ks[] = { 0.1, 0.8 };
+    for (size_t i = 0; i < 2; i++) {
+        vafm_params p0, p1;
+        s_fig4(&p0, ks[i], 1);
+        s_fig4(&p1, ks[i], 1);
+        p1.omega_dt_far = 1.5;
+        vafm_sim *s0 = NULL, *s1 = NULL;
+        vafm_curve_result r0, r1;
+        ENSURE(vafm_sim_new(&s0, &p0, NULL) == 0);
+        ENSURE(vafm_sim_new(&s1, &p1, NULL) == 0);
+        ENSURE(vafm_sim_curve(s0, 0, NULL, NULL, &r0) == 0);
+        ENSURE(vafm_sim_curve(s1, 0, NULL, NULL, &r1) == 0);
+        ENSURE(r0.flags == 0 && r1.flags == 0);
+        ENSURE_MSG(r1.steps < 0.7 * r0.steps, "k %g: adaptive %llu steps vs plain %llu", ks[i],
+                   (unsigned long long)r1.steps, (unsigned long long)r0.steps);
+        ENSURE_REL(r1.detach_force_N, r0.detach_force_N, 1e-4);
+        ENSURE_REL(r1.detach_height_m, r0.detach_height_m, 1e-4);
+        ENSURE_REL(r1.pulloff_spring_N, r0.pulloff_spring_N, 1e-4);
+        vafm_sim_destroy(&s0);
+        vafm_sim_destroy(&s1);
+    }
+}
+
 int main(void)
 {
     RUN_TEST(test_table_accuracy);
     RUN_TEST(test_table_vs_solver_curve);
+    RUN_TEST(test_adaptive_vs_plain);
     return harness_done();
 }

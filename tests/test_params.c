@@ -21,7 +21,7 @@
 /* REAL fields that are dimensionless by design (a ratio): everything else must carry an SI unit. */
 static int t_dimensionless(const char *name)
 {
-    return !strcmp(name, "omega_dt");
+    return !strcmp(name, "omega_dt") || !strcmp(name, "omega_dt_far") || !strcmp(name, "near_barrier_kT");
 }
 
 /* The range as the library formats it in its messages ("[%.6g, %.6g]"). */
@@ -321,7 +321,7 @@ static const struct {
     M(E_star_Pa), M(R_m), M(gamma_J_per_m2), M(k_N_per_m), M(m_kg), M(eta_per_s), M(eta_cont_per_s), M(T_K),
     M(v_approach_m_per_s), M(v_retract_m_per_s), M(start_height_m), M(setpoint_N), M(trigger_height_m),
     M(z_range_m), M(dwell_s), M(retract_margin_m), M(retract_max_m), M(sample_rate_Hz), M(tune_duration_s),
-    M(dt_s), M(omega_dt),
+    M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])

@@ -69,6 +69,8 @@ typedef struct vafm_params {
     int noise;             /**< enum vafm_noise */
     double dt_s;           /**< time step, s (0: automatic from omega_dt, the paper's Eq. 8 rule) */
     double omega_dt;       /**< automatic step: ω_max·dt at the stiffest contact reached (paper: 2π/40) */
+    double omega_dt_far;   /**< ω_max·dt while far from the pull-off instability (0: same as omega_dt) */
+    double near_barrier_kT; /**< "near" the instability: quasi-static barrier below this many k_BT */
     int free_exact;        /**< 1: propagate the free cantilever exactly (linear SDE), 0: plain steps */
     int contact_table;     /**< 1: tabulated JKR branch in the step (error < 1e-13), 0: Newton solve */
     uint64_t seed;         /**< random seed; (seed, curve index) reproduces a curve bit for bit */

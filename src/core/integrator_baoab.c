@@ -16,21 +16,30 @@ static void s_prepare(vafm_kernel *K)
 static long s_run(vafm_kernel *K, long n)
 {
     const double dt = K->dt, half_dt = 0.5 * dt, half_dt_m = 0.5 * dt / K->m;
-    for (long i = 0; i < n; i++) {
-        const vafm_kcoef *c = &K->co[K->in_contact];
+    const int thermal = K->thermal;
+    const vafm_jkr_table *jtab = K->jtab;
+    vafm_khot h;
+    s_khot_load(K, &h);
+    double w = K->w;
+    long i = 0;
+    while (i < n) {
+        const vafm_kcoef *c = &K->co[h.in_contact];
         const double vref = K->v_spr / c->eta_tot;
-        double w = K->w + half_dt_m * K->f;
-        K->u += half_dt * w;
+        w += half_dt_m * h.f;
+        h.u += half_dt * w;
         w = vref + c->ou_c1 * (w - vref);
-        if (K->thermal)
+        if (thermal)
             w += c->ou_c3 * s_kernel_noise(K);
-        K->u += half_dt * w;
-        s_kernel_post_move(K);
-        K->w = w + half_dt_m * K->f;
-        if (K->event)
-            return i + 1;
+        h.u += half_dt * w;
+        s_khot_post_move(K, jtab, &h);
+        w += half_dt_m * h.f;
+        i++;
+        if (h.event)
+            break;
     }
-    return n;
+    K->w = w;
+    s_khot_store(K, &h, i);
+    return i;
 }
 
 static const vafm_integrator_type s_type = {

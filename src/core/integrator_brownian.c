@@ -15,19 +15,27 @@ static void s_prepare(vafm_kernel *K)
 static long s_run(vafm_kernel *K, long n)
 {
     const double dt = K->dt, inv_dt = 1.0 / dt, drift = K->m * K->v_spr;
-    for (long i = 0; i < n; i++) {
-        const vafm_kcoef *c = &K->co[K->in_contact];
-        const double u0 = K->u;
-        double du = dt / c->zeta * (K->f + drift);
-        if (K->thermal)
+    const int thermal = K->thermal;
+    const vafm_jkr_table *jtab = K->jtab;
+    vafm_khot h;
+    s_khot_load(K, &h);
+    double w = K->w;
+    long i = 0;
+    while (i < n) {
+        const vafm_kcoef *c = &K->co[h.in_contact];
+        double du = dt / c->zeta * (h.f + drift);
+        if (thermal)
             du += c->bd_sig * s_kernel_noise(K);
-        K->u = u0 + du;
-        K->w = du * inv_dt;
-        s_kernel_post_move(K);
-        if (K->event)
-            return i + 1;
+        h.u += du;
+        w = du * inv_dt;
+        s_khot_post_move(K, jtab, &h);
+        i++;
+        if (h.event)
+            break;
     }
-    return n;
+    K->w = w;
+    s_khot_store(K, &h, i);
+    return i;
 }
 
 static const vafm_integrator_type s_type = {

@@ -18,18 +18,26 @@ static long s_run(vafm_kernel *K, long n)
 {
     const double dt = K->dt, half_dt_m = 0.5 * dt / K->m, inv_m = 1.0 / K->m;
     const double drift = K->m * K->v_spr;
-    for (long i = 0; i < n; i++) {
-        const vafm_kcoef *c = &K->co[K->in_contact];
-        const double f = K->f + drift;
-        const double beta = K->thermal ? c->gjf_sig * s_kernel_noise(K) : 0.0;
-        const double w = K->w;
-        K->u += c->gjf_b * (dt * w + half_dt_m * dt * f + half_dt_m * beta);
-        s_kernel_post_move(K);
-        K->w = c->gjf_a * w + half_dt_m * (c->gjf_a * f + K->f + drift) + c->gjf_b * inv_m * beta;
-        if (K->event)
-            return i + 1;
+    const int thermal = K->thermal;
+    const vafm_jkr_table *jtab = K->jtab;
+    vafm_khot h;
+    s_khot_load(K, &h);
+    double w = K->w;
+    long i = 0;
+    while (i < n) {
+        const vafm_kcoef *c = &K->co[h.in_contact];
+        const double f = h.f + drift;
+        const double beta = thermal ? c->gjf_sig * s_kernel_noise(K) : 0.0;
+        h.u += c->gjf_b * (dt * w + half_dt_m * dt * f + half_dt_m * beta);
+        s_khot_post_move(K, jtab, &h);
+        w = c->gjf_a * w + half_dt_m * (c->gjf_a * f + h.f + drift) + c->gjf_b * inv_m * beta;
+        i++;
+        if (h.event)
+            break;
     }
-    return n;
+    K->w = w;
+    s_khot_store(K, &h, i);
+    return i;
 }
 
 static const vafm_integrator_type s_type = {

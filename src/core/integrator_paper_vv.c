@@ -5,15 +5,15 @@
  * force drawn once per force evaluation, Γ = √(2αkT/dt)·ξ with ξ of unit variance; with noise = uniform
  * this is exactly Eq. 7, Γ = √(6αkT/dt)(2U − 1). Kept as the reference to compare against: its
  * kinetic temperature is off by O(η dt) and it is unstable for η dt ≳ 2 and for ω dt ≥ 2.
- * Between steps K->f holds the total force (conservative + friction + random); s_kernel_post_move()
+ * Between steps K->f holds the total force (conservative + friction + random); s_khot_post_move()
  * overwrites it with the conservative force, from which the total is rebuilt.
  */
 #include "core/kernel.h"
 
-static inline double s_total(vafm_kernel *K, const vafm_kcoef *c, double w)
+/* conservative + friction (cantilever channel relative to the support, contact channel to 0) + random */
+static inline double s_total(vafm_kernel *K, const vafm_kcoef *c, double f, double w)
 {
-    /* conservative + friction (cantilever channel relative to the support, contact channel to 0) */
-    double ft = K->f - c->zeta * w + K->m * K->v_spr;
+    double ft = f - c->zeta * w + K->m * K->v_spr;
     if (K->thermal)
         ft += c->vv_sig * s_kernel_noise(K);
     return ft;
@@ -21,23 +21,31 @@ static inline double s_total(vafm_kernel *K, const vafm_kcoef *c, double w)
 
 static void s_prepare(vafm_kernel *K)
 {
-    K->f = K->k * (K->u_spr - K->u) - K->Fc;
-    K->f = s_total(K, &K->co[K->in_contact], K->w);
+    double f = K->k * (K->u_spr - K->u) - K->Fc;
+    K->f = s_total(K, &K->co[K->in_contact], f, K->w);
 }
 
 static long s_run(vafm_kernel *K, long n)
 {
     const double dt = K->dt, half_dt_m = 0.5 * dt / K->m;
-    for (long i = 0; i < n; i++) {
-        double w = K->w + half_dt_m * K->f; /* K->f holds the total force of the last evaluation */
-        K->u += dt * w;
-        s_kernel_post_move(K);
-        K->f = s_total(K, &K->co[K->in_contact], w);
-        K->w = w + half_dt_m * K->f;
-        if (K->event)
-            return i + 1;
+    const vafm_jkr_table *jtab = K->jtab;
+    vafm_khot h;
+    s_khot_load(K, &h);
+    double w = K->w;
+    long i = 0;
+    while (i < n) {
+        w += half_dt_m * h.f; /* h.f holds the total force of the last evaluation */
+        h.u += dt * w;
+        s_khot_post_move(K, jtab, &h);
+        h.f = s_total(K, &K->co[h.in_contact], h.f, w);
+        w += half_dt_m * h.f;
+        i++;
+        if (h.event)
+            break;
     }
-    return n;
+    K->w = w;
+    s_khot_store(K, &h, i);
+    return i;
 }
 
 static const vafm_integrator_type s_type = {

@@ -37,6 +37,9 @@ typedef struct vafm_numerics {
     double dt;            /* time step (reduced), a whole fraction of Ts */
     long n_sub;           /* steps per output sample */
     double stab;          /* ω_max·dt (underdamped) or K_max·dt/ζ (overdamped) */
+    double dt_far;        /* the larger step far from the instability (= dt without adaptation) */
+    long n_sub_far;       /* steps per output sample there */
+    double y_near;        /* spring distance u_spr − u_spr* below which the retract is "near" */
 } vafm_numerics;
 
 /** Derive the numerics of a scene and check them (time step against the stability limit, step count).

@@ -7,7 +7,7 @@
  * on the body is f = k(u_spr − u) − F_c(u) plus friction −mη(w − v_spr) (the cantilever in its medium)
  * and, in contact only, −mη_c·w (the optional contact channel), each channel with its own noise.
  *
- * An integrator's run() loop moves u (and w) and then calls s_kernel_post_move(), which advances time
+ * An integrator's run() loop moves u (and w) and then calls s_khot_post_move(), which advances time
  * and the support, applies the contact hysteresis (touch at u_touch, detach below u_detach), evaluates
  * the contact force, accumulates the output sample and tracks the most tensile spring force. A change
  * of contact state ends run() after that step, so that the scene records the event and the integrator
@@ -74,51 +74,89 @@ static inline double s_kernel_noise(vafm_kernel *K)
     return vafm_rng_normal_inline(&K->rng);
 }
 
-/** Contact force at the current u, with the hysteresis; sets K->event on a change. */
-static inline void s_kernel_contact(vafm_kernel *K)
+/* The hot part of the state, copied into a local by an integrator's loop so that the compiler keeps
+ * it in registers (a K-> field may be clobbered by the random generator's rare slow-path call, so the
+ * compiler would otherwise store and reload every field each step). */
+typedef struct vafm_khot {
+    int64_t n;
+    double u, u_spr, s, Fc, f;
+    double acc_u, acc_uspr, fs_min;
+    long acc_n;
+    int in_contact, event;
+    uint64_t steps_contact;
+} vafm_khot;
+
+static inline void s_khot_load(const vafm_kernel *K, vafm_khot *h)
 {
-    if (K->in_contact) {
-        if (K->u < K->contact.u_detach) {
-            K->in_contact = 0;
-            K->event = -1;
-            K->Fc = 0.0;
-            return;
-        }
-    } else {
-        if (!(K->u >= K->contact.u_touch)) {
-            K->Fc = 0.0;
-            return;
-        }
-        K->in_contact = 1;
-        K->event = 1;
-        K->s = 0.0; /* cold start of the solver */
-    }
-    if (K->jtab)
-        K->Fc = vafm_jkr_table_force(K->jtab, &K->contact, K->u, &K->s);
-    else if (K->is_jkr)
-        K->Fc = vafm_jkr_force_inline(&K->contact, K->u, &K->s, NULL);
-    else
-        K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
+    h->n = K->n;
+    h->u = K->u;
+    h->u_spr = K->u_spr;
+    h->s = K->s;
+    h->Fc = K->Fc;
+    h->f = K->f;
+    h->acc_u = K->acc_u;
+    h->acc_uspr = K->acc_uspr;
+    h->fs_min = K->fs_min;
+    h->acc_n = K->acc_n;
+    h->in_contact = K->in_contact;
+    h->event = K->event;
+    h->steps_contact = K->steps_contact;
 }
 
-/** The tail of every step: time, support, contact, force, accumulation. Returns the spring force. */
-static inline double s_kernel_post_move(vafm_kernel *K)
+static inline void s_khot_store(vafm_kernel *K, const vafm_khot *h, long steps)
 {
-    K->n++;
-    double tau = (double)K->n * K->dt;
-    K->t = K->t0 + tau;
-    K->u_spr = K->uspr0 + K->v_spr * tau;
-    s_kernel_contact(K);
-    double fs = K->k * (K->u_spr - K->u);
-    K->f = fs - K->Fc;
-    K->acc_u += K->u;
-    K->acc_uspr += K->u_spr;
-    K->acc_n++;
-    if (fs < K->fs_min)
-        K->fs_min = fs;
-    K->steps++;
-    K->steps_contact += (uint64_t)K->in_contact;
-    return fs;
+    K->n = h->n;
+    K->t = K->t0 + (double)h->n * K->dt;
+    K->u = h->u;
+    K->u_spr = h->u_spr;
+    K->s = h->s;
+    K->Fc = h->Fc;
+    K->f = h->f;
+    K->acc_u = h->acc_u;
+    K->acc_uspr = h->acc_uspr;
+    K->fs_min = h->fs_min;
+    K->acc_n = h->acc_n;
+    K->in_contact = h->in_contact;
+    K->event = h->event;
+    K->steps_contact = h->steps_contact;
+    K->steps += (uint64_t)steps;
+}
+
+/** The tail of every step, on the loop's local hot state. */
+static inline void s_khot_post_move(const vafm_kernel *K, const vafm_jkr_table *jtab, vafm_khot *h)
+{
+    h->n++;
+    const double tau = (double)h->n * K->dt;
+    h->u_spr = K->uspr0 + K->v_spr * tau;
+    if (h->in_contact) {
+        if (h->u < K->contact.u_detach) {
+            h->in_contact = 0;
+            h->event = -1;
+            h->Fc = 0.0;
+        }
+    } else if (h->u >= K->contact.u_touch) {
+        h->in_contact = 1;
+        h->event = 1;
+        h->s = 0.0;
+    } else {
+        h->Fc = 0.0;
+    }
+    if (h->in_contact) {
+        if (jtab)
+            h->Fc = vafm_jkr_table_force(jtab, &K->contact, h->u, &h->s);
+        else if (K->is_jkr)
+            h->Fc = vafm_jkr_force_inline(&K->contact, h->u, &h->s, NULL);
+        else
+            h->Fc = K->cforce(&K->contact, h->u, &h->s, NULL);
+    }
+    const double fs = K->k * (h->u_spr - h->u);
+    h->f = fs - h->Fc;
+    h->acc_u += h->u;
+    h->acc_uspr += h->u_spr;
+    h->acc_n++;
+    if (fs < h->fs_min)
+        h->fs_min = fs;
+    h->steps_contact += (uint64_t)h->in_contact;
 }
 
 /** Set the step-size dependent coefficients of both contact states. */

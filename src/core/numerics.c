@@ -104,6 +104,27 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
                      it->stability_limit, dt_stable);
         return VAFM_EUNSTABLE;
     }
+    /* Adaptive step: far from the instability (in contact, before the retract gets near it) the well is
+     * close to harmonic and deep, where GJF/BAOAB sample configurations exactly at any ω dt < 2; near
+     * it the escape dynamics need the fine step. */
+    nm->dt_far = dt;
+    nm->n_sub_far = nm->n_sub;
+    nm->y_near = INFINITY;
+    if (p->omega_dt_far > p->omega_dt && p->dt_s == 0 && !it->overdamped) {
+        double dtf = p->omega_dt_far / sqrt(nm->K_max / r->m);
+        long nf = (long)ceil(nm->Ts / dtf * (1.0 - 1e-12));
+        nm->n_sub_far = nf < 1 ? 1 : nf;
+        nm->dt_far = nm->Ts / (double)nm->n_sub_far;
+        nm->y_near = 0.0;
+        if (p->contact == vafm_contact_jkr && r->gamma > 0) {
+            vafm_quasistatic q;
+            if (vafm_theory_quasistatic(r->gamma, r->k, &q) == 0) {
+                /* ΔV(y) = (4√2/3)(ky)^{3/2}/√F″ = B·kT  ⇒  k·y_B = [3B·kT√F″/(4√2)]^{2/3} */
+                double kyB = pow(3.0 * p->near_barrier_kT * r->kT * sqrt(fabs(q.F2)) / (4.0 * sqrt(2.0)), 2.0 / 3.0);
+                nm->y_near = fmax(kyB, 0.1 * q.F_star) / r->k;
+            }
+        }
+    }
     if (it == vafm_integrator_paper_vv) {
         double eta_dt = (1.0 + (has_contact ? r->eta_cont : 0.0)) * dt;
         if (!(eta_dt < 2.0)) {

@@ -68,6 +68,12 @@ static const s_field s_fields[] = {
     REAL(omega_dt, "", 1e-6, 1.99,
          "automatic time step: omega_max*dt at the stiffest contact reached (paper 2*pi/40 = 0.157); "
          "brownian: K_max*dt/zeta"),
+    REAL(omega_dt_far, "", 0, 1.99,
+         "adaptive step: omega_max*dt while in contact and far from the pull-off instability "
+         "(0: no adaptation, omega_dt everywhere)"),
+    REAL(near_barrier_kT, "", 1, 1e6,
+         "adaptive step: the spring is near the instability when the quasi-static barrier is below this many "
+         "k_BT (or within 10% of the quasi-static pull-off force)"),
     { { "free_exact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
         "propagate the free cantilever exactly (linear SDE) instead of plain steps" },
       offsetof(vafm_params, free_exact), S_NONE },
@@ -111,6 +117,8 @@ static void s_common(vafm_params *p)
     p->noise = VAFM_NOISE_GAUSSIAN;
     p->antialias = VAFM_ANTIALIAS_MEAN;
     p->omega_dt = 2.0 * M_PI / 40.0;
+    p->omega_dt_far = 0.0;
+    p->near_barrier_kT = 50.0;
     p->free_exact = 1;
     p->contact_table = 1;
     p->seed = 1;

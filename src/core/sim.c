@@ -34,6 +34,8 @@ struct vafm_sim {
     long n_free;        /* exact free steps per sample */
     double sigma_free;  /* √(kT/k): thermal spread of the free cantilever */
     int mode_free;      /* the last sample interval used exact free steps */
+    int adaptive;       /* two step sizes: nm.dt near the instability, nm.dt_far elsewhere in contact */
+    double dt_cur;      /* the integrator step in use */
     int need_prepare;   /* the integrator's cached force is stale */
     /* scene */
     int scene, phase;
@@ -109,6 +111,7 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
     s->n_free = nf < 1 ? 1 : nf;
     vafm_free_ou_setup(&s->ou, K, Ts / (double)s->n_free, s->it->overdamped);
     s->sigma_free = sqrt(rd->kT / rd->k);
+    s->adaptive = s->nm.n_sub_far != s->nm.n_sub;
     *out = s;
     return 0;
 }
@@ -196,6 +199,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     double v0 = scene == S_SCENE_CURVE ? rd->v_approach : 0.0;
     s_kernel_phase(K, v0);
     vafm_kernel_set_dt(K, s->nm.dt);
+    s->dt_cur = s->nm.dt;
     K->event = 0;
     K->steps = K->steps_contact = K->steps_free = 0;
     K->fs_min = INFINITY;
@@ -322,9 +326,16 @@ static int s_step_interval(vafm_sim *s)
         for (long i = 0; i < s->n_free; i++)
             vafm_free_ou_step(K, &s->ou);
     } else {
-        if (s->mode_free) {
+        /* far from the instability (in contact, not yet near u_spr* on the retract): the larger step */
+        int far = s->adaptive && K->in_contact &&
+                  (s->phase != S_PH_RETRACT || !(K->u_spr - s->nm.u_spr_star <= s->nm.y_near));
+        double dt_want = far ? s->nm.dt_far : s->nm.dt;
+        if (s->mode_free || dt_want != s->dt_cur) {
             s_kernel_phase(K, K->v_spr);
-            K->dt = s->nm.dt;
+            if (dt_want != s->dt_cur)
+                vafm_kernel_set_dt(K, dt_want);
+            K->dt = dt_want;
+            s->dt_cur = dt_want;
             s->mode_free = 0;
             s->need_prepare = 1;
         }
@@ -332,7 +343,7 @@ static int s_step_interval(vafm_sim *s)
             s->it->prepare(K);
             s->need_prepare = 0;
         }
-        long left = s->nm.n_sub;
+        long left = far ? s->nm.n_sub_far : s->nm.n_sub;
         while (left > 0) {
             long d = s->it->run(K, left);
             left -= d;
@@ -348,7 +359,7 @@ static int s_step_interval(vafm_sim *s)
         K->cforce(&K->contact, K->u, &sq, &dF);
         double Kl = K->k + dF;
         if (Kl > 0) {
-            double stab = s->it->overdamped ? Kl * s->nm.dt / K->co[1].zeta : sqrt(Kl / K->m) * s->nm.dt;
+            double stab = s->it->overdamped ? Kl * s->dt_cur / K->co[1].zeta : sqrt(Kl / K->m) * s->dt_cur;
             if (!(stab < s->it->stability_limit))
                 return VAFM_EUNSTABLE;
         }

@@ -1,0 +1,232 @@
+/* SPDX-License-Identifier: MIT */
+/**
+ * @file h5.h
+ * HDF5 force-curve files in the layout of afmformats (read by afmformats, nanite and PyJibe):
+ * one group per curve named "0", "1", …, with the channels as 1-D datasets and the curve metadata as
+ * attributes from afmformats' fixed list. vafm's provenance (scene, grid, seed, ground truth per
+ * curve) lives in root attributes, the only place the layout leaves free. The layout, units, sign
+ * conventions and version policy are written down in protocol/hdf5.md.
+ *
+ * The writer appends curves and makes them durable with vafm_h5_writer_flush(): a process killed at
+ * any moment (kill -9) leaves a file that opens and holds every curve flushed before; reopening it
+ * with resume drops what came after the last flush and continues. The reader opens any file of this
+ * layout, vafm's or another program's (afmformats' own exports, instrument conversions), and refuses
+ * damaged or non-conforming files with an error that names the file, the object and the rule broken.
+ *
+ * Errors: every function returns 0 or a negative VAFM_E* code and fills an optional vafm_error
+ * (err->field holds the HDF5 object path, err->message the file, the object and the rule). The library
+ * never prints; HDF5's own error printing is silenced during each call and restored afterwards.
+ * Objects are not thread-safe: use one writer or reader from one thread at a time.
+ */
+#ifndef VAFM_H5_H
+#define VAFM_H5_H
+
+#include "vafm/campaign.h"
+#include "vafm/common.h"
+#include "vafm/params.h"
+#include "vafm/sim.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** vafm's own format version, stored in the root attribute "vafm format version" as "MAJOR.MINOR".
+ *  A reader refuses another major version; a newer minor version only adds root attributes. */
+#define VAFM_H5_FORMAT_MAJOR 1
+#define VAFM_H5_FORMAT_MINOR 0
+
+typedef struct vafm_h5_writer vafm_h5_writer;
+typedef struct vafm_h5_reader vafm_h5_reader;
+
+/** Curve metadata: the curve group's attributes. Absent values: NULL strings, NaN reals, −1 integers.
+ *  On write, strings are borrowed for the call; on read, they are owned by the reader and valid until
+ *  the next vafm_h5_reader_curve() call or vafm_h5_reader_destroy(). */
+typedef struct vafm_h5_meta {
+    const char *imaging_mode;     /**< "imaging mode": "force-distance" (write: NULL means that) */
+    const char *feedback_mode;    /**< "feedback mode": "contact" or "force-modulation" */
+    const char *instrument;       /**< "instrument" */
+    const char *software;         /**< "software" that recorded the curve */
+    const char *software_version; /**< "software version" */
+    const char *date;             /**< "date": "YYYY-MM-DD" (write: NULL and stamp_time → now, UTC) */
+    const char *time;             /**< "time": "HH:MM:SS" with an optional fraction, not ISO 8601 */
+    const char *session_id;       /**< "session id" */
+    const char *curve_id;         /**< "curve id" */
+    double spring_constant_N_per_m; /**< "spring constant", N/m */
+    double sensitivity_m_per_V;     /**< "sensitivity", m/V */
+    double setpoint_N;              /**< "setpoint", N */
+    double rate_approach_Hz;        /**< "rate approach": sample rate of the approach, Hz */
+    double rate_retract_Hz;         /**< "rate retract", Hz */
+    double speed_approach_m_per_s;  /**< "speed approach": piezo speed, m/s */
+    double speed_retract_m_per_s;   /**< "speed retract", m/s */
+    double duration_s;              /**< "duration" of the whole curve, s */
+    double duration_approach_s;     /**< "duration approach", s */
+    double duration_retract_s;      /**< "duration retract", s */
+    double z_range_m;               /**< "z range": piezo travel, m */
+    double position_x_m;            /**< "position x", m */
+    double position_y_m;            /**< "position y", m */
+    double grid_center_x_m;         /**< "grid center x", m */
+    double grid_center_y_m;         /**< "grid center y", m */
+    double grid_size_x_m;           /**< "grid size x", m */
+    double grid_size_y_m;           /**< "grid size y", m */
+    int64_t point_count;            /**< "point count" (write: always the datasets' length) */
+    int64_t segment_count;          /**< "segment count" (2 for force-distance) */
+    int64_t grid_shape_x;           /**< "grid shape x", pixels */
+    int64_t grid_shape_y;           /**< "grid shape y", pixels */
+    int64_t grid_index_x;           /**< "grid index x" */
+    int64_t grid_index_y;           /**< "grid index y" */
+    uint8_t reserved[32];
+} vafm_h5_meta;
+
+/** One curve: channels (1-D, n samples each, SI) and metadata. NULL channel = absent. */
+typedef struct vafm_h5_curve {
+    uint64_t group;                  /**< read: the group's number (its name); write: ignored */
+    size_t n;                        /**< samples per channel, ≥ 1 */
+    const double *force_N;           /**< "force", N, positive repulsive (required) */
+    const double *height_measured_m; /**< "height (measured)", m, decreasing toward the sample */
+    const double *height_piezo_m;    /**< "height (piezo)", m, decreasing toward the sample */
+    const uint8_t *segment;          /**< "segment": 0 approach, 1 retract, 2 dwell (required) */
+    const double *time_s;            /**< "time", s, from 0, increasing (optional in others' files) */
+    const double *tip_position_m;    /**< "tip position" = height (measured) + force / spring constant */
+    vafm_h5_meta meta;
+} vafm_h5_curve;
+
+/** Ground truth of one vafm curve (a row of the root table "vafm ground truth"). */
+typedef struct vafm_h5_truth {
+    uint64_t point;             /**< grid point of the campaign */
+    int status;                 /**< 0, or the VAFM_E* code the curve ended with */
+    double T_K;                 /**< temperature of the point, K */
+    double v_m_per_s;           /**< piezo speed of the point, m/s */
+    double k_N_per_m;           /**< spring constant of the point, N/m */
+    vafm_curve_result result;   /**< observables; result.index is the curve's number (its group) */
+} vafm_h5_truth;
+
+/** Provenance read back from a file. Strings are owned by the reader (valid until destroy). */
+typedef struct vafm_h5_provenance {
+    const char *software;         /**< root "software" */
+    const char *software_version; /**< root "software version" */
+    int is_vafm;                  /**< 1 if the file carries vafm's root attributes */
+    int format_major, format_minor; /**< "vafm format version" (is_vafm only) */
+    const char *scene_json;       /**< "vafm scene": the base scene, vafm_params_to_json() */
+    const char *grid_json;        /**< "vafm grid": temperatures, speeds, spring constants, N per point */
+    const char *created;          /**< "vafm created": UTC time the file was created, ISO 8601 */
+    uint64_t seed;                /**< "vafm seed" */
+    size_t truth_rows;            /**< ground-truth rows present */
+} vafm_h5_provenance;
+
+/** Writer options. */
+typedef struct vafm_h5_writer_opts {
+    int resume;      /**< 1: open an existing vafm file, keep its complete curves, drop the rest. Default 0 */
+    int overwrite;   /**< create: 1 replaces an existing file, 0 refuses it. Default 0 */
+    int gzip_level;  /**< 0: no compression (default); 1–9: shuffle + deflate at that level */
+    int fletcher32;  /**< 1: checksum every channel so damaged data is refused on read (default 1) */
+    int stamp_time;  /**< 1: curves without date/time get the current UTC date and time (default 1) */
+    uint8_t reserved[32];
+} vafm_h5_writer_opts;
+
+/** Fill o with the defaults. */
+VAFM_API void vafm_h5_writer_opts_default(vafm_h5_writer_opts *o);
+
+/** Set every field of m to "absent". */
+VAFM_API void vafm_h5_meta_default(vafm_h5_meta *m);
+
+/**
+ * Create a file (or reopen one for resume, see opts->resume). A new file gets the root attributes
+ * "software" = "vafm" and "software version". The path must end in ".h5".
+ * @param out   receives the writer; owned by the caller (vafm_h5_writer_close / _destroy)
+ * @param path  file name
+ * @param opts  options, NULL for the defaults
+ * @param err   optional error detail
+ * @return 0, VAFM_EINVAL (bad path or options), VAFM_EIO (cannot create/open), VAFM_EFORMAT (resume of
+ *         a file that is not a vafm file of a known format version), VAFM_ENOMEM.
+ * @note On resume, vafm_h5_writer_count() tells how many complete curves were kept; a trailing curve
+ *       that was not flushed, or whose data do not read back, is removed.
+ */
+VAFM_API int vafm_h5_writer_open(vafm_h5_writer **out, const char *path, const vafm_h5_writer_opts *opts,
+                                 vafm_error *err);
+
+/**
+ * Record vafm's provenance in the root attributes: the scene as JSON, the campaign grid, the seed and
+ * the format version. Call once before the first curve of a new file. On resume, the scene and grid
+ * must equal the stored ones (else VAFM_EINVAL naming the first differing field).
+ * @param scene the base scene (its seed is the file's seed)
+ * @param grid  the campaign grid, or NULL for a single point (curves_per_point unknown)
+ * @return 0, VAFM_EINVAL, VAFM_ESTATE (curves already written), VAFM_EIO.
+ */
+VAFM_API int vafm_h5_writer_set_provenance(vafm_h5_writer *w, const vafm_params *scene,
+                                           const vafm_campaign_spec *grid, vafm_error *err);
+
+/**
+ * Append one curve as group "<count>". The curve is checked against the layout first (lengths,
+ * segment values, time from 0 and increasing, tip position convention, date/time formats); "point
+ * count" is set to n. In a file with provenance, truth is required and truth->result.index must equal
+ * the group number. Data are written to the file at once; vafm_h5_writer_flush() makes them durable.
+ * @return 0, VAFM_EINVAL (curve violates the layout; nothing is written), VAFM_EIO, VAFM_ENOMEM.
+ */
+VAFM_API int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth,
+                                   vafm_error *err);
+
+/** Write pending ground-truth rows and flush the file to the operating system (H5Fflush). After it
+ *  returns, a killed process leaves every curve appended so far readable. @return 0 or VAFM_EIO. */
+VAFM_API int vafm_h5_writer_flush(vafm_h5_writer *w, vafm_error *err);
+
+/** @return the number of curves in the file (kept on resume + appended). */
+VAFM_API uint64_t vafm_h5_writer_count(const vafm_h5_writer *w);
+
+/** Merge the ground-truth rows into the single root attribute "vafm ground truth", flush and close.
+ *  *w is destroyed and set to NULL even on error. NULL-safe. @return 0 or VAFM_EIO. */
+VAFM_API int vafm_h5_writer_close(vafm_h5_writer **w, vafm_error *err);
+
+/** Close without merging the ground-truth parts (what a crash leaves; for tests and emergencies).
+ *  NULL-safe; sets *w to NULL. */
+VAFM_API void vafm_h5_writer_destroy(vafm_h5_writer **w);
+
+/**
+ * Fill a curve from a simulated force curve: channels from the samples (height (measured) = height
+ * (piezo) = the piezo height, tip position = vafm's true tip height = height + force/k), metadata from
+ * the scene and the result (spring constant, setpoint, rates, speeds, durations, z range, segment
+ * count, software). The arrays are borrowed from s; date, time, session id and curve id stay absent.
+ */
+VAFM_API void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_params *p,
+                                     const vafm_curve_result *r);
+
+/**
+ * Open a file for reading. The file must follow the layout: root attributes "software" and "software
+ * version", only curve groups at the root; curve groups are checked when read.
+ * @param out receives the reader; owned by the caller (vafm_h5_reader_destroy)
+ * @return 0, VAFM_EIO (cannot open), VAFM_EFORMAT (not HDF5, damaged, or not this layout), VAFM_ENOMEM.
+ */
+VAFM_API int vafm_h5_reader_open(vafm_h5_reader **out, const char *path, vafm_error *err);
+
+/** Destroy a reader; NULL-safe; sets *r to NULL. */
+VAFM_API void vafm_h5_reader_destroy(vafm_h5_reader **r);
+
+/** @return the number of curve groups. */
+VAFM_API size_t vafm_h5_reader_count(const vafm_h5_reader *r);
+
+/**
+ * Read curve i (0 ≤ i < count, in the order of the group numbers). Channel arrays and metadata
+ * strings belong to the reader and stay valid until the next call or destroy.
+ * @return 0, VAFM_EINVAL (i out of range), VAFM_EFORMAT (the group breaks the layout or its data are
+ *         damaged: err names the object and the rule), VAFM_ENOTSUP (imaging mode other than
+ *         force-distance), VAFM_ENOMEM.
+ */
+VAFM_API int vafm_h5_reader_curve(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_error *err);
+
+/** Provenance of the file (strings owned by the reader). @return 0. */
+VAFM_API int vafm_h5_reader_provenance(const vafm_h5_reader *r, vafm_h5_provenance *out);
+
+/** Ground truth of curve number `curve`. @return 0, or VAFM_ENOTFOUND (no row for it). */
+VAFM_API int vafm_h5_reader_truth(const vafm_h5_reader *r, uint64_t curve, vafm_h5_truth *out);
+
+/**
+ * Conformance check: every rule of protocol/hdf5.md, on the raw HDF5 objects (independent of the
+ * reader's leniency). Rules L* apply to every file; rules V* to files that carry vafm's provenance.
+ * @return 0 if the file conforms, else VAFM_EFORMAT (or VAFM_EIO) with err naming the first violation:
+ *         "[rule] file: object: what is wrong".
+ */
+VAFM_API int vafm_h5_check(const char *path, vafm_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
