@@ -93,7 +93,8 @@ static void t_scene(vafm_params *p, double gamma, double k, double m, double v)
  * simulated. At γ̃ = 0.229 that is 11.1 (k̃ = 0.1) and 1.73 (k̃ = 0.8) length units, i.e. 1.1e7 and
  * 1.7e6 time units at ṽ = 1e-6. To afford it, omega_dt = 1.5 (stable: < 2 at the stiffest contact):
  * at T = 0 GJF's fixed points are exact at any dt, so the quasi-static path does not depend on dt;
- * test_qs_dt_insensitive() checks that (0.157 vs 1.5 agree to 1e-5 in u_spr and F_det). */
+ * test_qs_dt_insensitive() checks that the step moves the results by < 15% of their small distance
+ * from the quasi-static limit. */
 static int t_qs_run(double gamma, double k, double v, double omega_dt, vafm_curve_result *res, double *dt_red)
 {
     vafm_params p;
@@ -192,21 +193,30 @@ static void test_quasistatic(void)
     }
 }
 
-/* The slow athermal observables do not depend on the time step (GJF's exact fixed points; the snap's
- * timing error is a small fraction of the small force excess): omega_dt 0.157 (the paper's rule) and
- * 1.5 agree to 1e-5 relative in u_spr at detachment and in the detachment force (measured ~3e-7 and
- * 1e-5 at γ̃ = 1.2e-4, k̃ = 0.8, ṽ = 1e-5; γ̃ = 0.229 agrees to 1e-8). */
+/* The slow athermal observables hardly depend on the time step (GJF's fixed points are exact; only
+ * the timing of the snap, which sets the small excess over the quasi-static limit, sees dt): between
+ * omega_dt 0.157 (the paper's rule) and 1.5 the spring position and force at detachment move by less
+ * than 15% of their distance from u_spr* and F_det (measured: 7% at γ̃ = 1.2e-4, k̃ = 0.8, ṽ = 1e-5;
+ * 1% at γ̃ = 0.229, k̃ = 0.8, ṽ = 1e-4), and the most tensile spring force by < 1e-6. So the bounds of
+ * test_quasistatic, which have ≥ 3× margin over the measured excess, hold for either step. */
 static void test_qs_dt_insensitive(void)
 {
     const double cases[2][3] = {{1.2e-4, 0.8, 1e-5}, {0.229, 0.8, 1e-4}};
     for (int i = 0; i < 2; i++) {
+        vafm_quasistatic q;
+        ENSURE(vafm_theory_quasistatic(cases[i][0], cases[i][1], &q) == 0);
         vafm_curve_result a, b;
         double dta = 0, dtb = 0;
         ENSURE(t_qs_run(cases[i][0], cases[i][1], cases[i][2], 0.157, &a, &dta) == 0);
         ENSURE(t_qs_run(cases[i][0], cases[i][1], cases[i][2], 1.5, &b, &dtb) == 0);
         ENSURE(dtb > 5.0 * dta);
-        ENSURE_REL(b.detach_height_m, a.detach_height_m, 1e-4);
-        ENSURE_REL(b.detach_force_N, a.detach_force_N, 1e-3);
+        const double lag_u = -a.detach_height_m - q.u_spr_star, lag_F = a.detach_force_N - q.F_det;
+        fprintf(stderr, "  gamma %g k %g v %g: omega_dt 0.157 -> 1.5 moves u_spr_det by %.3f of its lag, "
+                "F_det by %.3f of its excess\n", cases[i][0], cases[i][1], cases[i][2],
+                fabs(b.detach_height_m - a.detach_height_m) / fabs(lag_u),
+                fabs(b.detach_force_N - a.detach_force_N) / fabs(lag_F));
+        ENSURE_ABS(b.detach_height_m, a.detach_height_m, 0.15 * fabs(lag_u));
+        ENSURE_ABS(b.detach_force_N, a.detach_force_N, 0.15 * fabs(lag_F));
         ENSURE_REL(b.pulloff_spring_N, a.pulloff_spring_N, 1e-6);
     }
 }

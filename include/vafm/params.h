@@ -53,6 +53,7 @@ typedef struct vafm_params {
     double v_approach_m_per_s; /**< piezo approach speed, m/s */
     double v_retract_m_per_s;  /**< piezo retract speed, m/s */
     double start_height_m; /**< piezo height at t = 0 above the contact point (spring relaxed, u = 0), m */
+    int start_in_contact;  /**< 1: the tip starts in contact at equilibrium (needs an equilibrium there) */
     int trigger;           /**< enum vafm_trigger */
     double setpoint_N;     /**< force trigger: repulsive force that ends the approach, N */
     double trigger_height_m; /**< height trigger: piezo height that ends the approach, m */

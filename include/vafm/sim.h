@@ -94,6 +94,9 @@ VAFM_API int vafm_sim_tune_begin(vafm_sim *s, uint64_t index);
  *  Never allocates. @return 1 while the scene goes on, 0 when it ended, or a negative VAFM_E* code. */
 VAFM_API int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user);
 
+/** Detail of the error that ended the last scene (field and message), or NULL if it did not fail. */
+VAFM_API const vafm_error *vafm_sim_error(const vafm_sim *s);
+
 /** The result of the last (or running) curve. */
 VAFM_API int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out);
 

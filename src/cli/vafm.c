@@ -628,11 +628,14 @@ static int s_cmd_run(const s_args *a)
     double wall = s_now() - pg.t0;
     vafm_curve_result res;
     vafm_sim_result(sim, &res);
-    vafm_sim_destroy(&sim);
     if (r) {
-        s_error("curve %" PRIu64 " failed after %.6g s simulated: %s", index, res.duration_s, vafm_strerror(r));
+        const vafm_error *e = vafm_sim_error(sim);
+        s_error("curve %" PRIu64 " failed after %.6g s simulated: %s", index, res.duration_s,
+                e ? e->message : vafm_strerror(r));
+        vafm_sim_destroy(&sim);
         return S_EXIT_RUNTIME;
     }
+    vafm_sim_destroy(&sim);
     s_print_run_result(stdout, &sc.p, &res, wall);
     return S_EXIT_OK;
 }
@@ -697,12 +700,15 @@ static int s_cmd_samples(const s_args *a)
     int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : vafm_sim_curve_begin(sim, index);
     if (!r)
         r = s_advance_all(sim, s_write_samples, f, &pg);
-    vafm_sim_destroy(&sim);
     rc = s_close_out(f, a->val[O_CSV], r == VAFM_EABORT);
     if (r && r != VAFM_EABORT) {
-        s_error("%s %" PRIu64 " failed: %s", a->on[O_TUNE] ? "tune" : "curve", index, vafm_strerror(r));
+        const vafm_error *e = vafm_sim_error(sim);
+        s_error("%s %" PRIu64 " failed: %s", a->on[O_TUNE] ? "tune" : "curve", index,
+                e ? e->message : vafm_strerror(r));
+        vafm_sim_destroy(&sim);
         return S_EXIT_RUNTIME;
     }
+    vafm_sim_destroy(&sim);
     return rc;
 }
 

@@ -65,6 +65,18 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
         }
     }
     nm->u_c = fmax(u_spr_turn - u_end, 0.0);
+    if (p->start_in_contact) {
+        /* an equilibrium on the contact branch exists for spring positions above the instability */
+        double uspr0 = -p->start_height_m / nm->sc.length_m;
+        double lowest = isfinite(nm->u_spr_star) ? nm->u_spr_star : 0.0;
+        if (!has_contact || !(uspr0 > lowest)) {
+            vafm_err_set(err, VAFM_EINVAL, "start_height_m",
+                         "start_in_contact: start_height_m = %.6g m has no contact equilibrium; with contact %s it "
+                         "must be below %.6g m (the quasi-static pull-off instability)",
+                         p->start_height_m, p->contact->name, -lowest * nm->sc.length_m);
+            return VAFM_EINVAL;
+        }
+    }
 
     const vafm_integrator_type *it = p->integrator;
     const double zeta_min = r->m; /* out of contact ζ = mη; in contact larger */

@@ -44,6 +44,10 @@ static const s_field s_fields[] = {
     REAL(v_approach_m_per_s, "m/s", 1e-12, 1e3, "piezo approach speed"),
     REAL(v_retract_m_per_s, "m/s", 1e-12, 1e3, "piezo retract speed"),
     REAL(start_height_m, "m", -1e-3, 1e-3, "piezo height at t = 0 above the contact point (negative: pressed in)"),
+    { { "start_in_contact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
+        "start with the tip in adhesive contact at equilibrium (a retract-only curve can then start anywhere "
+        "above the instability, e.g. with a height trigger just below start_height_m)" },
+      offsetof(vafm_params, start_in_contact), S_NONE },
     { { "trigger", VAFM_PARAM_CHOICE, "", 0, 0, "force|height",
         "what ends the approach: the filtered force reaching setpoint_N, or the piezo reaching trigger_height_m" },
       offsetof(vafm_params, trigger), S_TRIGGER },
@@ -64,7 +68,9 @@ static const s_field s_fields[] = {
     { { "noise", VAFM_PARAM_CHOICE, "", 0, 0, "gaussian|uniform",
         "random force distribution: gaussian, or uniform of matched variance (the paper's Eq. 7)" },
       offsetof(vafm_params, noise), S_NOISE },
-    REAL(dt_s, "s", 0, 1, "time step (0: automatic from omega_dt, as the paper's Eq. 8)"),
+    REAL(dt_s, "s", 0, 1,
+         "time step (0: automatic from omega_dt, as the paper's Eq. 8); rounded down to a whole fraction of the "
+         "sample interval"),
     REAL(omega_dt, "", 1e-6, 1.99,
          "automatic time step: omega_max*dt at the stiffest contact reached (paper 2*pi/40 = 0.157); "
          "brownian: K_max*dt/zeta"),
@@ -299,7 +305,9 @@ int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_er
         /* strtoull would skip white space and wrap a minus sign around: accept plain digits only */
         if (value[0] < '0' || value[0] > '9')
             goto bad_seed;
-        unsigned long long v = strtoull(value, &end, 0);
+        /* decimal, or hexadecimal with 0x; never octal ("010" is ten) */
+        int base = (value[0] == '0' && (value[1] == 'x' || value[1] == 'X')) ? 16 : 10;
+        unsigned long long v = strtoull(value, &end, base);
         if (*end != '\0' || errno == ERANGE)
             goto bad_seed;
         p->seed = (uint64_t)v;

@@ -45,6 +45,7 @@ struct vafm_sim {
     int touched, detached_in_retract, flags, retract_samples;
     double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
     double touch_t, touch_uspr;
+    vafm_error err;     /* detail of the error that ended the scene (err.code 0: none) */
     /* output block */
     size_t nblk;
     double *bt, *bh, *bd, *bf, *btip;
@@ -170,6 +171,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     vafm_rng_init(&K->rng, s->p.seed, index);
     s->scene = scene;
     s->index = index;
+    memset(&s->err, 0, sizeof s->err);
     s->sample_index = 0;
     s->nblk = 0;
     s->flags = 0;
@@ -206,7 +208,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     K->in_contact = 0;
     K->s = 0.0;
     const int has_contact = K->contact.type != vafm_contact_none;
-    if (has_contact && s->uspr_start >= K->contact.u_touch) {
+    if (has_contact && (s->uspr_start >= K->contact.u_touch || s->p.start_in_contact)) {
         double K_loc;
         K->u = s_contact_equilibrium(s, s->uspr_start, &K_loc);
         K->w = 0.0;
@@ -351,8 +353,13 @@ static int s_step_interval(vafm_sim *s)
                 s_event(s);
         }
     }
-    if (!isfinite(K->u) || !isfinite(K->w))
+    if (!isfinite(K->u) || !isfinite(K->w)) {
+        vafm_err_set(&s->err, VAFM_EUNSTABLE, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
+                     "curve %llu: the state became non-finite at t = %.6g s: the step %.6g s is unstable for the "
+                     "contact reached; lower %s", (unsigned long long)s->index, K->t * s->nm.sc.time_s,
+                     s->dt_cur * s->nm.sc.time_s, s->p.dt_s > 0 ? "dt_s" : "omega_dt");
         return VAFM_EUNSTABLE;
+    }
     if (K->in_contact) {
         /* runtime guard: the contact reached may be stiffer than the scene predicted */
         double sq = K->s, dF = 0.0;
@@ -360,8 +367,17 @@ static int s_step_interval(vafm_sim *s)
         double Kl = K->k + dF;
         if (Kl > 0) {
             double stab = s->it->overdamped ? Kl * s->dt_cur / K->co[1].zeta : sqrt(Kl / K->m) * s->dt_cur;
-            if (!(stab < s->it->stability_limit))
+            if (!(stab < s->it->stability_limit)) {
+                vafm_err_set(&s->err, VAFM_EUNSTABLE, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
+                             "curve %llu at t = %.6g s: the contact reached (stiffness %.4g N/m, force %.4g N) gives "
+                             "%s = %.4g >= %.3g with the step %.6g s; lower %s (the scene predicted %.4g N/m at most)",
+                             (unsigned long long)s->index, K->t * s->nm.sc.time_s,
+                             Kl * s->nm.sc.stiffness_N_per_m, K->Fc * s->nm.sc.force_N,
+                             s->it->overdamped ? "K*dt/zeta" : "omega*dt", stab, s->it->stability_limit,
+                             s->dt_cur * s->nm.sc.time_s, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
+                             s->nm.K_max * s->nm.sc.stiffness_N_per_m);
                 return VAFM_EUNSTABLE;
+            }
         }
     }
     return 0;
@@ -499,6 +515,11 @@ int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *u
         return VAFM_EABORT;
     }
     return s->phase == S_PH_DONE ? 0 : 1;
+}
+
+const vafm_error *vafm_sim_error(const vafm_sim *s)
+{
+    return s && s->err.code ? &s->err : NULL;
 }
 
 int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)

@@ -1,0 +1,656 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Tables and helpers shared by the HDF5 writer, reader and checker: afmformats' metadata keys, the
+ * channels, the ground-truth row type, attribute input/output, HDF5 error capture and value rules.
+ */
+#include <ctype.h>
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "h5/h5_internal.h"
+
+#define K_STR(n, f) { n, VAFM_H5I_STR, offsetof(vafm_h5_meta, f), "" }
+#define K_REAL(n, f, u) { n, VAFM_H5I_REAL, offsetof(vafm_h5_meta, f), u }
+#define K_INT(n, f) { n, VAFM_H5I_INT, offsetof(vafm_h5_meta, f), "" }
+
+/* The issue's list, which is afmformats' META_FIELDS for force-distance without "enum", "path" and
+ * "format" (storage keys afmformats fills in itself on load). */
+const vafm_h5i_key vafm_h5i_keys[] = {
+    K_STR("imaging mode", imaging_mode),
+    K_STR("feedback mode", feedback_mode),
+    K_STR("instrument", instrument),
+    K_STR("software", software),
+    K_STR("software version", software_version),
+    K_STR("date", date),
+    K_STR("time", time),
+    K_STR("session id", session_id),
+    K_STR("curve id", curve_id),
+    K_REAL("spring constant", spring_constant_N_per_m, "N/m"),
+    K_REAL("sensitivity", sensitivity_m_per_V, "m/V"),
+    K_REAL("setpoint", setpoint_N, "N"),
+    K_REAL("rate approach", rate_approach_Hz, "Hz"),
+    K_REAL("rate retract", rate_retract_Hz, "Hz"),
+    K_REAL("speed approach", speed_approach_m_per_s, "m/s"),
+    K_REAL("speed retract", speed_retract_m_per_s, "m/s"),
+    K_REAL("duration", duration_s, "s"),
+    K_REAL("duration approach", duration_approach_s, "s"),
+    K_REAL("duration retract", duration_retract_s, "s"),
+    K_REAL("z range", z_range_m, "m"),
+    K_REAL("position x", position_x_m, "m"),
+    K_REAL("position y", position_y_m, "m"),
+    K_REAL("grid center x", grid_center_x_m, "m"),
+    K_REAL("grid center y", grid_center_y_m, "m"),
+    K_REAL("grid size x", grid_size_x_m, "m"),
+    K_REAL("grid size y", grid_size_y_m, "m"),
+    K_INT("point count", point_count),
+    K_INT("segment count", segment_count),
+    K_INT("grid shape x", grid_shape_x),
+    K_INT("grid shape y", grid_shape_y),
+    K_INT("grid index x", grid_index_x),
+    K_INT("grid index y", grid_index_y),
+};
+const int vafm_h5i_nkeys = (int)(sizeof vafm_h5i_keys / sizeof vafm_h5i_keys[0]);
+
+const vafm_h5i_key *vafm_h5i_key_find(const char *name)
+{
+    for (int i = 0; i < vafm_h5i_nkeys; i++)
+        if (!strcmp(name, vafm_h5i_keys[i].name))
+            return &vafm_h5i_keys[i];
+    return NULL;
+}
+
+int vafm_h5i_key_tolerated(const char *name)
+{
+    return !strcmp(name, "enum") || !strcmp(name, "path") || !strcmp(name, "format");
+}
+
+const vafm_h5i_chan vafm_h5i_chans[VAFM_H5I_NCHAN] = {
+    { "force", "N", 0, offsetof(vafm_h5_curve, force_N) },
+    { "height (measured)", "m", 0, offsetof(vafm_h5_curve, height_measured_m) },
+    { "height (piezo)", "m", 0, offsetof(vafm_h5_curve, height_piezo_m) },
+    { "segment", "", 1, offsetof(vafm_h5_curve, segment) },
+    { "time", "s", 0, offsetof(vafm_h5_curve, time_s) },
+    { "tip position", "m", 0, offsetof(vafm_h5_curve, tip_position_m) },
+};
+
+int vafm_h5i_chan_find(const char *name)
+{
+    for (int i = 0; i < VAFM_H5I_NCHAN; i++)
+        if (!strcmp(name, vafm_h5i_chans[i].name))
+            return i;
+    return -1;
+}
+
+/* ---- ground-truth rows ---------------------------------------------------------------------------- */
+
+enum { F_U64, F_I32, F_F64 };
+typedef struct s_rowfield {
+    const char *name;
+    int type;
+    size_t offset;
+} s_rowfield;
+
+#define RF(name, type) { #name, type, offsetof(vafm_h5i_row, name) }
+static const s_rowfield s_rowfields[] = {
+    RF(curve, F_U64),
+    RF(point, F_U64),
+    RF(status, F_I32),
+    RF(flags, F_I32),
+    RF(T_K, F_F64),
+    RF(v_m_per_s, F_F64),
+    RF(k_N_per_m, F_F64),
+    RF(pulloff_sampled_N, F_F64),
+    RF(pulloff_spring_N, F_F64),
+    RF(detach_force_N, F_F64),
+    RF(detach_height_m, F_F64),
+    RF(detach_eq_force_N, F_F64),
+    RF(detach_time_s, F_F64),
+    RF(touch_time_s, F_F64),
+    RF(touch_height_m, F_F64),
+    RF(retract_start_s, F_F64),
+    RF(duration_s, F_F64),
+    RF(samples, F_U64),
+    RF(steps, F_U64),
+    RF(steps_contact, F_U64),
+    RF(steps_free, F_U64),
+};
+#define S_NROWFIELDS ((int)(sizeof s_rowfields / sizeof s_rowfields[0]))
+
+int vafm_h5i_row_nfields(void)
+{
+    return S_NROWFIELDS;
+}
+
+const char *vafm_h5i_row_field(int i)
+{
+    return i >= 0 && i < S_NROWFIELDS ? s_rowfields[i].name : NULL;
+}
+
+hid_t vafm_h5i_row_type(int file)
+{
+    size_t size = 0;
+    if (file) {
+        for (int i = 0; i < S_NROWFIELDS; i++)
+            size += s_rowfields[i].type == F_I32 ? 4 : 8;
+    } else {
+        size = sizeof(vafm_h5i_row);
+    }
+    hid_t t = H5Tcreate(H5T_COMPOUND, size);
+    if (t < 0)
+        return -1;
+    size_t off = 0;
+    for (int i = 0; i < S_NROWFIELDS; i++) {
+        const s_rowfield *f = &s_rowfields[i];
+        hid_t ft = f->type == F_U64 ? (file ? H5T_STD_U64LE : H5T_NATIVE_UINT64)
+                   : f->type == F_I32 ? (file ? H5T_STD_I32LE : H5T_NATIVE_INT32)
+                                      : (file ? H5T_IEEE_F64LE : H5T_NATIVE_DOUBLE);
+        if (H5Tinsert(t, f->name, file ? off : f->offset, ft) < 0) {
+            H5Tclose(t);
+            return -1;
+        }
+        off += f->type == F_I32 ? 4 : 8;
+    }
+    return t;
+}
+
+void vafm_h5i_row_from_truth(vafm_h5i_row *row, uint64_t curve, const vafm_h5_truth *t)
+{
+    const vafm_curve_result *r = &t->result;
+    memset(row, 0, sizeof *row);
+    row->curve = curve;
+    row->point = t->point;
+    row->status = t->status;
+    row->flags = r->flags;
+    row->T_K = t->T_K;
+    row->v_m_per_s = t->v_m_per_s;
+    row->k_N_per_m = t->k_N_per_m;
+    row->pulloff_sampled_N = r->pulloff_sampled_N;
+    row->pulloff_spring_N = r->pulloff_spring_N;
+    row->detach_force_N = r->detach_force_N;
+    row->detach_height_m = r->detach_height_m;
+    row->detach_eq_force_N = r->detach_eq_force_N;
+    row->detach_time_s = r->detach_time_s;
+    row->touch_time_s = r->touch_time_s;
+    row->touch_height_m = r->touch_height_m;
+    row->retract_start_s = r->retract_start_s;
+    row->duration_s = r->duration_s;
+    row->samples = r->samples;
+    row->steps = r->steps;
+    row->steps_contact = r->steps_contact;
+    row->steps_free = r->steps_free;
+}
+
+void vafm_h5i_truth_from_row(vafm_h5_truth *t, const vafm_h5i_row *row)
+{
+    vafm_curve_result *r = &t->result;
+    memset(t, 0, sizeof *t);
+    t->point = row->point;
+    t->status = row->status;
+    t->T_K = row->T_K;
+    t->v_m_per_s = row->v_m_per_s;
+    t->k_N_per_m = row->k_N_per_m;
+    r->index = row->curve;
+    r->flags = row->flags;
+    r->pulloff_sampled_N = row->pulloff_sampled_N;
+    r->pulloff_spring_N = row->pulloff_spring_N;
+    r->detach_force_N = row->detach_force_N;
+    r->detach_height_m = row->detach_height_m;
+    r->detach_eq_force_N = row->detach_eq_force_N;
+    r->detach_time_s = row->detach_time_s;
+    r->touch_time_s = row->touch_time_s;
+    r->touch_height_m = row->touch_height_m;
+    r->retract_start_s = row->retract_start_s;
+    r->duration_s = row->duration_s;
+    r->samples = row->samples;
+    r->steps = row->steps;
+    r->steps_contact = row->steps_contact;
+    r->steps_free = row->steps_free;
+}
+
+/* ---- HDF5 errors ---------------------------------------------------------------------------------- */
+
+void vafm_h5i_quiet_begin(vafm_h5i_quiet *q)
+{
+    q->fn = NULL;
+    q->data = NULL;
+    H5Eget_auto2(H5E_DEFAULT, &q->fn, &q->data);
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+    H5Eclear2(H5E_DEFAULT);
+}
+
+void vafm_h5i_quiet_end(const vafm_h5i_quiet *q)
+{
+    H5Eclear2(H5E_DEFAULT);
+    H5Eset_auto2(H5E_DEFAULT, q->fn, q->data);
+}
+
+static void s_verr(vafm_error *err, int code, const char *object, const char *suffix, const char *fmt,
+                   va_list ap)
+{
+    if (!err)
+        return;
+    err->code = code;
+    snprintf(err->field, sizeof err->field, "%s", object ? object : "");
+    int n = vsnprintf(err->message, sizeof err->message, fmt, ap);
+    if (suffix && n >= 0 && (size_t)n < sizeof err->message)
+        snprintf(err->message + n, sizeof err->message - (size_t)n, "%s", suffix);
+}
+
+void vafm_h5i_err(vafm_error *err, int code, const char *object, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    s_verr(err, code, object, NULL, fmt, ap);
+    va_end(ap);
+}
+
+static herr_t s_walk_first(unsigned n, const H5E_error2_t *e, void *data)
+{
+    char *buf = data;
+    if (n == 0 && e->desc)
+        snprintf(buf, 160, "%s", e->desc);
+    return 0;
+}
+
+void vafm_h5i_err_hdf5(vafm_error *err, int code, const char *object, const char *fmt, ...)
+{
+    char inner[160] = "", suffix[200] = "";
+    /* Walking upward starts at the innermost (most specific) entry. */
+    H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, s_walk_first, inner);
+    if (inner[0])
+        snprintf(suffix, sizeof suffix, " (HDF5: %s)", inner);
+    va_list ap;
+    va_start(ap, fmt);
+    s_verr(err, code, object, suffix, fmt, ap);
+    va_end(ap);
+    H5Eclear2(H5E_DEFAULT);
+}
+
+/* ---- attributes ----------------------------------------------------------------------------------- */
+
+void vafm_h5i_val_free(vafm_h5i_val *v)
+{
+    free(v->s);
+    v->s = NULL;
+}
+
+int vafm_h5i_attr_get(hid_t loc, const char *name, vafm_h5i_val *v)
+{
+    memset(v, 0, sizeof *v);
+    v->cls = H5T_NO_CLASS;
+    hid_t a = H5Aopen(loc, name, H5P_DEFAULT);
+    if (a < 0)
+        return -1;
+    int rc = -1;
+    hid_t t = H5Aget_type(a), sp = H5Aget_space(a), mt = -1;
+    if (t < 0 || sp < 0)
+        goto done;
+    v->cls = H5Tget_class(t);
+    v->size = H5Tget_size(t);
+    v->order = H5Tget_order(t);
+    H5S_class_t sc = H5Sget_simple_extent_type(sp);
+    v->scalar = sc == H5S_SCALAR;
+    v->npoints = H5Sget_simple_extent_npoints(sp);
+    if (v->npoints < 0)
+        goto done;
+    if (v->npoints != 1) {
+        rc = 0; /* shape refused by the callers, value not read */
+        goto done;
+    }
+    if (v->cls == H5T_STRING) {
+        htri_t vl = H5Tis_variable_str(t);
+        if (vl < 0)
+            goto done;
+        v->vlen = vl > 0;
+        v->cset = H5Tget_cset(t);
+        if (v->vlen) {
+            char *p = NULL;
+            mt = H5Tcopy(H5T_C_S1);
+            if (mt < 0 || H5Tset_size(mt, H5T_VARIABLE) < 0 || H5Tset_cset(mt, v->cset) < 0)
+                goto done;
+            if (H5Aread(a, mt, &p) < 0)
+                goto done;
+            v->s = strdup(p ? p : "");
+            if (p)
+                H5free_memory(p);
+        } else {
+            if (v->size == 0 || v->size > (1u << 24))
+                goto done;
+            v->s = calloc(1, v->size + 1);
+            mt = H5Tcopy(H5T_C_S1);
+            if (!v->s || mt < 0 || H5Tset_size(mt, v->size) < 0 || H5Tset_strpad(mt, H5T_STR_NULLTERM) < 0)
+                goto done;
+            /* read raw bytes: a NULLPAD/SPACEPAD string is converted to NULLTERM by HDF5 */
+            if (H5Tset_size(mt, v->size + 1) < 0 || H5Aread(a, mt, v->s) < 0)
+                goto done;
+        }
+        if (!v->s)
+            goto done;
+        rc = 0;
+    } else if (v->cls == H5T_INTEGER) {
+        v->sign = H5Tget_sign(t);
+        if (v->sign == H5T_SGN_NONE) {
+            if (H5Aread(a, H5T_NATIVE_UINT64, &v->u) < 0)
+                goto done;
+            v->i = v->u > (uint64_t)INT64_MAX ? INT64_MAX : (int64_t)v->u;
+        } else {
+            if (H5Aread(a, H5T_NATIVE_INT64, &v->i) < 0)
+                goto done;
+            v->u = v->i < 0 ? 0 : (uint64_t)v->i;
+        }
+        v->d = v->sign == H5T_SGN_NONE ? (double)v->u : (double)v->i;
+        v->integral = 1;
+        rc = 0;
+    } else if (v->cls == H5T_FLOAT) {
+        if (H5Aread(a, H5T_NATIVE_DOUBLE, &v->d) < 0)
+            goto done;
+        v->integral = isfinite(v->d) && v->d == floor(v->d) && fabs(v->d) < 9.2e18;
+        if (v->integral) {
+            v->i = (int64_t)v->d;
+            v->u = v->i < 0 ? 0 : (uint64_t)v->i;
+        }
+        rc = 0;
+    } else {
+        rc = 0; /* other classes: refused by the callers */
+    }
+done:
+    if (mt >= 0)
+        H5Tclose(mt);
+    if (t >= 0)
+        H5Tclose(t);
+    if (sp >= 0)
+        H5Sclose(sp);
+    H5Aclose(a);
+    if (rc)
+        vafm_h5i_val_free(v);
+    return rc;
+}
+
+hid_t vafm_h5i_str_type(void)
+{
+    hid_t t = H5Tcopy(H5T_C_S1);
+    if (t < 0)
+        return -1;
+    if (H5Tset_size(t, H5T_VARIABLE) < 0 || H5Tset_cset(t, H5T_CSET_UTF8) < 0) {
+        H5Tclose(t);
+        return -1;
+    }
+    return t;
+}
+
+static int s_put(hid_t loc, const char *name, hid_t ftype, hid_t mtype, const void *buf)
+{
+    if (H5Aexists(loc, name) > 0 && H5Adelete(loc, name) < 0)
+        return -1;
+    hid_t sp = H5Screate(H5S_SCALAR);
+    if (sp < 0)
+        return -1;
+    hid_t a = H5Acreate2(loc, name, ftype, sp, H5P_DEFAULT, H5P_DEFAULT);
+    H5Sclose(sp);
+    if (a < 0)
+        return -1;
+    int rc = H5Awrite(a, mtype, buf) < 0 ? -1 : 0;
+    if (H5Aclose(a) < 0)
+        rc = -1;
+    return rc;
+}
+
+int vafm_h5i_put_str(hid_t loc, const char *name, const char *value)
+{
+    hid_t t = vafm_h5i_str_type();
+    if (t < 0)
+        return -1;
+    int rc = s_put(loc, name, t, t, &value);
+    H5Tclose(t);
+    return rc;
+}
+
+int vafm_h5i_put_f64(hid_t loc, const char *name, double value)
+{
+    return s_put(loc, name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &value);
+}
+
+int vafm_h5i_put_i64(hid_t loc, const char *name, int64_t value)
+{
+    return s_put(loc, name, H5T_STD_I64LE, H5T_NATIVE_INT64, &value);
+}
+
+int vafm_h5i_put_u64(hid_t loc, const char *name, uint64_t value)
+{
+    return s_put(loc, name, H5T_STD_U64LE, H5T_NATIVE_UINT64, &value);
+}
+
+/* ---- value rules ---------------------------------------------------------------------------------- */
+
+static int s_digits(const char *s, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isdigit((unsigned char)s[i]))
+            return 0;
+    return 1;
+}
+
+int vafm_h5i_date_ok(const char *s)
+{
+    if (!s || strlen(s) != 10 || !s_digits(s, 4) || s[4] != '-' || !s_digits(s + 5, 2) || s[7] != '-' ||
+        !s_digits(s + 8, 2))
+        return 0;
+    int mo = (s[5] - '0') * 10 + (s[6] - '0'), d = (s[8] - '0') * 10 + (s[9] - '0');
+    return mo >= 1 && mo <= 12 && d >= 1 && d <= 31;
+}
+
+int vafm_h5i_time_ok(const char *s)
+{
+    if (!s || strlen(s) < 8 || !s_digits(s, 2) || s[2] != ':' || !s_digits(s + 3, 2) || s[5] != ':' ||
+        !s_digits(s + 6, 2))
+        return 0;
+    int h = (s[0] - '0') * 10 + (s[1] - '0'), m = (s[3] - '0') * 10 + (s[4] - '0'),
+        sec = (s[6] - '0') * 10 + (s[7] - '0');
+    if (h > 23 || m > 59 || sec > 60)
+        return 0;
+    if (!s[8])
+        return 1;
+    if (s[8] != '.' || !s[9])
+        return 0;
+    for (const char *p = s + 9; *p; p++)
+        if (!isdigit((unsigned char)*p))
+            return 0;
+    return 1;
+}
+
+/* A small recursive-descent JSON syntax check (RFC 8259), depth-limited. */
+static const char *s_json_value(const char *p, int depth);
+
+static const char *s_ws(const char *p)
+{
+    while (*p == ' ' || *p == '\t' || *p == '\n' || *p == '\r')
+        p++;
+    return p;
+}
+
+static const char *s_json_string(const char *p)
+{
+    if (*p != '"')
+        return NULL;
+    for (p++; *p && *p != '"'; p++) {
+        if ((unsigned char)*p < 0x20)
+            return NULL;
+        if (*p == '\\') {
+            p++;
+            if (*p == 'u') {
+                for (int i = 1; i <= 4; i++)
+                    if (!isxdigit((unsigned char)p[i]))
+                        return NULL;
+                p += 4;
+            } else if (!*p || !strchr("\"\\/bfnrt", *p)) {
+                return NULL;
+            }
+        }
+    }
+    return *p == '"' ? p + 1 : NULL;
+}
+
+static const char *s_json_number(const char *p)
+{
+    if (*p == '-')
+        p++;
+    if (*p == '0')
+        p++;
+    else if (isdigit((unsigned char)*p))
+        while (isdigit((unsigned char)*p))
+            p++;
+    else
+        return NULL;
+    if (*p == '.') {
+        p++;
+        if (!isdigit((unsigned char)*p))
+            return NULL;
+        while (isdigit((unsigned char)*p))
+            p++;
+    }
+    if (*p == 'e' || *p == 'E') {
+        p++;
+        if (*p == '+' || *p == '-')
+            p++;
+        if (!isdigit((unsigned char)*p))
+            return NULL;
+        while (isdigit((unsigned char)*p))
+            p++;
+    }
+    return p;
+}
+
+static const char *s_json_value(const char *p, int depth)
+{
+    if (depth > 64)
+        return NULL;
+    p = s_ws(p);
+    if (*p == '{' || *p == '[') {
+        char close = *p == '{' ? '}' : ']';
+        int obj = *p == '{';
+        p = s_ws(p + 1);
+        if (*p == close)
+            return p + 1;
+        for (;;) {
+            if (obj) {
+                p = s_json_string(s_ws(p));
+                if (!p)
+                    return NULL;
+                p = s_ws(p);
+                if (*p != ':')
+                    return NULL;
+                p++;
+            }
+            p = s_json_value(p, depth + 1);
+            if (!p)
+                return NULL;
+            p = s_ws(p);
+            if (*p == ',') {
+                p++;
+                continue;
+            }
+            return *p == close ? p + 1 : NULL;
+        }
+    }
+    if (*p == '"')
+        return s_json_string(p);
+    if (!strncmp(p, "true", 4))
+        return p + 4;
+    if (!strncmp(p, "false", 5))
+        return p + 5;
+    if (!strncmp(p, "null", 4))
+        return p + 4;
+    return s_json_number(p);
+}
+
+int vafm_h5i_json_object_ok(const char *s)
+{
+    if (!s)
+        return 0;
+    const char *p = s_ws(s);
+    if (*p != '{')
+        return 0;
+    p = s_json_value(p, 0);
+    return p && !*s_ws(p);
+}
+
+int vafm_h5i_group_name(const char *name, uint64_t *out)
+{
+    size_t n = strlen(name);
+    if (n == 0 || n > 19 || !s_digits(name, (int)n) || (n > 1 && name[0] == '0'))
+        return 0;
+    uint64_t v = strtoull(name, NULL, 10);
+    if (v > (uint64_t)INT64_MAX)
+        return 0;
+    *out = v;
+    return 1;
+}
+
+const char *vafm_h5i_rule_segment(const uint8_t *seg, size_t n, size_t *at)
+{
+    for (size_t i = 0; i < n; i++)
+        if (seg[i] > 2) {
+            *at = i;
+            return "segment values are 0 (approach), 1 (retract) or 2 (dwell)";
+        }
+    return NULL;
+}
+
+const char *vafm_h5i_rule_finite(const double *x, size_t n, size_t *at)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(x[i])) {
+            *at = i;
+            return "values are finite numbers";
+        }
+    return NULL;
+}
+
+const char *vafm_h5i_rule_time(const double *t, size_t n, size_t *at)
+{
+    const char *r = vafm_h5i_rule_finite(t, n, at);
+    if (r)
+        return r;
+    if (n == 0)
+        return NULL;
+    if (t[0] < 0) {
+        *at = 0;
+        return "time starts at 0 (the first sample lies within one sample interval of 0)";
+    }
+    for (size_t i = 1; i < n; i++)
+        if (!(t[i] > t[i - 1])) {
+            *at = i;
+            return "time increases strictly from sample to sample";
+        }
+    /* "continuous from 0": the first sample lies within one mean sample interval of 0 (vafm stamps a
+     * box-car averaged sample at the middle of its interval, so t[0] = interval/2) */
+    if (n >= 2 && t[0] > (t[n - 1] - t[0]) / (double)(n - 1) * (1 + 1e-9)) {
+        *at = 0;
+        return "time starts at 0 (the first sample lies within one sample interval of 0)";
+    }
+    return NULL;
+}
+
+const char *vafm_h5i_rule_tip(const double *tip, const double *hm, const double *f, double k, size_t n,
+                              size_t *at)
+{
+    if (!(k > 0) || !isfinite(k)) {
+        *at = 0;
+        return "tip position needs a positive spring constant (tip position = height (measured) + "
+               "force / spring constant)";
+    }
+    for (size_t i = 0; i < n; i++) {
+        double want = hm[i] + f[i] / k;
+        /* equal up to rounding: the writer's source may form h + deflection instead of h + F/k */
+        double tol = 1e-9 * (fabs(hm[i]) + fabs(f[i] / k)) + 1e-300;
+        if (!(fabs(tip[i] - want) <= tol)) {
+            *at = i;
+            return "tip position = height (measured) + force / spring constant (nanite's tip-sample "
+                   "separation)";
+        }
+    }
+    return NULL;
+}

@@ -1,0 +1,208 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * HDF5 force-curve files: what the writer, the reader and the conformance checker share.
+ *
+ * Layout (protocol/hdf5.md): afmformats' HDF5 export. Root attributes "software" and "software
+ * version"; one group per curve named "0", "1", …; in each group 1-D datasets (force, height
+ * (measured), height (piezo), segment, time, tip position) with a string attribute "unit", and the
+ * curve metadata as scalar attributes whose names come from afmformats' fixed list (s_keys below).
+ * afmformats' reader builds its metadata dictionary from the group attributes and raises on any name
+ * it does not know; it reads strings through h5py, which returns variable-length strings as text and
+ * fixed-length ones as bytes (then "imaging mode" never equals "force-distance" and the file is not
+ * detected). So every string vafm writes is a scalar variable-length UTF-8 string, like h5py's.
+ *
+ * Durability without a journal. HDF5 has none, and SWMR forbids creating groups, so a kill -9 is
+ * survived by construction instead:
+ *  - the file format is pinned to the 1.8 format (libver bounds V18..V18): checksummed superblock v2,
+ *    object headers and dense link/attribute storage, so damage is detected, and no superblock v3
+ *    "file is open for write" flag that would lock a killed file until h5clear;
+ *  - raw data are written when a curve is appended (to space past the last flush's end of file; the
+ *    sec2 driver keeps raw data and metadata in separate free lists, so freed metadata is never
+ *    overwritten by raw data before the next flush);
+ *  - metadata stay in HDF5's cache until vafm_h5_writer_flush(), which writes them and the superblock;
+ *  - the ground truth of the curves appended since the last flush goes into one new root attribute
+ *    ("vafm ground truth from <first>") written in the same flush, so a curve counts as complete only
+ *    with its row. Resume keeps the longest prefix 0..c−1 of groups that pass the layout check and have
+ *    a row (the last ones are also read back through their Fletcher-32 checksums), deletes the rest and
+ *    merges the rows into "vafm ground truth"; a clean close merges them too.
+ * The window left is a kill during H5Fflush itself (tens of microseconds per flush).
+ */
+#ifndef VAFM_H5_INTERNAL_H
+#define VAFM_H5_INTERNAL_H
+
+#include <hdf5.h>
+#include <stdarg.h>
+#include <stdint.h>
+
+#include "vafm/h5.h"
+
+#if defined(__GNUC__)
+#define VAFM_H5_PRINTF(a, b) __attribute__((format(printf, a, b)))
+#else
+#define VAFM_H5_PRINTF(a, b)
+#endif
+
+/* Root attribute names of vafm's provenance. */
+#define VAFM_H5I_A_FORMAT "vafm format version"
+#define VAFM_H5I_A_SCENE "vafm scene"
+#define VAFM_H5I_A_GRID "vafm grid"
+#define VAFM_H5I_A_SEED "vafm seed"
+#define VAFM_H5I_A_CREATED "vafm created"
+#define VAFM_H5I_A_TRUTH "vafm ground truth"           /* merged table */
+#define VAFM_H5I_A_TRUTH_PART "vafm ground truth from " /* + first curve: rows of one flush */
+
+/* ---- curve-group attributes: afmformats' list ---------------------------------------------------- */
+
+enum { VAFM_H5I_STR = 0, VAFM_H5I_REAL = 1, VAFM_H5I_INT = 2 };
+
+typedef struct vafm_h5i_key {
+    const char *name; /* attribute name */
+    int kind;         /* VAFM_H5I_STR / REAL / INT */
+    size_t offset;    /* of the field in vafm_h5_meta */
+    const char *unit; /* SI unit, for messages */
+} vafm_h5i_key;
+
+extern const vafm_h5i_key vafm_h5i_keys[];
+extern const int vafm_h5i_nkeys;
+
+/** @return the key named `name`, or NULL. */
+const vafm_h5i_key *vafm_h5i_key_find(const char *name);
+
+/** Keys afmformats knows but the issue's list leaves out ("enum", "path", "format"): afmformats' own
+ *  exporter writes "enum" and "path". The reader ignores them; the checker and the writer refuse them.
+ *  @return 1 if tolerated. */
+int vafm_h5i_key_tolerated(const char *name);
+
+/* ---- channels ------------------------------------------------------------------------------------- */
+
+typedef struct vafm_h5i_chan {
+    const char *name; /* dataset name */
+    const char *unit; /* value of its "unit" attribute */
+    int is_segment;   /* 1: uint8 segment labels, 0: float64 */
+    size_t offset;    /* of the pointer in vafm_h5_curve */
+} vafm_h5i_chan;
+
+#define VAFM_H5I_NCHAN 6
+extern const vafm_h5i_chan vafm_h5i_chans[VAFM_H5I_NCHAN];
+enum { VAFM_H5I_FORCE = 0, VAFM_H5I_HMEAS, VAFM_H5I_HPIEZO, VAFM_H5I_SEGMENT, VAFM_H5I_TIME, VAFM_H5I_TIP };
+
+/** @return the channel index of dataset `name`, or −1. */
+int vafm_h5i_chan_find(const char *name);
+
+/* ---- ground-truth rows ---------------------------------------------------------------------------- */
+
+typedef struct vafm_h5i_row {
+    uint64_t curve, point;
+    int32_t status, flags;
+    double T_K, v_m_per_s, k_N_per_m;
+    double pulloff_sampled_N, pulloff_spring_N, detach_force_N, detach_height_m, detach_eq_force_N;
+    double detach_time_s, touch_time_s, touch_height_m, retract_start_s, duration_s;
+    uint64_t samples, steps, steps_contact, steps_free;
+} vafm_h5i_row;
+
+/** Compound type of a row: file = 1 (little-endian, packed) or 0 (native, for memory). Caller closes. */
+hid_t vafm_h5i_row_type(int file);
+void vafm_h5i_row_from_truth(vafm_h5i_row *row, uint64_t curve, const vafm_h5_truth *t);
+void vafm_h5i_truth_from_row(vafm_h5_truth *t, const vafm_h5i_row *row);
+
+/** Number of fields of the row type, and field i's name (for the checker). */
+int vafm_h5i_row_nfields(void);
+const char *vafm_h5i_row_field(int i);
+
+/* ---- HDF5 error handling -------------------------------------------------------------------------- */
+
+/** Silence HDF5's automatic error printing for one public call (the library never prints). */
+typedef struct vafm_h5i_quiet {
+    H5E_auto2_t fn;
+    void *data;
+} vafm_h5i_quiet;
+void vafm_h5i_quiet_begin(vafm_h5i_quiet *q);
+void vafm_h5i_quiet_end(const vafm_h5i_quiet *q);
+
+/** Fill err: code, object path (err->field) and message. */
+void vafm_h5i_err(vafm_error *err, int code, const char *object, const char *fmt, ...) VAFM_H5_PRINTF(4, 5);
+/** Same, appending " (HDF5: <innermost message of HDF5's error stack>)". */
+void vafm_h5i_err_hdf5(vafm_error *err, int code, const char *object, const char *fmt, ...)
+    VAFM_H5_PRINTF(4, 5);
+
+/* ---- attributes ----------------------------------------------------------------------------------- */
+
+/** What an attribute holds, as found in the file. */
+typedef struct vafm_h5i_val {
+    H5T_class_t cls;   /* H5T_STRING, H5T_INTEGER, H5T_FLOAT, or another class (refused by callers) */
+    int vlen;          /* string: variable length */
+    H5T_cset_t cset;   /* string: character set */
+    size_t size;       /* datatype size, bytes */
+    H5T_sign_t sign;   /* integer: signedness */
+    H5T_order_t order; /* byte order */
+    int scalar;        /* dataspace is scalar */
+    hssize_t npoints;  /* elements */
+    char *s;           /* string value (malloc'd, NUL-terminated) when cls == H5T_STRING and npoints == 1 */
+    double d;          /* numeric value when npoints == 1 */
+    int64_t i;         /* integer value (integers, and floats when integral) */
+    uint64_t u;        /* unsigned integer value */
+    int integral;      /* the numeric value is an integer */
+} vafm_h5i_val;
+
+/** Read attribute `name` of loc into v (v->s to be freed with vafm_h5i_val_free). @return 0, or −1 if
+ *  HDF5 failed (absent attribute, damage); the error stays on HDF5's stack for vafm_h5i_err_hdf5. */
+int vafm_h5i_attr_get(hid_t loc, const char *name, vafm_h5i_val *v);
+void vafm_h5i_val_free(vafm_h5i_val *v);
+
+/** Scalar variable-length UTF-8 string type (caller closes). */
+hid_t vafm_h5i_str_type(void);
+/** Write (create or replace) a scalar attribute. @return 0 or −1. */
+int vafm_h5i_put_str(hid_t loc, const char *name, const char *value);
+int vafm_h5i_put_f64(hid_t loc, const char *name, double value);
+int vafm_h5i_put_i64(hid_t loc, const char *name, int64_t value);
+int vafm_h5i_put_u64(hid_t loc, const char *name, uint64_t value);
+
+/* ---- value rules ---------------------------------------------------------------------------------- */
+
+/** "YYYY-MM-DD" with a plausible month and day. */
+int vafm_h5i_date_ok(const char *s);
+/** "HH:MM:SS" or "HH:MM:SS.f…" (afmformats' format, not ISO 8601). */
+int vafm_h5i_time_ok(const char *s);
+/** A syntactically valid JSON document whose top level is an object. */
+int vafm_h5i_json_object_ok(const char *s);
+/** Canonical curve-group name: "0" or [1-9][0-9]* below 2^63. @return 1 and *out, or 0. */
+int vafm_h5i_group_name(const char *name, uint64_t *out);
+
+/** Channel rules shared by the writer (before writing) and the checker (after reading). Each returns
+ *  NULL when the rule holds, else a static description of the rule, with *at the first bad sample. */
+const char *vafm_h5i_rule_segment(const uint8_t *seg, size_t n, size_t *at);
+const char *vafm_h5i_rule_time(const double *t, size_t n, size_t *at);
+const char *vafm_h5i_rule_tip(const double *tip, const double *hm, const double *f, double k, size_t n,
+                              size_t *at);
+const char *vafm_h5i_rule_finite(const double *x, size_t n, size_t *at);
+
+/* ---- reading one curve group (reader, writer's resume) -------------------------------------------- */
+
+/** Storage behind a vafm_h5_curve that was read. */
+typedef struct vafm_h5i_curvebuf {
+    double *d[VAFM_H5I_NCHAN];
+    uint8_t *seg;
+    size_t cap[VAFM_H5I_NCHAN];
+    char *str[16];
+    int nstr;
+} vafm_h5i_curvebuf;
+void vafm_h5i_curvebuf_free(vafm_h5i_curvebuf *b);
+
+/**
+ * Read curve group `group` of an open file (the reader's lenient rules, protocol/hdf5.md). With
+ * read_data 0, only the structure, attributes and dataset shapes are checked (no channel arrays).
+ * file_size bounds the dataset lengths a damaged file could claim. @return 0 or VAFM_E* with err.
+ */
+int vafm_h5i_curve_read(hid_t file, const char *path, uint64_t group, int read_data, uint64_t file_size,
+                        vafm_h5i_curvebuf *buf, vafm_h5_curve *out, vafm_error *err);
+
+/** Read every ground-truth row of the root (merged table and parts) into a malloc'd array sorted by
+ *  curve. Parts that cannot be read are skipped if skip_damaged, else refused. @return 0 or VAFM_E*. */
+int vafm_h5i_rows_read(hid_t file, const char *path, int skip_damaged, vafm_h5i_row **rows, size_t *n,
+                       vafm_error *err);
+
+/** Names of the root's ground-truth attributes (merged and parts), malloc'd; caller frees each and
+ *  the array. @return 0 or −1. */
+int vafm_h5i_truth_attr_names(hid_t file, char ***names, size_t *n);
+
+#endif

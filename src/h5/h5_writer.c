@@ -1,0 +1,849 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Writing force-curve files of afmformats' HDF5 layout, with vafm's provenance in root attributes,
+ * durable flushes and resume after a kill (the durability argument is in h5_internal.h).
+ *
+ * A curve is checked completely before anything is written, so a refused curve leaves no trace. The
+ * ground-truth table is kept in memory: each flush adds one root attribute with the rows appended
+ * since the previous flush; a clean close (and a resume) merges all rows into "vafm ground truth".
+ */
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#include "h5/h5_internal.h"
+
+#define S_TAG 0x76683577u /* "vh5w" */
+#define S_JSON_MAX 65536
+/* one chunk per channel: HDF5 limits a chunk to 4 GiB */
+#define S_MAX_SAMPLES ((size_t)1 << 28)
+
+struct vafm_h5_writer {
+    uint32_t tag;
+    char *path;
+    hid_t file;
+    vafm_h5_writer_opts o;
+    uint64_t count;    /* curve groups in the file */
+    int has_prov;      /* "vafm scene" is in the file */
+    char *scene, *grid;
+    vafm_h5i_row *rows; /* rows of curves 0..nrows−1 */
+    size_t nrows, caprows;
+    size_t rows_in_file; /* rows [0, rows_in_file) are in the file */
+    int parts_in_file;   /* rows sit in flush parts: merge on close */
+};
+
+void vafm_h5_writer_opts_default(vafm_h5_writer_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->fletcher32 = 1;
+    o->stamp_time = 1;
+}
+
+static int s_has_suffix(const char *path, const char *suf)
+{
+    size_t n = strlen(path), m = strlen(suf);
+    return n > m && !strcmp(path + n - m, suf);
+}
+
+static hid_t s_fapl(void)
+{
+    hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+    if (fapl < 0)
+        return -1;
+    /* 1.8 format: checksummed metadata, and no superblock-v3 "open for write" flag that would keep a
+     * killed file locked until h5clear (h5_internal.h) */
+    if (H5Pset_libver_bounds(fapl, H5F_LIBVER_V18, H5F_LIBVER_V18) < 0 ||
+        H5Pset_fclose_degree(fapl, H5F_CLOSE_STRONG) < 0) {
+        H5Pclose(fapl);
+        return -1;
+    }
+    return fapl;
+}
+
+static void s_now(char date[16], char tod[16], char iso[32])
+{
+    time_t t = time(NULL);
+    struct tm tm;
+    gmtime_r(&t, &tm);
+    if (date)
+        strftime(date, 16, "%Y-%m-%d", &tm);
+    if (tod)
+        strftime(tod, 16, "%H:%M:%S", &tm);
+    if (iso)
+        strftime(iso, 32, "%Y-%m-%dT%H:%M:%SZ", &tm);
+}
+
+/* ---- ground-truth table --------------------------------------------------------------------------- */
+
+static int s_rows_reserve(vafm_h5_writer *w, size_t n)
+{
+    if (n <= w->caprows)
+        return 0;
+    size_t cap = w->caprows ? w->caprows : 64;
+    while (cap < n)
+        cap *= 2;
+    vafm_h5i_row *v = realloc(w->rows, cap * sizeof *v);
+    if (!v)
+        return -1;
+    w->rows = v;
+    w->caprows = cap;
+    return 0;
+}
+
+static int s_write_rows(hid_t file, const char *name, const vafm_h5i_row *rows, size_t n)
+{
+    hsize_t dim = n;
+    hid_t ft = vafm_h5i_row_type(1), mt = vafm_h5i_row_type(0), sp = H5Screate_simple(1, &dim, NULL), a = -1;
+    int rc = -1;
+    if (ft < 0 || mt < 0 || sp < 0)
+        goto done;
+    if (H5Aexists(file, name) > 0 && H5Adelete(file, name) < 0)
+        goto done;
+    a = H5Acreate2(file, name, ft, sp, H5P_DEFAULT, H5P_DEFAULT);
+    if (a < 0 || H5Awrite(a, mt, rows) < 0)
+        goto done;
+    rc = 0;
+done:
+    if (a >= 0 && H5Aclose(a) < 0)
+        rc = -1;
+    if (sp >= 0)
+        H5Sclose(sp);
+    if (mt >= 0)
+        H5Tclose(mt);
+    if (ft >= 0)
+        H5Tclose(ft);
+    return rc;
+}
+
+/* Replace every ground-truth attribute by one merged table. */
+static int s_merge_rows(vafm_h5_writer *w)
+{
+    char **names = NULL;
+    size_t nn = 0;
+    if (vafm_h5i_truth_attr_names(w->file, &names, &nn))
+        return -1;
+    int rc = 0;
+    for (size_t i = 0; i < nn; i++) {
+        if (H5Adelete(w->file, names[i]) < 0)
+            rc = -1;
+        free(names[i]);
+    }
+    free(names);
+    if (!rc && w->nrows)
+        rc = s_write_rows(w->file, VAFM_H5I_A_TRUTH, w->rows, w->nrows);
+    if (!rc) {
+        w->rows_in_file = w->nrows;
+        w->parts_in_file = 0;
+    }
+    return rc;
+}
+
+/* ---- open, create, resume ------------------------------------------------------------------------- */
+
+static int s_create(vafm_h5_writer *w, vafm_error *err)
+{
+    hid_t fcpl = H5Pcreate(H5P_FILE_CREATE), fapl = s_fapl();
+    if (fcpl < 0 || fapl < 0 || H5Pset_attr_phase_change(fcpl, 0, 0) < 0) {
+        if (fcpl >= 0)
+            H5Pclose(fcpl);
+        if (fapl >= 0)
+            H5Pclose(fapl);
+        vafm_h5i_err_hdf5(err, VAFM_EIO, "", "%s: HDF5 property lists cannot be set up", w->path);
+        return VAFM_EIO;
+    }
+    /* root attributes in dense storage from the start: the scene JSON and the ground-truth table
+     * exceed the 64 KiB limit of attributes kept in the object header */
+    struct stat st;
+    if (!w->o.overwrite && !stat(w->path, &st)) {
+        H5Pclose(fcpl);
+        H5Pclose(fapl);
+        vafm_h5i_err(err, VAFM_EIO, "", "%s: exists already (resume it, or allow overwriting)", w->path);
+        return VAFM_EIO;
+    }
+    w->file = H5Fcreate(w->path, w->o.overwrite ? H5F_ACC_TRUNC : H5F_ACC_EXCL, fcpl, fapl);
+    H5Pclose(fcpl);
+    H5Pclose(fapl);
+    if (w->file < 0) {
+        vafm_h5i_err_hdf5(err, VAFM_EIO, "", "%s: cannot be created", w->path);
+        return VAFM_EIO;
+    }
+    char ver[32];
+    snprintf(ver, sizeof ver, "%d.%d", VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR);
+    if (vafm_h5i_put_str(w->file, "software", "vafm") ||
+        vafm_h5i_put_str(w->file, "software version", vafm_version()) ||
+        vafm_h5i_put_str(w->file, VAFM_H5I_A_FORMAT, ver) || H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0) {
+        vafm_h5i_err_hdf5(err, VAFM_EIO, "/", "%s: root attributes cannot be written", w->path);
+        return VAFM_EIO;
+    }
+    return 0;
+}
+
+static int s_read_root_str(hid_t file, const char *name, char **out)
+{
+    *out = NULL;
+    if (H5Aexists(file, name) <= 0)
+        return 0;
+    vafm_h5i_val v;
+    if (vafm_h5i_attr_get(file, name, &v))
+        return -1;
+    if (v.cls != H5T_STRING || v.npoints != 1) {
+        vafm_h5i_val_free(&v);
+        return -1;
+    }
+    *out = v.s;
+    return 0;
+}
+
+typedef struct s_linklist {
+    uint64_t *num;
+    char **name;
+    size_t n, cap;
+    int bad;
+    char bad_name[64];
+} s_linklist;
+
+static herr_t s_root_link_cb(hid_t g, const char *name, const H5L_info_t *info, void *data)
+{
+    s_linklist *l = data;
+    uint64_t num;
+    if (!vafm_h5i_group_name(name, &num)) {
+        if (!l->bad)
+            snprintf(l->bad_name, sizeof l->bad_name, "%s", name);
+        l->bad = 1;
+        return 0;
+    }
+    if (l->n == l->cap) {
+        size_t cap = l->cap ? 2 * l->cap : 64;
+        uint64_t *a = realloc(l->num, cap * sizeof *a);
+        if (!a)
+            return -1;
+        l->num = a;
+        char **b = realloc(l->name, cap * sizeof *b);
+        if (!b)
+            return -1;
+        l->name = b;
+        l->cap = cap;
+    }
+    if (!(l->name[l->n] = strdup(name)))
+        return -1;
+    l->num[l->n++] = num;
+    return 0;
+}
+
+static void s_linklist_free(s_linklist *l)
+{
+    for (size_t i = 0; i < l->n; i++)
+        free(l->name[i]);
+    free(l->name);
+    free(l->num);
+    memset(l, 0, sizeof *l);
+}
+
+static int s_resume(vafm_h5_writer *w, vafm_error *err)
+{
+    struct stat st;
+    if (stat(w->path, &st)) {
+        vafm_h5i_err(err, VAFM_EIO, "", "%s: cannot be resumed: %s", w->path, strerror(errno));
+        return VAFM_EIO;
+    }
+    if (H5Fis_hdf5(w->path) <= 0) {
+        vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: cannot be resumed: not an HDF5 file", w->path);
+        return VAFM_EFORMAT;
+    }
+    hid_t fapl = s_fapl();
+    w->file = H5Fopen(w->path, H5F_ACC_RDWR, fapl >= 0 ? fapl : H5P_DEFAULT);
+    if (fapl >= 0)
+        H5Pclose(fapl);
+    if (w->file < 0) {
+        vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "", "%s: cannot be resumed: damaged HDF5 file", w->path);
+        return VAFM_EFORMAT;
+    }
+    char *fmt = NULL;
+    int ma = -1, mi = -1;
+    if (s_read_root_str(w->file, VAFM_H5I_A_FORMAT, &fmt) || !fmt || sscanf(fmt, "%d.%d", &ma, &mi) != 2 ||
+        ma != VAFM_H5_FORMAT_MAJOR) {
+        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x (root attribute '"
+                     VAFM_H5I_A_FORMAT "' is %s)", w->path, VAFM_H5_FORMAT_MAJOR, fmt ? fmt : "missing");
+        free(fmt);
+        return VAFM_EFORMAT;
+    }
+    free(fmt);
+    if (s_read_root_str(w->file, VAFM_H5I_A_SCENE, &w->scene) || s_read_root_str(w->file, VAFM_H5I_A_GRID, &w->grid)) {
+        vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: the stored scene cannot be read", w->path);
+        return VAFM_EFORMAT;
+    }
+    w->has_prov = w->scene != NULL;
+
+    vafm_h5i_row *rows = NULL;
+    size_t nrows = 0;
+    int rc = vafm_h5i_rows_read(w->file, w->path, 1, &rows, &nrows, err);
+    if (rc)
+        return rc;
+    s_linklist l = { 0 };
+    if (H5Literate(w->file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_root_link_cb, &l) < 0) {
+        vafm_h5i_err_hdf5(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: the root group cannot be listed", w->path);
+        goto done;
+    }
+    if (l.bad) {
+        vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: root object '%s' is not a curve group", w->path,
+                     l.bad_name);
+        goto done;
+    }
+    /* numbers → presence map over 0..n−1 (numbers ≥ n cannot be part of the complete prefix) */
+    uint8_t *present = calloc(l.n + 1, 1);
+    if (!present) {
+        vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
+        goto done;
+    }
+    for (size_t i = 0; i < l.n; i++)
+        if (l.num[i] < l.n)
+            present[l.num[i]] = 1;
+    uint64_t file_size = (uint64_t)st.st_size;
+    vafm_h5i_curvebuf buf = { 0 };
+    vafm_h5_curve cv;
+    uint64_t c = 0;
+    /* the complete prefix: structure of every group, plus a ground-truth row when the file has a scene */
+    while (c < l.n && present[c] && (!w->has_prov || (c < nrows && rows[c].curve == c)) &&
+           !vafm_h5i_curve_read(w->file, w->path, c, 0, file_size, &buf, &cv, NULL))
+        c++;
+    /* the last curves kept were written last: read them back through their checksums */
+    for (int tries = 0; c > 0 && tries < 2;) {
+        if (vafm_h5i_curve_read(w->file, w->path, c - 1, 1, file_size, &buf, &cv, NULL)) {
+            c--;
+            continue;
+        }
+        tries++;
+        if (tries < 2 && c >= 2 && vafm_h5i_curve_read(w->file, w->path, c - 2, 1, file_size, &buf, &cv, NULL)) {
+            c -= 2;
+            tries = 0;
+            continue;
+        }
+        break;
+    }
+    vafm_h5i_curvebuf_free(&buf);
+    free(present);
+    for (size_t i = 0; i < l.n; i++)
+        if (l.num[i] >= c && H5Ldelete(w->file, l.name[i], H5P_DEFAULT) < 0) {
+            vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: cannot be resumed: incomplete curve '%s' cannot be removed",
+                              w->path, l.name[i]);
+            goto done;
+        }
+    w->count = c;
+    w->nrows = 0;
+    if (w->has_prov) {
+        if (s_rows_reserve(w, (size_t)c + 1)) {
+            vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
+            goto done;
+        }
+        memcpy(w->rows, rows, (size_t)c * sizeof *rows);
+        w->nrows = (size_t)c;
+    }
+    if (s_merge_rows(w) || H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0) {
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: cannot be resumed: the ground truth cannot be rewritten", w->path);
+        goto done;
+    }
+done:
+    s_linklist_free(&l);
+    free(rows);
+    return rc;
+}
+
+void vafm_h5_writer_destroy(vafm_h5_writer **wp)
+{
+    if (!wp || !*wp)
+        return;
+    vafm_h5_writer *w = *wp;
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    if (w->file >= 0)
+        H5Fclose(w->file);
+    vafm_h5i_quiet_end(&q);
+    free(w->path);
+    free(w->scene);
+    free(w->grid);
+    free(w->rows);
+    w->tag = 0xdeadbeefu;
+    free(w);
+    *wp = NULL;
+}
+
+int vafm_h5_writer_open(vafm_h5_writer **out, const char *path, const vafm_h5_writer_opts *opts, vafm_error *err)
+{
+    if (!out || !path) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_writer_open: no %s given", out ? "path" : "output pointer");
+        return VAFM_EINVAL;
+    }
+    *out = NULL;
+    if (!s_has_suffix(path, ".h5")) {
+        vafm_h5i_err(err, VAFM_EINVAL, "path", "%s: the file name must end in .h5 (afmformats recognises the format by it)",
+                     path);
+        return VAFM_EINVAL;
+    }
+    vafm_h5_writer_opts o;
+    if (opts)
+        o = *opts;
+    else
+        vafm_h5_writer_opts_default(&o);
+    if (o.gzip_level < 0 || o.gzip_level > 9) {
+        vafm_h5i_err(err, VAFM_EINVAL, "gzip_level", "gzip_level is %d, allowed 0 (off) to 9", o.gzip_level);
+        return VAFM_EINVAL;
+    }
+    vafm_h5_writer *w = calloc(1, sizeof *w);
+    if (!w || !(w->path = strdup(path))) {
+        free(w);
+        vafm_h5i_err(err, VAFM_ENOMEM, "", "%s: out of memory", path);
+        return VAFM_ENOMEM;
+    }
+    w->tag = S_TAG;
+    w->file = -1;
+    w->o = o;
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    int rc = o.resume ? s_resume(w, err) : s_create(w, err);
+    vafm_h5i_quiet_end(&q);
+    if (rc) {
+        vafm_h5_writer_destroy(&w);
+        return rc;
+    }
+    *out = w;
+    return 0;
+}
+
+/* ---- provenance ----------------------------------------------------------------------------------- */
+
+static int s_json_list(char *buf, size_t len, size_t *pos, const char *name, const double *v, size_t n)
+{
+    int k = snprintf(buf + *pos, len - *pos, "%s\"%s\": [", *pos > 1 ? ", " : "", name);
+    if (k < 0 || (size_t)k >= len - *pos)
+        return -1;
+    *pos += (size_t)k;
+    for (size_t i = 0; i < n; i++) {
+        k = snprintf(buf + *pos, len - *pos, "%s%.17g", i ? ", " : "", v[i]);
+        if (k < 0 || (size_t)k >= len - *pos)
+            return -1;
+        *pos += (size_t)k;
+    }
+    k = snprintf(buf + *pos, len - *pos, "]");
+    if (k < 0 || (size_t)k >= len - *pos)
+        return -1;
+    *pos += (size_t)k;
+    return 0;
+}
+
+static int s_grid_json(const vafm_campaign_spec *g, char *buf, size_t len)
+{
+    size_t pos = 0;
+    int k = snprintf(buf, len, "{");
+    pos = (size_t)k;
+    if (!g) {
+        k = snprintf(buf + pos, len - pos, "\"points\": 1}");
+        return k < 0 || (size_t)k >= len - pos ? -1 : 0;
+    }
+    if (s_json_list(buf, len, &pos, "T_K", g->T_K, g->T_K ? g->n_T : 0) ||
+        s_json_list(buf, len, &pos, "v_m_per_s", g->v_m_per_s, g->v_m_per_s ? g->n_v : 0) ||
+        s_json_list(buf, len, &pos, "k_N_per_m", g->k_N_per_m, g->k_N_per_m ? g->n_k : 0))
+        return -1;
+    size_t points = vafm_campaign_points(g);
+    k = snprintf(buf + pos, len - pos, ", \"curves_per_point\": %llu, \"points\": %zu, \"curves\": %llu}",
+                 (unsigned long long)g->curves_per_point, points,
+                 (unsigned long long)(g->curves_per_point * (uint64_t)points));
+    return k < 0 || (size_t)k >= len - pos ? -1 : 0;
+}
+
+/* Name the first JSON key at which a and b differ (the key whose value holds the difference). */
+static void s_first_diff_key(const char *a, const char *b, char *key, size_t len)
+{
+    size_t i = 0;
+    while (a[i] && a[i] == b[i])
+        i++;
+    snprintf(key, len, "?");
+    /* walk back to the last "name": before the difference */
+    for (size_t j = i; j-- > 0;) {
+        if (a[j] == ':' && j > 0 && a[j - 1] == '"') {
+            size_t e = j - 1, s = e;
+            while (s > 0 && a[s - 1] != '"')
+                s--;
+            size_t m = e - s < len - 1 ? e - s : len - 1;
+            memcpy(key, a + s, m);
+            key[m] = 0;
+            return;
+        }
+    }
+}
+
+int vafm_h5_writer_set_provenance(vafm_h5_writer *w, const vafm_params *scene, const vafm_campaign_spec *grid,
+                                  vafm_error *err)
+{
+    if (!w || w->tag != S_TAG || !scene) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_writer_set_provenance: no writer or scene given");
+        return VAFM_EINVAL;
+    }
+    char *sj = malloc(S_JSON_MAX), *gj = malloc(S_JSON_MAX);
+    int rc = 0;
+    if (!sj || !gj) {
+        vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
+        goto done;
+    }
+    if (vafm_params_to_json(scene, sj, S_JSON_MAX) < 0 || s_grid_json(grid, gj, S_JSON_MAX)) {
+        vafm_h5i_err(err, rc = VAFM_EINVAL, "", "%s: the scene or grid does not fit in %d bytes of JSON", w->path,
+                     S_JSON_MAX);
+        goto done;
+    }
+    if (w->has_prov) {
+        /* resume: the run must continue the same campaign */
+        const char *which = NULL, *a = NULL, *b = NULL;
+        if (strcmp(w->scene, sj)) {
+            which = "scene";
+            a = w->scene;
+            b = sj;
+        } else if (!w->grid || strcmp(w->grid, gj)) {
+            which = "grid";
+            a = w->grid ? w->grid : "";
+            b = gj;
+        }
+        if (which) {
+            char key[64];
+            s_first_diff_key(a, b, key, sizeof key);
+            vafm_h5i_err(err, rc = VAFM_EINVAL, key,
+                         "%s: the %s differs from the one the file was written with (first at '%s'); resume needs the same "
+                         "campaign", w->path, which, key);
+        }
+        goto done;
+    }
+    if (w->count > 0) {
+        vafm_h5i_err(err, rc = VAFM_ESTATE, "", "%s: provenance must be set before the first curve", w->path);
+        goto done;
+    }
+    char iso[32];
+    s_now(NULL, NULL, iso);
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    if (vafm_h5i_put_str(w->file, VAFM_H5I_A_SCENE, sj) || vafm_h5i_put_str(w->file, VAFM_H5I_A_GRID, gj) ||
+        vafm_h5i_put_u64(w->file, VAFM_H5I_A_SEED, scene->seed) ||
+        vafm_h5i_put_str(w->file, VAFM_H5I_A_CREATED, iso) || H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0) {
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: provenance attributes cannot be written", w->path);
+    } else {
+        w->has_prov = 1;
+        free(w->scene);
+        free(w->grid);
+        w->scene = sj;
+        w->grid = gj;
+        sj = gj = NULL;
+    }
+    vafm_h5i_quiet_end(&q);
+done:
+    free(sj);
+    free(gj);
+    return rc;
+}
+
+/* ---- appending curves ----------------------------------------------------------------------------- */
+
+static int s_check_curve(const vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth,
+                         vafm_error *err)
+{
+    const char *p = w->path;
+    unsigned long long g = (unsigned long long)w->count;
+    if (!c->force_N || !c->segment || !(c->height_measured_m || c->height_piezo_m)) {
+        vafm_h5i_err(err, VAFM_EINVAL, !c->force_N ? "force" : !c->segment ? "segment" : "height (measured)",
+                     "%s: curve %llu: force, segment and a height are required", p, g);
+        return VAFM_EINVAL;
+    }
+    if (c->n < 1 || c->n > S_MAX_SAMPLES) {
+        vafm_h5i_err(err, VAFM_EINVAL, "n", "%s: curve %llu: %zu samples (allowed 1 to %zu)", p, g, c->n, S_MAX_SAMPLES);
+        return VAFM_EINVAL;
+    }
+    size_t at = 0;
+    for (int i = 0; i < VAFM_H5I_NCHAN; i++) {
+        const vafm_h5i_chan *ch = &vafm_h5i_chans[i];
+        const void *data = *(const void *const *)((const char *)c + ch->offset);
+        if (!data)
+            continue;
+        const char *rule = ch->is_segment ? vafm_h5i_rule_segment(data, c->n, &at)
+                           : i == VAFM_H5I_TIME ? vafm_h5i_rule_time(data, c->n, &at)
+                                                : vafm_h5i_rule_finite(data, c->n, &at);
+        if (rule) {
+            vafm_h5i_err(err, VAFM_EINVAL, ch->name, "%s: curve %llu: '%s' at sample %zu: %s", p, g, ch->name, at, rule);
+            return VAFM_EINVAL;
+        }
+    }
+    const vafm_h5_meta *m = &c->meta;
+    if (c->tip_position_m) {
+        const double *hm = c->height_measured_m ? c->height_measured_m : NULL;
+        if (!hm) {
+            vafm_h5i_err(err, VAFM_EINVAL, "tip position",
+                         "%s: curve %llu: tip position needs 'height (measured)' (tip = height (measured) + force/k)", p, g);
+            return VAFM_EINVAL;
+        }
+        const char *rule = vafm_h5i_rule_tip(c->tip_position_m, hm, c->force_N, m->spring_constant_N_per_m, c->n, &at);
+        if (rule) {
+            vafm_h5i_err(err, VAFM_EINVAL, "tip position", "%s: curve %llu: 'tip position' at sample %zu: %s", p, g, at,
+                         rule);
+            return VAFM_EINVAL;
+        }
+    }
+    for (int i = 0; i < vafm_h5i_nkeys; i++) {
+        const vafm_h5i_key *k = &vafm_h5i_keys[i];
+        const char *f = (const char *)m + k->offset;
+        if (k->kind == VAFM_H5I_REAL) {
+            double v = *(const double *)f;
+            if (!isnan(v) && !isfinite(v)) {
+                vafm_h5i_err(err, VAFM_EINVAL, k->name, "%s: curve %llu: '%s' is infinite", p, g, k->name);
+                return VAFM_EINVAL;
+            }
+        } else if (k->kind == VAFM_H5I_INT) {
+            int64_t v = *(const int64_t *)f;
+            if (v < -1) {
+                vafm_h5i_err(err, VAFM_EINVAL, k->name, "%s: curve %llu: '%s' is %lld (−1 absent, else ≥ 0)", p, g,
+                             k->name, (long long)v);
+                return VAFM_EINVAL;
+            }
+        }
+    }
+    if (m->point_count >= 0 && (uint64_t)m->point_count != (uint64_t)c->n) {
+        vafm_h5i_err(err, VAFM_EINVAL, "point count", "%s: curve %llu: 'point count' %lld differs from the %zu samples", p,
+                     g, (long long)m->point_count, c->n);
+        return VAFM_EINVAL;
+    }
+    if (m->imaging_mode && strcmp(m->imaging_mode, "force-distance")) {
+        vafm_h5i_err(err, VAFM_EINVAL, "imaging mode", "%s: curve %llu: imaging mode '%s' (vafm writes force-distance)", p,
+                     g, m->imaging_mode);
+        return VAFM_EINVAL;
+    }
+    if (m->feedback_mode && strcmp(m->feedback_mode, "contact") && strcmp(m->feedback_mode, "force-modulation")) {
+        vafm_h5i_err(err, VAFM_EINVAL, "feedback mode",
+                     "%s: curve %llu: feedback mode '%s' (afmformats knows 'contact' and 'force-modulation')", p, g,
+                     m->feedback_mode);
+        return VAFM_EINVAL;
+    }
+    if (m->date && !vafm_h5i_date_ok(m->date)) {
+        vafm_h5i_err(err, VAFM_EINVAL, "date", "%s: curve %llu: date '%s' is not YYYY-MM-DD", p, g, m->date);
+        return VAFM_EINVAL;
+    }
+    if (m->time && !vafm_h5i_time_ok(m->time)) {
+        vafm_h5i_err(err, VAFM_EINVAL, "time", "%s: curve %llu: time '%s' is not HH:MM:SS[.fraction]", p, g, m->time);
+        return VAFM_EINVAL;
+    }
+    if (w->has_prov && !truth) {
+        vafm_h5i_err(err, VAFM_EINVAL, "truth", "%s: curve %llu: a file with vafm provenance needs each curve's ground truth",
+                     p, g);
+        return VAFM_EINVAL;
+    }
+    if (truth && truth->result.index != w->count) {
+        vafm_h5i_err(err, VAFM_EINVAL, "truth",
+                     "%s: curve %llu: the ground truth is of curve %llu (curves are appended in index order)", p, g,
+                     (unsigned long long)truth->result.index);
+        return VAFM_EINVAL;
+    }
+    return 0;
+}
+
+static int s_write_channel(vafm_h5_writer *w, hid_t g, const vafm_h5i_chan *ch, const void *data, size_t n)
+{
+    hsize_t dim = n;
+    hid_t sp = H5Screate_simple(1, &dim, NULL), dcpl = H5Pcreate(H5P_DATASET_CREATE), d = -1;
+    int rc = -1;
+    if (sp < 0 || dcpl < 0)
+        goto done;
+    /* no fill values: every element is written right away */
+    if (H5Pset_fill_time(dcpl, H5D_FILL_TIME_NEVER) < 0)
+        goto done;
+    if (w->o.fletcher32 || w->o.gzip_level) {
+        if (H5Pset_chunk(dcpl, 1, &dim) < 0)
+            goto done;
+        if (w->o.gzip_level && (H5Pset_shuffle(dcpl) < 0 || H5Pset_deflate(dcpl, (unsigned)w->o.gzip_level) < 0))
+            goto done;
+        if (w->o.fletcher32 && H5Pset_fletcher32(dcpl) < 0)
+            goto done;
+    }
+    d = H5Dcreate2(g, ch->name, ch->is_segment ? H5T_STD_U8LE : H5T_IEEE_F64LE, sp, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    if (d < 0)
+        goto done;
+    if (H5Dwrite(d, ch->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0)
+        goto done;
+    if (vafm_h5i_put_str(d, "unit", ch->unit))
+        goto done;
+    rc = 0;
+done:
+    if (d >= 0 && H5Dclose(d) < 0)
+        rc = -1;
+    if (dcpl >= 0)
+        H5Pclose(dcpl);
+    if (sp >= 0)
+        H5Sclose(sp);
+    return rc;
+}
+
+static int s_write_meta(vafm_h5_writer *w, hid_t g, const vafm_h5_curve *c)
+{
+    vafm_h5_meta m = c->meta;
+    char date[16], tod[16];
+    if (!m.imaging_mode)
+        m.imaging_mode = "force-distance";
+    m.point_count = (int64_t)c->n;
+    if (w->o.stamp_time && !m.date && !m.time) {
+        s_now(date, tod, NULL);
+        m.date = date;
+        m.time = tod;
+    }
+    for (int i = 0; i < vafm_h5i_nkeys; i++) {
+        const vafm_h5i_key *k = &vafm_h5i_keys[i];
+        const char *f = (const char *)&m + k->offset;
+        int r = 0;
+        if (k->kind == VAFM_H5I_STR) {
+            const char *s = *(const char *const *)f;
+            if (s)
+                r = vafm_h5i_put_str(g, k->name, s);
+        } else if (k->kind == VAFM_H5I_REAL) {
+            double v = *(const double *)f;
+            if (!isnan(v))
+                r = vafm_h5i_put_f64(g, k->name, v);
+        } else {
+            int64_t v = *(const int64_t *)f;
+            if (v >= 0)
+                r = vafm_h5i_put_i64(g, k->name, v);
+        }
+        if (r)
+            return -1;
+    }
+    return 0;
+}
+
+int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth, vafm_error *err)
+{
+    if (!w || w->tag != S_TAG || !c) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_writer_append: no writer or curve given");
+        return VAFM_EINVAL;
+    }
+    int rc = s_check_curve(w, c, truth, err);
+    if (rc)
+        return rc;
+    if (truth && s_rows_reserve(w, w->nrows + 1)) {
+        vafm_h5i_err(err, VAFM_ENOMEM, "", "%s: out of memory", w->path);
+        return VAFM_ENOMEM;
+    }
+    char name[24];
+    snprintf(name, sizeof name, "%llu", (unsigned long long)w->count);
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    hid_t g = H5Gcreate2(w->file, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    int ok = g >= 0;
+    for (int i = 0; ok && i < VAFM_H5I_NCHAN; i++) {
+        const vafm_h5i_chan *ch = &vafm_h5i_chans[i];
+        const void *data = *(const void *const *)((const char *)c + ch->offset);
+        if (data)
+            ok = !s_write_channel(w, g, ch, data, c->n);
+    }
+    ok = ok && !s_write_meta(w, g, c);
+    if (g >= 0 && H5Gclose(g) < 0)
+        ok = 0;
+    if (!ok) {
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, name, "%s: curve group '%s' cannot be written", w->path, name);
+        if (g >= 0)
+            H5Ldelete(w->file, name, H5P_DEFAULT); /* leave no half-written curve behind */
+    } else {
+        if (truth)
+            vafm_h5i_row_from_truth(&w->rows[w->nrows++], w->count, truth);
+        w->count++;
+    }
+    vafm_h5i_quiet_end(&q);
+    return rc;
+}
+
+int vafm_h5_writer_flush(vafm_h5_writer *w, vafm_error *err)
+{
+    if (!w || w->tag != S_TAG) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_writer_flush: no writer given");
+        return VAFM_EINVAL;
+    }
+    int rc = 0;
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    if (w->nrows > w->rows_in_file) {
+        char name[96];
+        snprintf(name, sizeof name, VAFM_H5I_A_TRUTH_PART "%llu", (unsigned long long)w->rows[w->rows_in_file].curve);
+        if (s_write_rows(w->file, name, w->rows + w->rows_in_file, w->nrows - w->rows_in_file)) {
+            vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: ground-truth rows cannot be written", w->path);
+        } else {
+            w->rows_in_file = w->nrows;
+            w->parts_in_file = 1;
+        }
+    }
+    if (!rc && H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0)
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "", "%s: flush failed", w->path);
+    vafm_h5i_quiet_end(&q);
+    return rc;
+}
+
+uint64_t vafm_h5_writer_count(const vafm_h5_writer *w)
+{
+    return w ? w->count : 0;
+}
+
+int vafm_h5_writer_close(vafm_h5_writer **wp, vafm_error *err)
+{
+    if (!wp || !*wp)
+        return 0;
+    vafm_h5_writer *w = *wp;
+    int rc = 0;
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    if ((w->parts_in_file || w->nrows > w->rows_in_file) && s_merge_rows(w))
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: the ground-truth table cannot be written", w->path);
+    if (H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0 && !rc)
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "", "%s: flush failed", w->path);
+    if (H5Fclose(w->file) < 0 && !rc)
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "", "%s: close failed", w->path);
+    w->file = -1;
+    vafm_h5i_quiet_end(&q);
+    vafm_h5_writer_destroy(wp);
+    return rc;
+}
+
+/* ---- from a simulated curve ----------------------------------------------------------------------- */
+
+void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_params *p,
+                            const vafm_curve_result *r)
+{
+    memset(c, 0, sizeof *c);
+    vafm_h5_meta_default(&c->meta);
+    c->n = s->n;
+    c->force_N = s->force_N;
+    /* an ideal height sensor: the measured height is the piezo height */
+    c->height_measured_m = s->height_m;
+    c->height_piezo_m = s->height_m;
+    c->segment = s->segment;
+    c->time_s = s->time_s;
+    c->tip_position_m = s->tip_m;
+    vafm_h5_meta *m = &c->meta;
+    m->imaging_mode = "force-distance";
+    m->software = "vafm";
+    m->software_version = vafm_version();
+    m->spring_constant_N_per_m = p->k_N_per_m;
+    if (p->trigger == VAFM_TRIGGER_FORCE)
+        m->setpoint_N = p->setpoint_N;
+    m->rate_approach_Hz = m->rate_retract_Hz = p->sample_rate_Hz;
+    m->speed_approach_m_per_s = p->v_approach_m_per_s;
+    m->speed_retract_m_per_s = p->v_retract_m_per_s;
+    size_t na = 0, nr = 0;
+    double hmin = INFINITY, hmax = -INFINITY;
+    for (size_t i = 0; i < s->n; i++) {
+        na += s->segment[i] == VAFM_SEG_APPROACH;
+        nr += s->segment[i] == VAFM_SEG_RETRACT;
+        if (s->height_m[i] < hmin)
+            hmin = s->height_m[i];
+        if (s->height_m[i] > hmax)
+            hmax = s->height_m[i];
+    }
+    if (r)
+        m->duration_s = r->duration_s;
+    m->duration_approach_s = (double)na / p->sample_rate_Hz;
+    m->duration_retract_s = (double)nr / p->sample_rate_Hz;
+    if (s->n)
+        m->z_range_m = hmax - hmin;
+    m->segment_count = 2;
+}
