@@ -123,32 +123,35 @@ static void s_scene_fig4_far(vafm_params *p, const vafm_integrator_type *it, int
 typedef struct s_kwork {
     vafm_kernel K;
     const vafm_integrator_type *it;
+    vafm_jkr_table jtab;
     vafm_free_ou ou;
     int free_ou;      /* 1: time the exact free propagation instead of the integrator */
-    int want_contact; /* the state the body must stay in */
     uint64_t events;  /* contact changes seen (0 for clean numbers) */
 } s_kwork;
 
-/* A kernel as vafm_sim_new() builds it, for scene p, with the support at rest at u_spr and the body at
- * its noise-free equilibrium (in contact on the JKR branch, or at the relaxed spring out of contact). */
+/* A kernel built as vafm_sim_new() builds it (same fields, same contact table, same free step) for
+ * scene p, with the support at rest at u_spr and the body at its noise-free equilibrium: on the JKR
+ * branch when in_contact, else at the relaxed spring. Release with s_kwork_fini(). */
 static int s_kwork_init(s_kwork *w, const vafm_params *p, double u_spr, int in_contact)
 {
     vafm_numerics nm;
     vafm_error err;
+    memset(w, 0, sizeof *w);
     if (vafm_numerics_check(p, &nm, &err)) {
         fprintf(stderr, "bench_step: %s\n", err.message);
         return -1;
     }
-    memset(w, 0, sizeof *w);
     vafm_kernel *K = &w->K;
     w->it = p->integrator;
-    w->want_contact = in_contact;
     K->m = nm.r.m;
     K->k = nm.r.k;
     K->kT = nm.r.kT;
     K->eta_c = nm.r.eta_cont;
     K->contact = nm.contact;
     K->cforce = K->contact.type->force;
+    K->is_jkr = K->contact.type == vafm_contact_jkr;
+    if (p->contact_table && K->is_jkr && K->contact.gamma > 0 && vafm_jkr_table_init(&w->jtab, &K->contact, nm.u_deep) == 0)
+        K->jtab = &w->jtab;
     K->thermal = nm.r.kT > 0;
     K->uniform_noise = p->noise == VAFM_NOISE_UNIFORM;
     vafm_rng_init(&K->rng, p->seed, 0);
@@ -161,6 +164,7 @@ static int s_kwork_init(s_kwork *w, const vafm_params *p, double u_spr, int in_c
         double F;
         if (vafm_theory_equilibrium(nm.r.gamma, nm.r.k, u_spr, &K->u, &F)) {
             fprintf(stderr, "bench_step: no contact equilibrium at u_spr = %g\n", u_spr);
+            vafm_jkr_table_free(&w->jtab);
             return -1;
         }
         K->in_contact = 1;
@@ -173,6 +177,12 @@ static int s_kwork_init(s_kwork *w, const vafm_params *p, double u_spr, int in_c
     nf = nf > nm.n_sub ? nm.n_sub : nf < 1 ? 1 : nf;
     vafm_free_ou_setup(&w->ou, K, nm.Ts / (double)nf, w->it->overdamped);
     return 0;
+}
+
+static void s_kwork_fini(s_kwork *w)
+{
+    vafm_jkr_table_free(&w->jtab);
+    w->K.jtab = NULL;
 }
 
 static uint64_t s_kwork_run(void *ctx)
@@ -278,6 +288,25 @@ static const vafm_integrator_type *s_integrator(int i)
     return i >= 0 && i < 4 ? all[i] : NULL;
 }
 
+/* One kernel row: build, time, check the body stayed where it was put, release. */
+static int s_kernel_row(s_bench *b, const vafm_params *p, double u_spr, int in_contact, int free_ou, const char *label,
+                        const char *where)
+{
+    s_kwork *w = malloc(sizeof *w);
+    if (!w || s_kwork_init(w, p, u_spr, in_contact)) {
+        free(w);
+        return -1;
+    }
+    w->free_ou = free_ou;
+    s_meas m = s_measure(s_kwork_run, w);
+    s_row *r = s_add(b, label, where, "kernel", free_ou ? w->ou.h : w->K.dt, m);
+    if (r && (w->events || w->K.in_contact != in_contact))
+        snprintf(r->note, sizeof r->note, "%llu contact changes", (unsigned long long)w->events);
+    s_kwork_fini(w);
+    free(w);
+    return 0;
+}
+
 static int s_bench_kernel(s_bench *b)
 {
     fprintf(stderr, "kernel (run() loops on a prepared kernel, support at rest):\n");
@@ -285,33 +314,22 @@ static int s_bench_kernel(s_bench *b)
         const vafm_integrator_type *it = s_integrator(i);
         vafm_params p;
         s_scene_fig4_pressed(&p, it);
-        s_kwork *w = malloc(sizeof *w);
-        if (!w)
-            return -1;
         /* in contact: support 5 R back from the contact point, about half way along the retract, on the
-         * tensile stable branch (the instability is at u_spr* = -11.09) */
-        if (s_kwork_init(w, &p, -5.0, 1)) {
-            free(w);
+         * tensile stable branch (the instability is at u_spr* = -11.09); with the contact table (the
+         * default) and with the exact Newton solve */
+        if (s_kernel_row(b, &p, -5.0, 1, 0, it->name, "contact"))
             return -1;
-        }
-        s_meas m = s_measure(s_kwork_run, w);
-        s_row *r = s_add(b, it->name, "contact", "kernel", w->K.dt, m);
-        if (r && (w->events || !w->K.in_contact))
-            snprintf(r->note, sizeof r->note, "%llu contact changes", (unsigned long long)w->events);
-        /* out of contact: support 20 R from the surface, integrator steps (free_exact = 0) */
-        s_kwork_init(w, &p, -20.0, 0);
-        m = s_measure(s_kwork_run, w);
-        r = s_add(b, it->name, "out-of-contact", "kernel", w->K.dt, m);
-        if (r && (w->events || w->K.in_contact))
-            snprintf(r->note, sizeof r->note, "%llu contact changes", (unsigned long long)w->events);
+        p.contact_table = 0;
+        if (s_kernel_row(b, &p, -5.0, 1, 0, it->name, "contact-newton"))
+            return -1;
+        p.contact_table = 1;
+        /* out of contact: support 20 R from the surface, integrator steps (as free_exact = 0) */
+        if (s_kernel_row(b, &p, -20.0, 0, 0, it->name, "out-of-contact"))
+            return -1;
         /* exact free propagation, once for the underdamped and once for the overdamped OU process */
-        if (it == vafm_integrator_gjf || it == vafm_integrator_brownian) {
-            s_kwork_init(w, &p, -20.0, 0);
-            w->free_ou = 1;
-            m = s_measure(s_kwork_run, w);
-            s_add(b, it->overdamped ? "exact-ou-overdamped" : "exact-ou", "free-exact", "kernel", w->ou.h, m);
-        }
-        free(w);
+        if ((it == vafm_integrator_gjf || it == vafm_integrator_brownian) &&
+            s_kernel_row(b, &p, -20.0, 0, 1, it->overdamped ? "exact-ou-overdamped" : "exact-ou", "free-exact"))
+            return -1;
     }
     return 0;
 }
@@ -364,9 +382,18 @@ static int s_bench_scene(s_bench *b)
 
 /* ---- real-time factor of the default scene ----------------------------------------------------- */
 
+/* One real-time-factor run: the default scene with these numerics. */
+typedef struct s_rtf_spec {
+    const vafm_integrator_type *const *it;
+    int noise;
+    double omega_dt, omega_dt_far; /* far: 0 = no adaptive step */
+    int well_exact;
+} s_rtf_spec;
+
 typedef struct s_rtf {
+    s_rtf_spec spec;
     const char *integrator, *noise;
-    double omega_dt, dt_s;
+    double dt_s;
     uint64_t steps, steps_contact;
     double sim_s, wall_s, cpu_s;
     double pulloff_N; /* observable 2, a sanity check that the curve is a pull-off */
@@ -374,33 +401,46 @@ typedef struct s_rtf {
     int status;
 } s_rtf;
 
+static void s_rtf_numerics(const s_rtf *o, char *buf, size_t len)
+{
+    int n = snprintf(buf, len, "%.4g", o->spec.omega_dt);
+    if (n > 0 && (size_t)n < len && o->spec.omega_dt_far > 0)
+        n += snprintf(buf + n, len - (size_t)n, ", far %.3g", o->spec.omega_dt_far);
+    if (n > 0 && (size_t)n < len && o->spec.well_exact)
+        snprintf(buf + n, len - (size_t)n, ", well_exact");
+}
+
 /* One paper-fig1 curve (index 0), advanced in blocks so that an overlong one can be cut. */
-static int s_rtf_run(s_rtf *o, const vafm_integrator_type *it, int noise, double omega_dt)
+static int s_rtf_run(s_rtf *o, const s_rtf_spec *spec)
 {
     vafm_params p;
     vafm_error err;
     vafm_params_default(&p);
-    p.integrator = it;
-    p.noise = noise;
-    p.omega_dt = omega_dt;
+    p.integrator = *spec->it;
+    p.noise = spec->noise;
+    p.omega_dt = spec->omega_dt;
+    p.omega_dt_far = spec->omega_dt_far;
+    p.well_exact = spec->well_exact;
     memset(o, 0, sizeof *o);
-    o->integrator = it->name;
-    o->noise = noise == VAFM_NOISE_UNIFORM ? "uniform" : "gaussian";
-    o->omega_dt = omega_dt;
+    o->spec = *spec;
+    o->integrator = p.integrator->name;
+    o->noise = spec->noise == VAFM_NOISE_UNIFORM ? "uniform" : "gaussian";
+    char lab[64];
+    s_rtf_numerics(o, lab, sizeof lab);
     vafm_sim *s = NULL;
     if (vafm_sim_new(&s, &p, &err)) {
-        fprintf(stderr, "bench_step: paper-fig1 %s omega_dt %g: %s\n", it->name, omega_dt, err.message);
+        fprintf(stderr, "bench_step: paper-fig1 %s omega_dt %s: %s\n", o->integrator, lab, err.message);
         return -1;
     }
     o->dt_s = vafm_sim_dt(s);
-    fprintf(stderr, "  paper-fig1 %-8s %-8s omega_dt %.4f dt %.3g s ... ", o->integrator, o->noise, omega_dt, o->dt_s);
+    fprintf(stderr, "  paper-fig1 %-8s %-8s omega_dt %s, dt %.3g s ... ", o->integrator, o->noise, lab, o->dt_s);
     s_clock t0 = s_now(), t1 = t0;
     int r = vafm_sim_curve_begin(s, 0);
-    while (r == 0 || r == 1) {
-        r = vafm_sim_advance(s, 1000, NULL, NULL);
-        t1 = s_now();
-        if (r == 1 && t1.wall - t0.wall > S_RTF_LIMIT_S)
-            break;
+    if (r == 0) {
+        do {
+            r = vafm_sim_advance(s, 1000, NULL, NULL);
+            t1 = s_now();
+        } while (r == 1 && t1.wall - t0.wall <= S_RTF_LIMIT_S);
     }
     vafm_curve_result res;
     vafm_sim_result(s, &res);
@@ -462,13 +502,15 @@ static void s_write_csv(FILE *f, const s_bench *b)
 
 static void s_write_rtf_csv(FILE *f, const s_rtf *o, int n)
 {
-    fprintf(f, "integrator,noise,omega_dt,dt_s,steps,steps_contact,simulated_s,wall_s,cpu_s,real_time_factor,"
-               "ns_per_step,steps_per_s,complete,pulloff_spring_N\n");
-    for (int i = 0; i < n; i++)
-        fprintf(f, "%s,%s,%.6g,%.6g,%llu,%llu,%.6g,%.6g,%.6g,%.6g,%.4f,%.6g,%d,%.6g\n", o[i].integrator, o[i].noise,
-                o[i].omega_dt, o[i].dt_s, (unsigned long long)o[i].steps, (unsigned long long)o[i].steps_contact,
-                o[i].sim_s, o[i].wall_s, o[i].cpu_s, o[i].sim_s / o[i].wall_s, 1e9 * o[i].wall_s / (double)o[i].steps,
-                (double)o[i].steps / o[i].wall_s, o[i].complete, o[i].pulloff_N);
+    fprintf(f, "integrator,noise,omega_dt,omega_dt_far,well_exact,dt_s,steps,steps_contact,simulated_s,wall_s,cpu_s,"
+               "real_time_factor,ns_per_step,steps_per_s,complete,pulloff_spring_N\n");
+    for (int i = 0; i < n; i++) {
+        const s_rtf *x = &o[i];
+        fprintf(f, "%s,%s,%.6g,%.6g,%d,%.6g,%llu,%llu,%.6g,%.6g,%.6g,%.6g,%.4f,%.6g,%d,%.6g\n", x->integrator, x->noise,
+                x->spec.omega_dt, x->spec.omega_dt_far, x->spec.well_exact, x->dt_s, (unsigned long long)x->steps,
+                (unsigned long long)x->steps_contact, x->sim_s, x->wall_s, x->cpu_s, x->sim_s / x->wall_s,
+                1e9 * x->wall_s / (double)x->steps, (double)x->steps / x->wall_s, x->complete, x->pulloff_N);
+    }
 }
 
 static void s_write_md(FILE *f, const s_bench *b, const s_rtf *o, int n_rtf)
@@ -481,9 +523,10 @@ static void s_write_md(FILE *f, const s_bench *b, const s_rtf *o, int n_rtf)
                "kT~ = 0.01); paper-vv uses uniform noise (the paper's method, the baseline), the others gaussian.\n\n",
             cpu, __VERSION__, S_REPS, S_MIN_REP_S);
     fprintf(f, "- kernel: the integrator's run() loop on a prepared kernel, support at rest; in contact at "
-               "u_spr = -5 (tensile, half way along the retract), out of contact 20 R from the surface "
-               "(integrator steps, as free_exact = 0); free-exact: one exact free-cantilever step "
-               "(vafm_free_ou_step).\n");
+               "u_spr = -5 (tensile, half way along the retract) with the tabulated JKR branch (contact_table = 1, "
+               "the default), contact-newton: the same with the Newton solve every step (contact_table = 0); "
+               "out of contact 20 R from the surface (integrator steps, as free_exact = 0); free-exact: one exact "
+               "free-cantilever step (vafm_free_ou_step).\n");
     fprintf(f, "- scene: whole curves through vafm_sim (pressed in 0.1 R, height trigger, retract through the "
                "pull-off) and thermal tunes 20 R off the surface, wall time / result.steps; includes sampling, "
                "phase logic and contact events.\n");
@@ -498,25 +541,33 @@ static void s_write_md(FILE *f, const s_bench *b, const s_rtf *o, int n_rtf)
                 r->integrator, r->where, r->dt, r->m.ns_med, r->m.ns_min, r->m.ns_max, r->m.ns_cpu_med, r->ratio,
                 1e3 / r->m.ns_med, r->note);
     }
-    fprintf(f, "\n## Real-time factor of the default scene (paper-fig1, one force curve, free_exact = 1)\n\n");
-    fprintf(f, "Real-time factor = simulated time / wall time (one thread). omega_dt = 2pi/40 = 0.157 is the "
-               "paper's rule.\n\n");
+    fprintf(f, "\n## Real-time factor of the default scene (paper-fig1, one force curve)\n\n");
+    fprintf(f, "Real-time factor = simulated time / wall time (one thread), defaults otherwise (free_exact = 1, "
+               "contact_table = 1). omega_dt = 2pi/40 = 0.157 is the paper's rule; \"far\" is the adaptive step "
+               "(omega_dt_far) in contact away from the instability, well_exact the exact linearised contact-well "
+               "step there.\n\n");
     fprintf(f, "| integrator | noise | omega_dt | dt (s) | steps | in contact | simulated (s) | wall (s) | "
                "real-time factor | ns/step | Msteps/s | pull-off (nN) |\n"
                "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    char lab[64];
     for (int i = 0; i < n_rtf; i++) {
         const s_rtf *x = &o[i];
-        fprintf(f, "| %s | %s | %.4g | %.3g | %.3g | %.1f%% | %.1f | %.2f | %.1f%s | %.2f | %.1f | %.4f |\n",
-                x->integrator, x->noise, x->omega_dt, x->dt_s, (double)x->steps,
+        s_rtf_numerics(x, lab, sizeof lab);
+        fprintf(f, "| %s | %s | %s | %.3g | %.3g | %.1f%% | %.2f | %.2f | %.3g%s | %.2f | %.1f | %.4f |\n",
+                x->integrator, x->noise, lab, x->dt_s, (double)x->steps,
                 100.0 * (double)x->steps_contact / (double)x->steps, x->sim_s, x->wall_s, x->sim_s / x->wall_s,
-                x->complete ? "" : x->status ? " (failed)" : " (cut, extrapolated)",
-                1e9 * x->wall_s / (double)x->steps, 1e-6 * (double)x->steps / x->wall_s, 1e9 * x->pulloff_N);
+                x->complete ? "" : x->status ? " (failed)" : " (cut)", 1e9 * x->wall_s / (double)x->steps,
+                1e-6 * (double)x->steps / x->wall_s, 1e9 * x->pulloff_N);
     }
     for (int i = 0; i < n_rtf; i++)
-        if (!o[i].complete && !o[i].status)
-            fprintf(f, "\n%s at omega_dt %.4g was cut after %.0f s of wall time: the real-time factor is the one "
-                       "measured over the %.1f s simulated until then (mostly in contact), not a full curve's.\n",
-                    o[i].integrator, o[i].omega_dt, o[i].wall_s, o[i].sim_s);
+        if (!o[i].complete && !o[i].status) {
+            s_rtf_numerics(&o[i], lab, sizeof lab);
+            fprintf(f, "\n%s at omega_dt %s was cut after %.0f s of wall time: its real-time factor is the one "
+                       "measured over the %.2f s simulated until then (%.3g steps at %.3g steps/s), not a full "
+                       "curve's.\n",
+                    o[i].integrator, lab, o[i].wall_s, o[i].sim_s, (double)o[i].steps,
+                    (double)o[i].steps / o[i].wall_s);
+        }
 }
 
 static int s_emit(const char *dir, const s_bench *b, const s_rtf *o, int n_rtf)
@@ -550,18 +601,17 @@ int main(int argc, char **argv)
     s_rtf o[S_MAX_RTF];
     int n_rtf = 0;
     const double paper = 2.0 * M_PI / 40.0;
-    const struct {
-        const vafm_integrator_type *const *it;
-        int noise;
-        double omega_dt;
-    } runs[] = {
-        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, paper },
-        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, 0.5 },
-        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, 1.0 },
-        { &vafm_integrator_paper_vv, VAFM_NOISE_UNIFORM, paper },
+    /* the brief's four runs, then the core's two speed options for the in-contact part of a curve */
+    const s_rtf_spec runs[] = {
+        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, paper, 0.0, 0 },
+        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, 0.5, 0.0, 0 },
+        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, 1.0, 0.0, 0 },
+        { &vafm_integrator_paper_vv, VAFM_NOISE_UNIFORM, paper, 0.0, 0 },
+        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, paper, 1.0, 0 },
+        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN, paper, 0.0, 1 },
     };
-    for (size_t i = 0; i < sizeof runs / sizeof runs[0]; i++)
-        if (s_rtf_run(&o[n_rtf], *runs[i].it, runs[i].noise, runs[i].omega_dt) == 0)
+    for (size_t i = 0; i < sizeof runs / sizeof runs[0] && n_rtf < S_MAX_RTF; i++)
+        if (s_rtf_run(&o[n_rtf], &runs[i]) == 0)
             n_rtf++;
     return s_emit(dir, &b, o, n_rtf) ? 1 : 0;
 }

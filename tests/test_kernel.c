@@ -5,6 +5,9 @@
  *   near the branch end u_min, and beyond the table (fallback);
  * - a force curve with the table against one without: athermal results agree to ~1e-9 relative
  *   (the trajectories differ only by the interpolation error, ~1e-13, amplified by the snap);
+ * - the exact contact-well step (well_exact.h): its (X, V) block against the closed-form 2×2
+ *   propagator of free_ou.c, its integral I against the long-time limit Var(I) → q·h/ω⁴; and a
+ *   thermal dwell in contact, whose output samples (mean, variance) must agree with plain GJF steps;
  * - the adaptive step (omega_dt_far) against the plain one: athermal pull-off observables agree to
  *   1e-4 relative (the far zone is the deep, nearly harmonic well, where GJF's configurational error is
  *   nil for a harmonic well) while the step count falls. Its thermal accuracy is judged by the
@@ -17,6 +20,8 @@
 #include "vafm/units.h"
 #include "core/internal.h"
 #include "core/jkr_table.h"
+#include "core/kernel.h"
+#include "core/well_exact.h"
 
 static void test_table_accuracy(void)
 {
@@ -159,11 +164,121 @@ static void test_start_in_contact(void)
     ENSURE(s == NULL);
 }
 
+static void test_well3_closed_form(void)
+{
+    /* ω² = 25, η = 1, kT/m = 0.3: underdamped; and ω² = 0.04, η = 3: overdamped */
+    const double cases[][3] = { { 25.0, 1.0, 0.3 }, { 0.04, 3.0, 0.3 }, { 3600.0, 1.0, 1e-3 } };
+    for (size_t c = 0; c < 3; c++) {
+        const double w2 = cases[c][0], eta = cases[c][1], kT_m = cases[c][2];
+        const double hs[] = { 0.01, 0.3, 2.0, 50.0, 200.0, 5000.0 };
+        /* the slowest relaxation rate of the oscillator */
+        const double lam = eta * eta > 4.0 * w2 ? eta / 2.0 - sqrt(eta * eta / 4.0 - w2) : eta / 2.0;
+        for (size_t j = 0; j < 6; j++) {
+            double h = hs[j];
+            vafm_well3 W;
+            vafm_well3_setup(&W, w2, eta, 2.0 * eta * kT_m, h);
+            vafm_free_ou o;
+            vafm_well_ou_setup(&o, 1.0, w2, eta, kT_m, h, 0); /* m = 1, stiffness ω², kT = kT_m */
+            ENSURE_ABS(W.phi[0][0], o.e11, 1e-12);
+            ENSURE_ABS(W.phi[0][1], o.e12, 1e-12);
+            ENSURE_ABS(W.phi[1][0], o.e21, 1e-12 * fmax(1.0, w2));
+            ENSURE_ABS(W.phi[1][1], o.e22, 1e-12);
+            /* covariance of (X, V): L Lᵀ against the closed form's Cholesky factor */
+            double sxx = W.chol[0][0] * W.chol[0][0];
+            double sxv = W.chol[1][0] * W.chol[0][0];
+            double svv = W.chol[1][0] * W.chol[1][0] + W.chol[1][1] * W.chol[1][1];
+            double s1 = kT_m / w2, s2 = kT_m;
+            ENSURE_ABS(sxx, o.l11 * o.l11, 1e-10 * s1);
+            ENSURE_ABS(sxv, o.l21 * o.l11, 1e-10 * sqrt(s1 * s2));
+            ENSURE_ABS(svv, o.l21 * o.l21 + o.l22 * o.l22, 1e-10 * s2);
+            /* I's own row: mean response to X0 is ∫Φ_XX, which for h ≫ 1/η tends to η/ω² */
+            if (h * lam > 40.0) {
+                ENSURE_REL(W.phi[2][0], eta / w2, 1e-9);
+                double sii = 0.0;
+                for (int k = 0; k < 3; k++)
+                    sii += W.chol[2][k] * W.chol[2][k];
+                /* Var(I) = q h/ω⁴ − 3qη/ω⁶... : the slope in h is q/ω⁴ */
+                vafm_well3 W2;
+                vafm_well3_setup(&W2, w2, eta, 2.0 * eta * kT_m, 2.0 * h);
+                double sii2 = 0.0;
+                for (int k = 0; k < 3; k++)
+                    sii2 += W2.chol[2][k] * W2.chol[2][k];
+                ENSURE_REL((sii2 - sii) / h, 2.0 * eta * kT_m / (w2 * w2), 1e-8);
+            }
+        }
+    }
+}
+
+/* A thermal dwell in contact: the force samples with the exact well step against plain GJF steps.
+ * paper-fig4 (k̃ 0.1, k_BT̃ 0.01), pressed in to a force of ~0.5 F_JKR, dwell of N_s samples of 2 time
+ * units each (≫ the well's relaxation time 2/η, so samples are nearly independent). Means agree within
+ * 5 standard errors of the difference; variances within 5σ of their ratio (σ ≈ √(2/N_s) each). */
+typedef struct s_acc {
+    double sum, sum2;
+    long n;
+} s_acc;
+
+static int s_collect_dwell(void *user, const vafm_samples *blk)
+{
+    s_acc *a = user;
+    for (size_t i = 0; i < blk->n; i++)
+        if (blk->segment[i] == VAFM_SEG_DWELL) {
+            a->sum += blk->force_N[i];
+            a->sum2 += blk->force_N[i] * blk->force_N[i];
+            a->n++;
+        }
+    return 0;
+}
+
+static void s_dwell_stats(int well, int n_samples, double *mean, double *var, long *n, uint64_t *steps)
+{
+    vafm_params p;
+    vafm_params_preset(&p, "paper-fig4", NULL);
+    p.well_exact = well;
+    p.trigger = VAFM_TRIGGER_HEIGHT;
+    vafm_scale sc = vafm_units_scale(&p);
+    p.start_height_m = -1.0 * sc.length_m; /* pressed in 1 R: a repulsive load, deep in the well */
+    p.trigger_height_m = p.start_height_m - 1e-6 * sc.length_m;
+    p.dwell_s = n_samples / p.sample_rate_Hz;
+    vafm_sim *s = NULL;
+    vafm_curve_result res;
+    s_acc a = { 0.0, 0.0, 0 };
+    ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+    ENSURE(vafm_sim_curve(s, 3, s_collect_dwell, &a, &res) == 0);
+    vafm_sim_destroy(&s);
+    *n = a.n;
+    *mean = a.sum / a.n;
+    *var = a.sum2 / a.n - *mean * *mean;
+    *steps = res.steps;
+}
+
+static void test_well_vs_plain_dwell(void)
+{
+    const int N = LONG_OR(20000, 4000); /* samples of the dwell; σ(var)/var ≈ √(2/N) */
+    double m0, v0, m1, v1;
+    long n0, n1;
+    uint64_t st0, st1;
+    s_dwell_stats(0, N, &m0, &v0, &n0, &st0);
+    s_dwell_stats(1, N, &m1, &v1, &n1, &st1);
+    ENSURE(n0 >= N - 1 && n1 >= N - 1);
+    ENSURE_MSG(st1 < st0 / 5, "well steps %llu vs plain %llu", (unsigned long long)st1, (unsigned long long)st0);
+    /* samples 2 time units apart with relaxation time 2/η = 2: correlation e^{-1} at most between
+     * neighbours; inflate the standard errors by √((1+ρ)/(1−ρ)) with ρ = e^{-1} (≈ 1.47) */
+    const double infl = sqrt((1.0 + exp(-1.0)) / (1.0 - exp(-1.0)));
+    double se = infl * sqrt(v0 / n0 + v1 / n1);
+    ENSURE_MSG(fabs(m1 - m0) <= 5.0 * se, "dwell mean force %.9g (well) vs %.9g (plain), 5 se = %.3g", m1, m0,
+               5.0 * se);
+    double sr = infl * sqrt(2.0 / n0 + 2.0 / n1);
+    ENSURE_MSG(fabs(v1 / v0 - 1.0) <= 5.0 * sr, "dwell force variance ratio %.5f, 5 sigma = %.3g", v1 / v0, 5.0 * sr);
+}
+
 int main(void)
 {
     RUN_TEST(test_table_accuracy);
     RUN_TEST(test_table_vs_solver_curve);
     RUN_TEST(test_adaptive_vs_plain);
     RUN_TEST(test_start_in_contact);
+    RUN_TEST(test_well3_closed_form);
+    RUN_TEST(test_well_vs_plain_dwell);
     return harness_done();
 }

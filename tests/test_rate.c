@@ -125,6 +125,11 @@ static void test_dhs(void)
     const vafm_scale sc = vafm_units_scale(&p);
     vafm_quasistatic q;
     ENSURE(vafm_theory_quasistatic(S_GAMMA, S_K, &q) == 0);
+    /* start the pull in contact, at equilibrium, 3 R before the instability (the barrier there is
+     * hundreds of k_BT: no escape before the pull has come near) instead of at the contact point */
+    p.start_in_contact = 1;
+    p.start_height_m = -(q.u_spr_star + 3.0) * sc.length_m;
+    p.trigger_height_m = p.start_height_m - 1e-6 * sc.length_m;
     const double kT = 0.003, zeta = 1.0, vr[2] = { 1e-4, 1e-3 };
     const double v_si[2] = { vr[0] * sc.speed_m_per_s, vr[1] * sc.speed_m_per_s };
     const uint64_t N = LONG_OR(400, 60);

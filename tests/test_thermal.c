@@ -781,7 +781,6 @@ static void test_psd(void)
                 sr += ref[kb];
             }
             double z = (sp / sr - 1.0) / sd;
-            if (getenv("T_VERBOSE")) fprintf(stderr, "    band %5.0f Hz ratio %.4f z %+.2f\n", df * (double)b0, sp / sr, z);
             ENSURE_MSG(fabs(z) < 5.0, "band at %.0f Hz: ratio %.4f, z = %.2f", df * (double)b0, sp / sr, z);
             chi2 += z * z;
             zmax = fmax(zmax, fabs(z));

@@ -6,6 +6,10 @@
  * is Gaussian with mean E·(y, z) and covariance Σ∞ − E Σ∞ Eᵀ, Σ∞ = diag(kT/k, kT/m). So the free flight
  * needs no small steps: only its sampling (output rate, distance to the surface) limits h.
  * The overdamped variant (Brownian dynamics) is the scalar OU y' = −(k/ζ) y + noise.
+ *
+ * The same propagator serves a deep contact well (vafm_well_ou_*): there the force is linearised about
+ * the moving equilibrium, u = u_eq(t) + x_s + X with X an OU process of stiffness k + dF/du; sim.c
+ * decides where that holds (far from the instability, small excursions) and supplies the centre line.
  */
 #include <math.h>
 
@@ -13,20 +17,25 @@
 
 void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int overdamped)
 {
-    const double eta = K->co[0].eta_tot; /* out of contact: the cantilever's own channel */
+    /* out of contact: the spring alone, the cantilever's own friction channel */
+    vafm_well_ou_setup(o, K->m, K->k, K->co[0].eta_tot, K->kT, h, overdamped);
+}
+
+void vafm_well_ou_setup(vafm_free_ou *o, double m, double stiff, double eta, double kT, double h, int overdamped)
+{
     o->h = h;
     o->overdamped = overdamped;
     if (overdamped) {
-        double rate = K->k / K->co[0].zeta;
+        double rate = stiff / (m * eta);
         o->a = exp(-rate * h);
-        o->sd = sqrt(K->kT / K->k * -expm1(-2.0 * rate * h));
+        o->sd = sqrt(kT / stiff * -expm1(-2.0 * rate * h));
         o->e11 = o->a;
         o->e12 = o->e21 = o->e22 = 0.0;
         o->l11 = o->sd;
         o->l21 = o->l22 = 0.0;
         return;
     }
-    const double w2 = K->k / K->m;       /* ω0² */
+    const double w2 = stiff / m;         /* ω0² */
     const double lam = -0.5 * eta;       /* mean of the eigenvalues */
     const double mu2 = 0.25 * eta * eta - w2;
     double eC, eS; /* e^{λ̄h}·cosh(μh) and e^{λ̄h}·sinh(μh)/μ (or cos/sin for μ² < 0) */
@@ -49,7 +58,7 @@ void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int ove
     o->e12 = eS;
     o->e21 = -eS * w2;
     o->e22 = eC - eS * 0.5 * eta;
-    const double s1 = K->kT / K->k, s2 = K->kT / K->m;
+    const double s1 = kT / stiff, s2 = kT / m;
     double q11 = s1 - (o->e11 * o->e11 * s1 + o->e12 * o->e12 * s2);
     double q12 = -(o->e11 * o->e21 * s1 + o->e12 * o->e22 * s2);
     double q22 = s2 - (o->e21 * o->e21 * s1 + o->e22 * o->e22 * s2);
@@ -61,7 +70,13 @@ void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int ove
 
 void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o)
 {
-    double y = K->u - K->u_spr, z = K->w - K->v_spr;
+    vafm_well_ou_step(K, o, K->uspr0, K->v_spr, 0);
+}
+
+void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double c1, int in_contact)
+{
+    const double tau0 = (double)K->n * K->dt;
+    double y = K->u - (c0 + c1 * tau0), z = K->w - c1;
     double ny, nz;
     if (o->overdamped) {
         ny = o->a * y;
@@ -78,14 +93,16 @@ void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o)
         }
     }
     K->n++;
-    double tau = (double)K->n * K->dt;
+    const double tau = (double)K->n * K->dt;
     K->t = K->t0 + tau;
     K->u_spr = K->uspr0 + K->v_spr * tau;
-    K->u = K->u_spr + ny;
-    K->w = K->v_spr + nz;
-    K->Fc = 0.0;
+    K->u = c0 + c1 * tau + ny;
+    K->w = c1 + nz;
     double fs = K->k * (K->u_spr - K->u);
-    K->f = fs;
+    if (!in_contact) {
+        K->Fc = 0.0;
+        K->f = fs;
+    }
     K->acc_u += K->u;
     K->acc_uspr += K->u_spr;
     K->acc_n++;
@@ -93,4 +110,5 @@ void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o)
         K->fs_min = fs;
     K->steps++;
     K->steps_free++;
+    K->steps_contact += (uint64_t)(in_contact != 0);
 }

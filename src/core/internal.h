@@ -40,6 +40,7 @@ typedef struct vafm_numerics {
     double dt_far;        /* the larger step far from the instability (= dt without adaptation) */
     long n_sub_far;       /* steps per output sample there */
     double y_near;        /* spring distance u_spr − u_spr* below which the retract is "near" */
+    double u_soft;        /* indentation where the branch's stiffness vanishes (JKR force minimum) */
 } vafm_numerics;
 
 /** Derive the numerics of a scene and check them (time step against the stability limit, step count).

@@ -184,4 +184,11 @@ void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int ove
 /** One exact step of length o->h (out of contact, support at constant speed). */
 void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o);
 
+/** The propagator of a harmonic well of stiffness `stiff`, friction rate eta, at temperature kT. */
+void vafm_well_ou_setup(vafm_free_ou *o, double m, double stiff, double eta, double kT, double h, int overdamped);
+/** One exact step about the centre line c0 + c1·τ (τ = time since the phase origin): the deviation
+ *  (u − centre, w − c1) is propagated by o. in_contact: count the step as in contact and leave Fc
+ *  (the caller evaluates the contact force where it needs it). */
+void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double c1, int in_contact);
+
 #endif

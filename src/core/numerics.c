@@ -121,21 +121,25 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
      * it the escape dynamics need the fine step. */
     nm->dt_far = dt;
     nm->n_sub_far = nm->n_sub;
-    nm->y_near = INFINITY;
+    /* "near" the instability: the quasi-static barrier below near_barrier_kT·kT or the spring force
+     * within 10% of F*. Without adhesion there is no instability: never near. */
+    nm->y_near = -INFINITY;
+    nm->u_soft = has_contact ? fmin(0.0, c->u_detach) : 0.0;
+    if (p->contact == vafm_contact_jkr && r->gamma > 0) {
+        vafm_quasistatic q;
+        if (vafm_theory_quasistatic(r->gamma, r->k, &q) == 0) {
+            /* ΔV(y) = (4√2/3)(ky)^{3/2}/√F″ = B·kT  ⇒  k·y_B = [3B·kT√F″/(4√2)]^{2/3} */
+            double kyB = pow(3.0 * p->near_barrier_kT * r->kT * sqrt(fabs(q.F2)) / (4.0 * sqrt(2.0)), 2.0 / 3.0);
+            nm->y_near = fmax(kyB, 0.1 * q.F_star) / r->k;
+        }
+        double xf = 0.75 * c->c, sf = cbrt(xf); /* the force minimum: the stiffness of the branch is 0 there */
+        nm->u_soft = sf * sf * sf * sf - c->c * sf;
+    }
     if (p->omega_dt_far > p->omega_dt && p->dt_s == 0 && !it->overdamped) {
         double dtf = p->omega_dt_far / sqrt(nm->K_max / r->m);
         long nf = (long)ceil(nm->Ts / dtf * (1.0 - 1e-12));
         nm->n_sub_far = nf < 1 ? 1 : nf;
         nm->dt_far = nm->Ts / (double)nm->n_sub_far;
-        nm->y_near = 0.0;
-        if (p->contact == vafm_contact_jkr && r->gamma > 0) {
-            vafm_quasistatic q;
-            if (vafm_theory_quasistatic(r->gamma, r->k, &q) == 0) {
-                /* ΔV(y) = (4√2/3)(ky)^{3/2}/√F″ = B·kT  ⇒  k·y_B = [3B·kT√F″/(4√2)]^{2/3} */
-                double kyB = pow(3.0 * p->near_barrier_kT * r->kT * sqrt(fabs(q.F2)) / (4.0 * sqrt(2.0)), 2.0 / 3.0);
-                nm->y_near = fmax(kyB, 0.1 * q.F_star) / r->k;
-            }
-        }
     }
     if (it == vafm_integrator_paper_vv) {
         double eta_dt = (1.0 + (has_contact ? r->eta_cont : 0.0)) * dt;

@@ -86,6 +86,10 @@ static const s_field s_fields[] = {
     { { "contact_table", VAFM_PARAM_BOOL, "", 0, 1, NULL,
         "tabulate the JKR branch for the step (relative error < 1e-13) instead of a Newton solve per step" },
       offsetof(vafm_params, contact_table), S_NONE },
+    { { "well_exact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
+        "far from the pull-off instability, propagate the deep contact well exactly (linearised about the "
+        "moving equilibrium, one step per sample) instead of integrator steps" },
+      offsetof(vafm_params, well_exact), S_NONE },
     { { "seed", VAFM_PARAM_SEED, "", 0, 18446744073709551615.0, NULL,
         "random seed: (seed, curve index) reproduces a curve bit for bit" },
       offsetof(vafm_params, seed), S_NONE },

@@ -2,10 +2,14 @@
 /*
  * The simulation object and its scenes (force curve, thermal tune) as resumable state machines.
  *
- * A scene advances one output sample at a time. Within a sample interval the body moves either by
- * exact free-cantilever steps (out of contact and provably far from the surface: the surface is more
- * than the deterministic excursion bound plus 8 thermal standard deviations away for the whole
- * interval) or by the scene's integrator at the step dt (a whole fraction of the interval). Contact
+ * A scene advances one output sample at a time. Within a sample interval the body moves by one of:
+ * - exact free-cantilever steps (out of contact and provably far from the surface: the surface is more
+ *   than the deterministic excursion bound plus 8 thermal standard deviations away for the whole
+ *   interval);
+ * - one exact step of the linearised contact well (well_exact.h: in contact, far from the pull-off
+ *   instability, with the thermal spread and the current excursion small against the distance to the
+ *   branch's soft point, so the force is linear over the body's whole range);
+ * - the scene's integrator at the step dt (a whole fraction of the interval) everywhere else. Contact
  * events end an integrator run early and are recorded here. Phase changes (trigger, dwell, end)
  * happen at sample boundaries, as an instrument that acts on its filtered output would.
  */
@@ -18,6 +22,7 @@
 #include "vafm/theory.h"
 #include "core/internal.h"
 #include "core/kernel.h"
+#include "core/well_exact.h"
 
 #define S_BLOCK 512
 
@@ -34,7 +39,9 @@ struct vafm_sim {
     long n_free;        /* exact free steps per sample */
     double sigma_free;  /* √(kT/k): thermal spread of the free cantilever */
     int mode_free;      /* the last sample interval used exact free steps */
+    int mode_well;      /* the last sample interval used the exact contact well */
     int adaptive;       /* two step sizes: nm.dt near the instability, nm.dt_far elsewhere in contact */
+    int well_ok;        /* the exact contact-well step may be used */
     double dt_cur;      /* the integrator step in use */
     int need_prepare;   /* the integrator's cached force is stale */
     /* scene */
@@ -113,6 +120,7 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
     vafm_free_ou_setup(&s->ou, K, Ts / (double)s->n_free, s->it->overdamped);
     s->sigma_free = sqrt(rd->kT / rd->k);
     s->adaptive = s->nm.n_sub_far != s->nm.n_sub;
+    s->well_ok = p->well_exact && !s->it->overdamped && K->contact.type != vafm_contact_none;
     *out = s;
     return 0;
 }
@@ -185,6 +193,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->uspr_detach = s->fs_detach = s->t_detach = NAN;
     s->t_retract0 = NAN;
     s->mode_free = 0;
+    s->mode_well = 0;
     s->need_prepare = 1;
 
     const double L = s->nm.sc.length_m;
@@ -314,38 +323,118 @@ static void s_event(vafm_sim *s)
     K->event = 0;
 }
 
+
+/* The exact contact-well step over one sample interval, when it applies (see the file comment).
+ * Linearised about the equilibrium u_eq0 at the interval start with stiffness K = k + dF/du there; the
+ * equilibrium moves at r = (u_eq1 − u_eq0)/Ts and friction (relative to the support for the cantilever
+ * channel, to the sample for the contact channel) shifts the centre by x_s = −m(η_tot·r − v)/K.
+ * @return 1 if the interval was done this way, 0 if it does not apply. */
+static int s_well_interval(vafm_sim *s)
+{
+    vafm_kernel *K = &s->K;
+    const double Ts = s->nm.Ts, v = K->v_spr;
+    double ueq0, ueq1, Feq;
+    if (vafm_theory_equilibrium(K->contact.gamma, K->k, K->u_spr, &ueq0, &Feq) != 0 ||
+        vafm_theory_equilibrium(K->contact.gamma, K->k, K->u_spr + v * Ts, &ueq1, &Feq) != 0)
+        return 0;
+    double sq = 0.0, dF = 0.0;
+    K->cforce(&K->contact, ueq0, &sq, &dF);
+    const double Kt = K->k + dF;
+    const double room = ueq0 - s->nm.u_soft; /* distance to where the branch's stiffness vanishes */
+    if (!(Kt > 0.0) || !(room > 0.0))
+        return 0;
+    const double eta = K->co[1].eta_tot, m = K->m;
+    const double sigma = sqrt(K->kT / Kt);
+    /* curvature of the force: the leading anharmonic effect is the mean shift −F″kT/(2K²); it is
+     * added to the centre line, and the scheme is used only while the next order is small */
+    double h2 = fmax(sigma, 1e-4 * room), dFp = 0.0, dFm = 0.0;
+    sq = 0.0;
+    K->cforce(&K->contact, ueq0 + h2, &sq, &dFp);
+    sq = 0.0;
+    K->cforce(&K->contact, ueq0 - h2, &sq, &dFm);
+    const double F2 = (dFp - dFm) / (2.0 * h2);
+    const double r = (ueq1 - ueq0) / Ts;
+    const double xs = -m * (eta * r - v) / Kt - F2 * K->kT / (2.0 * Kt * Kt);
+    const double X = K->u - (ueq0 + xs), V = K->w - r;
+    const double amp = sqrt(X * X + m * V * V / Kt);
+    if (!(6.0 * sigma <= room) || !(fabs(F2) * sigma <= 0.2 * Kt) || !(amp <= 6.0 * sigma + 1e-3 * room))
+        return 0;
+    vafm_well3 W;
+    vafm_well3_setup(&W, Kt / m, eta, 2.0 * eta * K->kT / m, Ts);
+    double x[3] = { X, V, 0.0 }, nx[3];
+    for (int i = 0; i < 3; i++)
+        nx[i] = W.phi[i][0] * x[0] + W.phi[i][1] * x[1];
+    if (K->thermal) {
+        double xi[3];
+        for (int i = 0; i < 3; i++)
+            xi[i] = vafm_rng_normal_inline(&K->rng);
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j <= i; j++)
+                nx[i] += W.chol[i][j] * xi[j];
+    }
+    s_kernel_phase(K, v);
+    K->dt = Ts;
+    K->n = 1;
+    K->t = K->t0 + Ts;
+    K->u_spr = K->uspr0 + v * Ts;
+    const double c0 = ueq0 + xs;
+    K->u = c0 + r * Ts + nx[0];
+    K->w = r + nx[1];
+    /* the sample is the interval mean: centre line mean plus I/Ts */
+    K->acc_u = c0 + 0.5 * r * Ts + nx[2] / Ts;
+    K->acc_uspr = K->uspr0 + 0.5 * v * Ts;
+    K->acc_n = 1;
+    K->s = 0.0;
+    K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
+    double fs = K->k * (K->u_spr - K->u);
+    K->f = fs - K->Fc;
+    if (fs < K->fs_min)
+        K->fs_min = fs;
+    K->steps++;
+    K->steps_contact++;
+    K->steps_free++;
+    return 1;
+}
+
 static int s_step_interval(vafm_sim *s)
 {
     vafm_kernel *K = &s->K;
     K->acc_u = K->acc_uspr = 0.0;
     K->acc_n = 0;
+    /* far from the instability: in contact, not yet near u_spr* on the retract */
+    const int far = K->in_contact && (s->phase != S_PH_RETRACT || !(K->u_spr - s->nm.u_spr_star <= s->nm.y_near));
     if (s_free_safe(s)) {
         if (!s->mode_free) {
             s_kernel_phase(K, K->v_spr);
             K->dt = s->ou.h;
             s->mode_free = 1;
+            s->mode_well = 0;
         }
         for (long i = 0; i < s->n_free; i++)
             vafm_free_ou_step(K, &s->ou);
+    } else if (far && s->well_ok && s_well_interval(s)) {
+        s->mode_well = 1;
+        s->mode_free = 0;
+        s->need_prepare = 1;
     } else {
-        /* far from the instability (in contact, not yet near u_spr* on the retract): the larger step */
-        int far = s->adaptive && K->in_contact &&
-                  (s->phase != S_PH_RETRACT || !(K->u_spr - s->nm.u_spr_star <= s->nm.y_near));
-        double dt_want = far ? s->nm.dt_far : s->nm.dt;
-        if (s->mode_free || dt_want != s->dt_cur) {
+        /* the larger step far from the instability (adaptive), the fine one near it */
+        const int big = s->adaptive && far;
+        double dt_want = big ? s->nm.dt_far : s->nm.dt;
+        if (s->mode_free || s->mode_well || dt_want != s->dt_cur) {
             s_kernel_phase(K, K->v_spr);
             if (dt_want != s->dt_cur)
                 vafm_kernel_set_dt(K, dt_want);
             K->dt = dt_want;
             s->dt_cur = dt_want;
             s->mode_free = 0;
+            s->mode_well = 0;
             s->need_prepare = 1;
         }
         if (s->need_prepare) {
             s->it->prepare(K);
             s->need_prepare = 0;
         }
-        long left = far ? s->nm.n_sub_far : s->nm.n_sub;
+        long left = big ? s->nm.n_sub_far : s->nm.n_sub;
         while (left > 0) {
             long d = s->it->run(K, left);
             left -= d;

@@ -310,19 +310,15 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
     while (c < l.n && present[c] && (!w->has_prov || (c < nrows && rows[c].curve == c)) &&
            !vafm_h5i_curve_read(w->file, w->path, c, 0, file_size, &buf, &cv, NULL))
         c++;
-    /* the last curves kept were written last: read them back through their checksums */
-    for (int tries = 0; c > 0 && tries < 2;) {
-        if (vafm_h5i_curve_read(w->file, w->path, c - 1, 1, file_size, &buf, &cv, NULL)) {
-            c--;
-            continue;
+    /* the last curves kept were written last: read their data back through their checksums */
+    for (uint64_t ok = 0; c > 0 && ok < 2 && ok < c;) {
+        uint64_t j = c - 1 - ok;
+        if (vafm_h5i_curve_read(w->file, w->path, j, 1, file_size, &buf, &cv, NULL)) {
+            c = j;
+            ok = 0;
+        } else {
+            ok++;
         }
-        tries++;
-        if (tries < 2 && c >= 2 && vafm_h5i_curve_read(w->file, w->path, c - 2, 1, file_size, &buf, &cv, NULL)) {
-            c -= 2;
-            tries = 0;
-            continue;
-        }
-        break;
     }
     vafm_h5i_curvebuf_free(&buf);
     free(present);

@@ -1,0 +1,510 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * bench_work_precision: cost against error of a campaign statistic, per integrator and time step
+ * (physics notes, "Speed against error"). It reports; it never fails.
+ *
+ * Scene: paper-fig4 (γ̃ = 0.229, k̃ = 0.1, k_BT̃ = 0.01, ṽ = 1e-3, m̃ = 0.01) pressed in: the support
+ * starts 0.1 R past the contact point, where the body is drawn at thermal equilibrium on the contact
+ * branch, the approach ends 0.01 R later on the height trigger and the retract pulls it off (at
+ * u_spr ≈ −9.5, the force minimum and the instability u_spr* = −11.09 still ahead, after ~10⁴ time
+ * units: ~10⁴ relaxation times 1/η of the well). Starting closer to the pull is not possible: a body
+ * whose support starts behind the contact point (u_spr < 0) starts out of contact.
+ *
+ * Each row is one campaign of N curves (indices 0..N−1, the same seeds in every row; common random
+ * numbers across time steps are impossible, so rows are independent samples). Statistics in F_JKR:
+ * observable 2 (pulloff_spring_N, the paper's pull-off force) and 3 (detach_force_N). Bias against the
+ * group's reference (dt₀/4 with the same integrator family) with the combined standard error
+ * √(se² + se_ref²); distribution error: the two-sample KS distance with its 5% critical value
+ * 1.36·√((n + m)/(n·m)) (= 1.36√(2/N) for equal sizes).
+ *
+ * Groups: underdamped (gjf, baoab, paper-vv with uniform noise = the paper's method; reference gjf at
+ * dt₀/4) and overdamped (brownian at ζ = mη = 0.01, a different model with its own reference). The
+ * overdamped step is ~15× smaller at the same ω·dt (K_max·dt/ζ), so that group runs N_bd curves.
+ *
+ * Usage: bench_work_precision [outdir [N [N_bd]]]   (defaults ".", 2000, N/10; N_bd = 0 skips the
+ * overdamped group). Writes work_precision.csv and work_precision.md, prints the markdown to stdout
+ * and progress to stderr.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "vafm/campaign.h"
+#include "vafm/integrator.h"
+#include "vafm/params.h"
+#include "vafm/sim.h"
+#include "vafm/units.h"
+#include "core/internal.h"
+
+#define S_N_DEFAULT 2000
+#define S_NOBS 2
+#define S_PAPER_OMEGA_DT (2.0 * M_PI / 40.0)
+#define S_REF_OMEGA_DT (S_PAPER_OMEGA_DT / 4.0)
+#define S_Z_OK 2.0 /* "within 2 standard errors" */
+
+static const double s_omega_dts[] = { S_PAPER_OMEGA_DT, 0.3, 0.6, 1.0, 1.5 };
+#define S_NDT ((int)(sizeof s_omega_dts / sizeof s_omega_dts[0]))
+
+static const char *const s_obs_name[S_NOBS] = { "pulloff_spring (obs. 2)", "detach_force (obs. 3)" };
+
+/* ---- clocks ------------------------------------------------------------------------------------ */
+
+static double s_clock_s(clockid_t id)
+{
+    struct timespec ts;
+    clock_gettime(id, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* ---- rows -------------------------------------------------------------------------------------- */
+
+typedef struct s_row {
+    /* configuration */
+    const char *group;
+    const vafm_integrator_type *it;
+    int noise;
+    double omega_dt, omega_dt_far; /* far: 0 = no adaptive step */
+    int is_ref;
+    uint64_t N;
+    /* derived numerics */
+    double dt, stab; /* reduced step and ω_max·dt (K_max·dt/ζ overdamped) actually used */
+    /* results */
+    uint64_t n_ok, n_failed, n_flagged, steps;
+    double cpu_s, wall_s;
+    double *obs[S_NOBS]; /* per curve, F_JKR units, NaN where excluded */
+    double mean[S_NOBS], se[S_NOBS], bias[S_NOBS], se_c[S_NOBS], z[S_NOBS], ks[S_NOBS], ks_crit[S_NOBS];
+} s_row;
+
+static void s_row_free(s_row *r)
+{
+    for (int j = 0; j < S_NOBS; j++) {
+        free(r->obs[j]);
+        r->obs[j] = NULL;
+    }
+}
+
+static const char *s_noise_name(int noise)
+{
+    return noise == VAFM_NOISE_UNIFORM ? "uniform" : "gaussian";
+}
+
+/* ---- the scene --------------------------------------------------------------------------------- */
+
+static void s_scene(vafm_params *p, const s_row *r)
+{
+    vafm_params_preset(p, "paper-fig4", NULL);
+    const double R = p->R_m;
+    p->start_height_m = -0.1 * R;
+    p->trigger = VAFM_TRIGGER_HEIGHT;
+    p->trigger_height_m = -0.11 * R;
+    p->integrator = r->it;
+    p->noise = r->noise;
+    p->omega_dt = r->omega_dt;
+    p->omega_dt_far = r->omega_dt_far;
+}
+
+static double s_F_jkr_N(const vafm_params *p)
+{
+    return 1.5 * M_PI * p->gamma_J_per_m2 * p->R_m;
+}
+
+/* ---- running a row ----------------------------------------------------------------------------- */
+
+typedef struct s_collect {
+    s_row *row;
+    double F_jkr_N;
+    uint64_t done, next_report;
+    double t0;
+} s_collect;
+
+static int s_on_curve(void *user, const vafm_campaign_curve *c)
+{
+    s_collect *col = user;
+    s_row *r = col->row;
+    const vafm_curve_result *res = &c->result;
+    const int bad_flags = VAFM_CURVE_NO_CONTACT | VAFM_CURVE_EARLY_DETACH | VAFM_CURVE_NO_DETACH | VAFM_CURVE_NO_TRIGGER;
+    double o[S_NOBS] = { res->pulloff_spring_N / col->F_jkr_N, res->detach_force_N / col->F_jkr_N };
+    int ok = c->status == 0 && !(res->flags & bad_flags) && isfinite(o[0]) && isfinite(o[1]);
+    if (c->status)
+        r->n_failed++;
+    if (res->flags)
+        r->n_flagged++;
+    for (int j = 0; j < S_NOBS; j++)
+        r->obs[j][c->index] = ok ? o[j] : NAN;
+    r->n_ok += (uint64_t)ok;
+    r->steps += res->steps;
+    if (++col->done >= col->next_report) {
+        fprintf(stderr, "    %llu / %llu curves, %.0f s\n", (unsigned long long)col->done,
+                (unsigned long long)r->N, s_clock_s(CLOCK_MONOTONIC) - col->t0);
+        col->next_report += r->N / 10 ? r->N / 10 : 1;
+    }
+    return 0;
+}
+
+static void s_stats(s_row *r)
+{
+    for (int j = 0; j < S_NOBS; j++) {
+        double s = 0.0, ss = 0.0;
+        uint64_t n = 0;
+        for (uint64_t i = 0; i < r->N; i++)
+            if (isfinite(r->obs[j][i])) {
+                s += r->obs[j][i];
+                n++;
+            }
+        double mean = n ? s / (double)n : NAN;
+        for (uint64_t i = 0; i < r->N; i++)
+            if (isfinite(r->obs[j][i]))
+                ss += (r->obs[j][i] - mean) * (r->obs[j][i] - mean);
+        r->mean[j] = mean;
+        r->se[j] = n > 1 ? sqrt(ss / (double)(n - 1) / (double)n) : NAN;
+    }
+}
+
+static int s_run_row(s_row *r)
+{
+    vafm_params p;
+    vafm_numerics nm;
+    vafm_error err;
+    s_scene(&p, r);
+    if (vafm_numerics_check(&p, &nm, &err)) {
+        fprintf(stderr, "bench_work_precision: %s omega_dt %g: %s\n", r->it->name, r->omega_dt, err.message);
+        return -1;
+    }
+    r->dt = nm.dt;
+    r->stab = nm.stab;
+    for (int j = 0; j < S_NOBS; j++)
+        if (!(r->obs[j] = malloc(r->N * sizeof(double))))
+            return -1;
+    fprintf(stderr, "  %s %s (%s noise) omega_dt %.5g%s, dt %.4g, %llu curves\n", r->group, r->it->name,
+            s_noise_name(r->noise), r->omega_dt, r->omega_dt_far > 0 ? " (adaptive)" : "", r->dt,
+            (unsigned long long)r->N);
+    vafm_campaign_spec spec;
+    memset(&spec, 0, sizeof spec);
+    spec.curves_per_point = r->N;
+    spec.threads = 0;
+    s_collect col = { r, s_F_jkr_N(&p), 0, r->N / 10 ? r->N / 10 : 1, s_clock_s(CLOCK_MONOTONIC) };
+    double c0 = s_clock_s(CLOCK_PROCESS_CPUTIME_ID), w0 = col.t0;
+    int rc = vafm_campaign_run(&p, &spec, s_on_curve, &col, &err);
+    r->cpu_s = s_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
+    r->wall_s = s_clock_s(CLOCK_MONOTONIC) - w0;
+    if (rc) {
+        fprintf(stderr, "bench_work_precision: campaign: %s\n", err.message);
+        return -1;
+    }
+    s_stats(r);
+    fprintf(stderr, "    done: %.1f s CPU, %.1f s wall; obs2 %.5f +- %.5f, obs3 %.5f +- %.5f F_JKR; %llu excluded\n",
+            r->cpu_s, r->wall_s, r->mean[0], r->se[0], r->mean[1], r->se[1], (unsigned long long)(r->N - r->n_ok));
+    return 0;
+}
+
+/* ---- comparison against the reference ---------------------------------------------------------- */
+
+/* The finite values of x, sorted, into out; @return their number. */
+static size_t s_sorted_finite(const double *x, uint64_t n, double *out)
+{
+    size_t m = 0;
+    for (uint64_t i = 0; i < n; i++)
+        if (isfinite(x[i]))
+            out[m++] = x[i];
+    return m;
+}
+
+static int s_cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Two-sample Kolmogorov–Smirnov distance sup|F_a − F_b| of sorted samples (ties stepped together). */
+static double s_ks_sorted(const double *a, size_t na, const double *b, size_t nb)
+{
+    size_t i = 0, j = 0;
+    double d = 0.0;
+    while (i < na && j < nb) {
+        double v = a[i] < b[j] ? a[i] : b[j];
+        while (i < na && a[i] == v)
+            i++;
+        while (j < nb && b[j] == v)
+            j++;
+        double diff = fabs((double)i / (double)na - (double)j / (double)nb);
+        if (diff > d)
+            d = diff;
+    }
+    return d;
+}
+
+static int s_compare(s_row *r, const s_row *ref)
+{
+    double *a = malloc(r->N * sizeof *a), *b = malloc(ref->N * sizeof *b);
+    if (!a || !b) {
+        free(a);
+        free(b);
+        return -1;
+    }
+    for (int j = 0; j < S_NOBS; j++) {
+        size_t na = s_sorted_finite(r->obs[j], r->N, a), nb = s_sorted_finite(ref->obs[j], ref->N, b);
+        qsort(a, na, sizeof *a, s_cmp_double);
+        qsort(b, nb, sizeof *b, s_cmp_double);
+        r->bias[j] = r->mean[j] - ref->mean[j];
+        r->se_c[j] = r->is_ref ? r->se[j] : sqrt(r->se[j] * r->se[j] + ref->se[j] * ref->se[j]);
+        r->z[j] = r->is_ref ? 0.0 : r->bias[j] / r->se_c[j];
+        r->ks[j] = na && nb ? s_ks_sorted(a, na, b, nb) : NAN;
+        r->ks_crit[j] = na && nb ? 1.36 * sqrt((double)(na + nb) / ((double)na * (double)nb)) : NAN;
+    }
+    free(a);
+    free(b);
+    return 0;
+}
+
+/* ---- output ------------------------------------------------------------------------------------ */
+
+static void s_label(const s_row *r, char *buf, size_t len)
+{
+    if (r->omega_dt_far > 0)
+        snprintf(buf, len, "%.4g (far %.3g)", r->omega_dt, r->omega_dt_far);
+    else
+        snprintf(buf, len, "%.4g%s", r->omega_dt, r->is_ref ? " (ref)" : "");
+}
+
+static double s_steps_per_curve(const s_row *r)
+{
+    return (double)r->steps / (double)r->N;
+}
+
+static void s_write_csv(FILE *f, const s_row *rows, int n)
+{
+    fprintf(f, "group,integrator,noise,omega_dt,omega_dt_far,is_ref,dt_reduced,omega_max_dt,steps_per_curve,n,n_ok,"
+               "n_failed,n_flagged,cpu_s,wall_s,curves_per_s");
+    for (int j = 0; j < S_NOBS; j++) {
+        const char *o = j ? "obs3" : "obs2";
+        fprintf(f, ",%s_mean,%s_se,%s_bias,%s_se_combined,%s_bias_over_se,%s_ks,%s_ks_crit", o, o, o, o, o, o, o);
+    }
+    fputc('\n', f);
+    for (int i = 0; i < n; i++) {
+        const s_row *r = &rows[i];
+        fprintf(f, "%s,%s,%s,%.6g,%.6g,%d,%.6g,%.6g,%.6g,%llu,%llu,%llu,%llu,%.4f,%.4f,%.6g", r->group, r->it->name,
+                s_noise_name(r->noise), r->omega_dt, r->omega_dt_far, r->is_ref, r->dt, r->stab, s_steps_per_curve(r),
+                (unsigned long long)r->N, (unsigned long long)r->n_ok, (unsigned long long)r->n_failed,
+                (unsigned long long)r->n_flagged, r->cpu_s, r->wall_s, (double)r->N / r->wall_s);
+        for (int j = 0; j < S_NOBS; j++)
+            fprintf(f, ",%.8f,%.8f,%.8f,%.8f,%.4f,%.6f,%.6f", r->mean[j], r->se[j], r->bias[j], r->se_c[j], r->z[j],
+                    r->ks[j], r->ks_crit[j]);
+        fputc('\n', f);
+    }
+}
+
+static void s_md_obs_cells(FILE *f, const s_row *r, int j)
+{
+    fprintf(f, " %.5f ± %.5f |", r->mean[j], r->se[j]);
+    if (r->is_ref)
+        fprintf(f, " reference | - | - |");
+    else
+        fprintf(f, " %+.5f ± %.5f | %+.1f%s | %.3f%s |", r->bias[j], r->se_c[j], r->z[j],
+                fabs(r->z[j]) > S_Z_OK ? " **" : "", r->ks[j], r->ks[j] > r->ks_crit[j] ? " **" : "");
+}
+
+static void s_write_tables(FILE *f, const s_row *rows, int n)
+{
+    char lab[48];
+    fprintf(f, "| group | integrator | noise | omega_dt | dt | steps/curve | CPU s | wall s | curves/s | "
+               "F2/F_JKR ± se | bias ± se_c | bias/se_c | KS |\n"
+               "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (int i = 0; i < n; i++) {
+        const s_row *r = &rows[i];
+        s_label(r, lab, sizeof lab);
+        fprintf(f, "| %s | %s | %s | %s | %.3g | %.3g | %.1f | %.1f | %.1f |", r->group, r->it->name,
+                s_noise_name(r->noise), lab, r->dt, s_steps_per_curve(r), r->cpu_s, r->wall_s,
+                (double)r->N / r->wall_s);
+        s_md_obs_cells(f, r, 0);
+        fputc('\n', f);
+    }
+    fprintf(f, "\nObservable 3 (detach_force_N: the spring force when the body passes u_min), same runs:\n\n"
+               "| group | integrator | omega_dt | F3/F_JKR ± se | bias ± se_c | bias/se_c | KS |\n"
+               "|---|---|---|---|---|---|---|\n");
+    for (int i = 0; i < n; i++) {
+        const s_row *r = &rows[i];
+        s_label(r, lab, sizeof lab);
+        fprintf(f, "| %s | %s | %s |", r->group, r->it->name, lab);
+        s_md_obs_cells(f, r, 1);
+        fputc('\n', f);
+    }
+}
+
+static int s_within(const s_row *r)
+{
+    for (int j = 0; j < S_NOBS; j++)
+        if (!(fabs(r->z[j]) <= S_Z_OK))
+            return 0;
+    return 1;
+}
+
+/* The reading: per group, the cheapest row whose bias is within 2 combined standard errors on both
+ * observables, against the group's baseline (the paper's method at the paper's step, or the
+ * overdamped integrator at that ω·dt). */
+static void s_write_reading(FILE *f, const s_row *rows, int n)
+{
+    const char *groups[] = { "underdamped", "overdamped" };
+    for (int g = 0; g < 2; g++) {
+        const s_row *best = NULL, *base = NULL;
+        int n_rows = 0, n_out = 0, n_ks = 0;
+        for (int i = 0; i < n; i++) {
+            const s_row *r = &rows[i];
+            if (strcmp(r->group, groups[g]) || r->is_ref)
+                continue;
+            n_rows++;
+            if (!s_within(r))
+                n_out++;
+            if (r->ks[0] > r->ks_crit[0] || r->ks[1] > r->ks_crit[1])
+                n_ks++;
+            if (r->omega_dt == S_PAPER_OMEGA_DT && r->omega_dt_far == 0 &&
+                (r->it == vafm_integrator_paper_vv || r->it->overdamped))
+                base = r;
+            if (s_within(r) && (!best || r->cpu_s < best->cpu_s))
+                best = r;
+        }
+        if (!n_rows)
+            continue;
+        char lab[48];
+        fprintf(f, "%s: %d of %d rows have a bias beyond %.0f combined standard errors on at least one observable, "
+                   "%d exceed the 5%% KS critical value on at least one. ",
+                groups[g], n_out, n_rows, S_Z_OK, n_ks);
+        if (best) {
+            s_label(best, lab, sizeof lab);
+            fprintf(f, "The cheapest within %.0f standard errors on both observables is %s (%s noise) at omega_dt = %s: "
+                       "%.1f CPU s for %llu curves",
+                    S_Z_OK, best->it->name, s_noise_name(best->noise), lab, best->cpu_s, (unsigned long long)best->N);
+            if (base && base != best)
+                fprintf(f, ", %.1fx cheaper than %s at the paper's omega_dt = %.3f (%.1f CPU s)",
+                        base->cpu_s / best->cpu_s, base->it->name, base->omega_dt, base->cpu_s);
+            fprintf(f, ".\n\n");
+        } else {
+            fprintf(f, "No row is within %.0f standard errors on both observables.\n\n", S_Z_OK);
+        }
+    }
+}
+
+static void s_write_md(FILE *f, const s_row *rows, int n, uint64_t N, uint64_t N_bd)
+{
+    fprintf(f, "## Work against precision (bench_work_precision)\n\n");
+    fprintf(f, "Scene: paper-fig4 (gamma~ = 0.229, k~ = 0.1, kT~ = 0.01, v~ = 1e-3, m~ = 0.01) pressed in 0.1 R, "
+               "height trigger 0.01 R further, retract through the pull-off; the body starts at thermal "
+               "equilibrium in contact. Curves 0..N-1 (same seeds) per row, N = %llu (overdamped group: %llu), "
+               "via vafm_campaign_run on all cores. CPU s = CLOCK_PROCESS_CPUTIME_ID over the campaign (all "
+               "threads); curves/s by wall time. Forces in F_JKR = 3 pi gamma R / 2. Reference per group: the same "
+               "family at dt0/4 (omega_dt = %.5f), dt0 = the paper's omega_dt = 2pi/40. bias/se_c uses "
+               "se_c = sqrt(se^2 + se_ref^2); KS: two-sample distance to the reference, ** where above the 5%% "
+               "critical value 1.36 sqrt(2/N) (= %.4f at N = %llu) or where |bias| > 2 se_c. omega_dt is "
+               "omega_max dt at the stiffest contact the scene may reach (K_max dt/zeta for brownian); dt is "
+               "reduced (unit 1/eta).\n\n",
+            (unsigned long long)N, (unsigned long long)N_bd, S_REF_OMEGA_DT, 1.36 * sqrt(2.0 / (double)N),
+            (unsigned long long)N);
+    s_write_tables(f, rows, n);
+    fprintf(f, "\n");
+    s_write_reading(f, rows, n);
+}
+
+static FILE *s_open(const char *dir, const char *name)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "w");
+    if (!f)
+        fprintf(stderr, "bench_work_precision: cannot write %s\n", path);
+    return f;
+}
+
+static int s_emit(const char *dir, const s_row *rows, int n, uint64_t N, uint64_t N_bd)
+{
+    FILE *f = s_open(dir, "work_precision.csv");
+    if (!f)
+        return -1;
+    s_write_csv(f, rows, n);
+    fclose(f);
+    if (!(f = s_open(dir, "work_precision.md")))
+        return -1;
+    s_write_md(f, rows, n, N, N_bd);
+    fclose(f);
+    s_write_md(stdout, rows, n, N, N_bd);
+    return 0;
+}
+
+/* ---- the plan ---------------------------------------------------------------------------------- */
+
+#define S_MAX_ROWS 32
+
+static int s_plan(s_row *rows, uint64_t N, uint64_t N_bd)
+{
+    int n = 0;
+    const struct {
+        const vafm_integrator_type *const *it;
+        int noise;
+    } under[] = {
+        { &vafm_integrator_gjf, VAFM_NOISE_GAUSSIAN },
+        { &vafm_integrator_baoab, VAFM_NOISE_GAUSSIAN },
+        { &vafm_integrator_paper_vv, VAFM_NOISE_UNIFORM },
+    };
+    s_row base = { .group = "underdamped", .it = vafm_integrator_gjf, .noise = VAFM_NOISE_GAUSSIAN, .N = N };
+    rows[n] = base;
+    rows[n].omega_dt = S_REF_OMEGA_DT;
+    rows[n++].is_ref = 1;
+    for (size_t k = 0; k < sizeof under / sizeof under[0]; k++)
+        for (int d = 0; d < S_NDT; d++) {
+            rows[n] = base;
+            rows[n].it = *under[k].it;
+            rows[n].noise = under[k].noise;
+            rows[n++].omega_dt = s_omega_dts[d];
+        }
+    /* the adaptive step: the paper's step near the instability, a large one in the deep well before it */
+    rows[n] = base;
+    rows[n].omega_dt = S_PAPER_OMEGA_DT;
+    rows[n++].omega_dt_far = 1.0;
+    if (N_bd > 0) {
+        s_row bd = { .group = "overdamped", .it = vafm_integrator_brownian, .noise = VAFM_NOISE_GAUSSIAN, .N = N_bd };
+        rows[n] = bd;
+        rows[n].omega_dt = S_REF_OMEGA_DT;
+        rows[n++].is_ref = 1;
+        for (int d = 0; d < S_NDT; d++) {
+            rows[n] = bd;
+            rows[n++].omega_dt = s_omega_dts[d];
+        }
+    }
+    return n;
+}
+
+static uint64_t s_parse_count(const char *s, uint64_t dflt)
+{
+    char *end = NULL;
+    unsigned long long v = strtoull(s, &end, 10);
+    return end != s && *end == '\0' ? (uint64_t)v : dflt;
+}
+
+int main(int argc, char **argv)
+{
+    const char *dir = argc > 1 ? argv[1] : ".";
+    uint64_t N = argc > 2 ? s_parse_count(argv[2], S_N_DEFAULT) : S_N_DEFAULT;
+    if (N < 2)
+        N = 2;
+    uint64_t N_bd = argc > 3 ? s_parse_count(argv[3], N / 10) : N / 10;
+    if (N_bd == 1)
+        N_bd = 2;
+    static s_row rows[S_MAX_ROWS];
+    int n = s_plan(rows, N, N_bd), rc = 0;
+    fprintf(stderr, "work-precision: %d rows, N = %llu (overdamped N = %llu)\n", n, (unsigned long long)N,
+            (unsigned long long)N_bd);
+    double t0 = s_clock_s(CLOCK_MONOTONIC);
+    const s_row *ref = NULL;
+    for (int i = 0; i < n && !rc; i++) {
+        if (rows[i].is_ref)
+            ref = &rows[i];
+        rc = s_run_row(&rows[i]) || s_compare(&rows[i], ref);
+    }
+    fprintf(stderr, "work-precision: %.0f s wall in all\n", s_clock_s(CLOCK_MONOTONIC) - t0);
+    if (!rc)
+        rc = s_emit(dir, rows, n, N, N_bd);
+    for (int i = 0; i < n; i++)
+        s_row_free(&rows[i]);
+    return rc ? 1 : 0;
+}

@@ -1,0 +1,26 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Exact propagation of a deep contact well over a whole output sample.
+ *
+ * Far from the pull-off instability the body sits deep in the contact well, where the force is linear
+ * in its (thermal, tiny) excursion: u = c(τ) + X with c the moving centre line (equilibrium plus the
+ * friction lag) and X a damped oscillator driven by white noise. The output sample needs the endpoint
+ * and the time average of u over the interval, so the state is augmented with I = ∫X dτ:
+ *     d(X, V, I) = A (X, V, I) dτ + (0, √q, 0) dW,  A = [[0, 1, 0], [−ω², −η, 0], [1, 0, 0]].
+ * The transition over h is Gaussian: mean Φ(h)·x, covariance Σ(h). Both come from Van Loan's block
+ * exponential on a sub-step small enough that a Taylor series converges to round-off with no
+ * cancellation, then doubling: Φ(2h) = Φ(h)², Σ(2h) = Φ(h)Σ(h)Φ(h)ᵀ + Σ(h). One step then replaces
+ * the thousands of integrator steps a well with ω·Ts ≫ 1 would need; sim.c decides where it holds.
+ */
+#ifndef VAFM_CORE_WELL_EXACT_H
+#define VAFM_CORE_WELL_EXACT_H
+
+typedef struct vafm_well3 {
+    double phi[3][3]; /* mean propagator of (X, V, I) */
+    double chol[3][3]; /* lower Cholesky factor of the covariance */
+} vafm_well3;
+
+/** Transition of the augmented well over h: ω² = K/m, friction rate eta, noise intensity q = 2ηkT/m. */
+void vafm_well3_setup(vafm_well3 *W, double omega2, double eta, double q, double h);
+
+#endif
