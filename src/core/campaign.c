@@ -80,37 +80,26 @@ static void s_buf_free(s_buf *b)
 static int s_collect(void *user, const vafm_samples *blk)
 {
     s_buf *b = user;
+    double **chan[5] = { &b->t, &b->h, &b->d, &b->f, &b->tip };
+    const double *src[5] = { blk->time_s, blk->height_m, blk->deflection_m, blk->force_N, blk->tip_m };
     if (b->n + blk->n > b->cap) {
         size_t cap = b->cap ? b->cap : 4096;
         while (cap < b->n + blk->n)
             cap *= 2;
-        double *t = realloc(b->t, cap * sizeof *t);
-        if (t)
-            b->t = t;
-        double *h = realloc(b->h, cap * sizeof *h);
-        if (h)
-            b->h = h;
-        double *d = realloc(b->d, cap * sizeof *d);
-        if (d)
-            b->d = d;
-        double *f = realloc(b->f, cap * sizeof *f);
-        if (f)
-            b->f = f;
-        double *tip = realloc(b->tip, cap * sizeof *tip);
-        if (tip)
-            b->tip = tip;
-        uint8_t *seg = realloc(b->seg, cap * sizeof *seg);
-        if (seg)
-            b->seg = seg;
-        if (!t || !h || !d || !f || !tip || !seg)
-            return 1; /* out of memory: stop this curve */
+        for (int c = 0; c < 5; c++) {
+            double *p = realloc(*chan[c], cap * sizeof(double));
+            if (!p)
+                return 1; /* out of memory: stop this curve (the arrays grown so far stay valid) */
+            *chan[c] = p;
+        }
+        uint8_t *seg = realloc(b->seg, cap);
+        if (!seg)
+            return 1;
+        b->seg = seg;
         b->cap = cap;
     }
-    memcpy(b->t + b->n, blk->time_s, blk->n * sizeof(double));
-    memcpy(b->h + b->n, blk->height_m, blk->n * sizeof(double));
-    memcpy(b->d + b->n, blk->deflection_m, blk->n * sizeof(double));
-    memcpy(b->f + b->n, blk->force_N, blk->n * sizeof(double));
-    memcpy(b->tip + b->n, blk->tip_m, blk->n * sizeof(double));
+    for (int c = 0; c < 5; c++)
+        memcpy(*chan[c] + b->n, src[c], blk->n * sizeof(double));
     memcpy(b->seg + b->n, blk->segment, blk->n);
     b->n += blk->n;
     return 0;
