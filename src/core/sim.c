@@ -361,6 +361,7 @@ static int s_well_interval(vafm_sim *s)
         return 0;
     vafm_well3 W;
     vafm_well3_setup(&W, Kt / m, eta, 2.0 * eta * K->kT / m, Ts);
+    const vafm_kernel K0 = *K; /* to undo a draw that leaves the linear range (see below) */
     double x[3] = { X, V, 0.0 }, nx[3];
     for (int i = 0; i < 3; i++)
         nx[i] = W.phi[i][0] * x[0] + W.phi[i][1] * x[1];
@@ -380,6 +381,13 @@ static int s_well_interval(vafm_sim *s)
     const double c0 = ueq0 + xs;
     K->u = c0 + r * Ts + nx[0];
     K->w = r + nx[1];
+    if (!(K->u > s->nm.u_soft)) {
+        /* a tail draw (≥ 6σ, probability < 1e-9) beyond the branch's soft point, where the linear well
+         * is qualitatively wrong: undo it, random stream included, and let the integrator do this
+         * interval from the same state */
+        *K = K0;
+        return 0;
+    }
     /* the sample is the interval mean: centre line mean plus I/Ts */
     K->acc_u = c0 + 0.5 * r * Ts + nx[2] / Ts;
     K->acc_uspr = K->uspr0 + 0.5 * v * Ts;
