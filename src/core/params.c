@@ -133,6 +133,7 @@ static void s_common(vafm_params *p)
     p->near_barrier_kT = 30.0;
     p->free_exact = 1;
     p->contact_table = 1;
+    p->well_exact = 1;
     p->seed = 1;
 }
 

@@ -25,6 +25,7 @@
 #include "core/well_exact.h"
 
 #define S_BLOCK 512
+#define S_WELL_MIN_STEPS 256 /* integrator steps per sample above which the exact well step pays */
 
 enum { S_SCENE_NONE = 0, S_SCENE_CURVE, S_SCENE_TUNE };
 enum { S_PH_APPROACH = 0, S_PH_DWELL, S_PH_RETRACT, S_PH_TUNE, S_PH_DONE };
@@ -120,7 +121,10 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
     vafm_free_ou_setup(&s->ou, K, Ts / (double)s->n_free, s->it->overdamped);
     s->sigma_free = sqrt(rd->kT / rd->k);
     s->adaptive = s->nm.n_sub_far != s->nm.n_sub;
-    s->well_ok = p->well_exact && !s->it->overdamped && K->contact.type != vafm_contact_none;
+    /* The exact well step costs about as much as a few hundred integrator steps (block exponential,
+     * two equilibrium solves): it is used only where an output sample spans more steps than that. */
+    s->well_ok = p->well_exact && !s->it->overdamped && K->contact.type != vafm_contact_none &&
+                 s->nm.n_sub >= S_WELL_MIN_STEPS;
     *out = s;
     return 0;
 }
