@@ -33,7 +33,7 @@
 #define S_REPS 5
 #define S_MIN_REP_S 0.2
 #define S_KERNEL_CHUNK 100000L
-#define S_RTF_LIMIT_S 60.0  /* a real-time-factor curve longer than this is cut and extrapolated */
+#define S_RTF_LIMIT_S 60.0  /* a real-time-factor curve is cut after this much wall time, its rate kept */
 #define S_MAX_ROWS 32
 #define S_MAX_RTF 8
 
@@ -240,13 +240,14 @@ typedef struct s_row {
     const char *integrator, *where, *method;
     double dt;      /* reduced time per step */
     s_meas m;
-    double ratio;   /* against paper-vv, same where and method */
+    double ratio, ratio_cpu; /* against paper-vv, same where and method: wall and CPU medians */
     char note[96];
 } s_row;
 
 typedef struct s_bench {
     s_row rows[S_MAX_ROWS];
     int n;
+    double load0, load1; /* 1-minute load average before and after */
 } s_bench;
 
 static s_row *s_add(s_bench *b, const char *integrator, const char *where, const char *method, double dt, s_meas m)
@@ -260,7 +261,7 @@ static s_row *s_add(s_bench *b, const char *integrator, const char *where, const
     r->method = method;
     r->dt = dt;
     r->m = m;
-    r->ratio = NAN;
+    r->ratio = r->ratio_cpu = NAN;
     fprintf(stderr, "  %-8s %-18s %-22s %8.2f ns/step (%.2f..%.2f)\n", method, where, integrator, m.ns_med, m.ns_min,
             m.ns_max);
     return r;
@@ -273,8 +274,10 @@ static void s_ratios(s_bench *b)
         for (int j = 0; j < b->n; j++) {
             const s_row *q = &b->rows[j];
             if (!strcmp(q->integrator, "paper-vv") && !strcmp(q->method, r->method) &&
-                !strcmp(q->where, !strcmp(r->where, "free-exact") ? "out-of-contact" : r->where))
+                !strcmp(q->where, !strcmp(r->where, "free-exact") ? "out-of-contact" : r->where)) {
                 r->ratio = r->m.ns_med / q->m.ns_med;
+                r->ratio_cpu = r->m.ns_cpu_med / q->m.ns_cpu_med;
+            }
         }
     }
 }
@@ -479,6 +482,19 @@ static void s_cpu_model(char *buf, size_t len)
     fclose(f);
 }
 
+/* The 1-minute load average: on a shared machine wall times include waiting for the CPU, CPU times do not. */
+static double s_loadavg(void)
+{
+    double l = NAN;
+    FILE *f = fopen("/proc/loadavg", "r");
+    if (f) {
+        if (fscanf(f, "%lf", &l) != 1)
+            l = NAN;
+        fclose(f);
+    }
+    return l;
+}
+
 static FILE *s_open(const char *dir, const char *name)
 {
     char path[4096];
@@ -492,23 +508,25 @@ static FILE *s_open(const char *dir, const char *name)
 static void s_write_csv(FILE *f, const s_bench *b)
 {
     fprintf(f, "integrator,where,method,ns_per_step_median,ns_min,ns_max,ns_cpu_median,ratio_vs_paper_vv,"
-               "steps_per_s,dt_reduced\n");
+               "ratio_cpu_vs_paper_vv,steps_per_s,dt_reduced\n");
     for (int i = 0; i < b->n; i++) {
         const s_row *r = &b->rows[i];
-        fprintf(f, "%s,%s,%s,%.4f,%.4f,%.4f,%.4f,%.4f,%.6g,%.6g\n", r->integrator, r->where, r->method, r->m.ns_med,
-                r->m.ns_min, r->m.ns_max, r->m.ns_cpu_med, r->ratio, 1e9 / r->m.ns_med, r->dt);
+        fprintf(f, "%s,%s,%s,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.6g,%.6g\n", r->integrator, r->where, r->method,
+                r->m.ns_med, r->m.ns_min, r->m.ns_max, r->m.ns_cpu_med, r->ratio, r->ratio_cpu, 1e9 / r->m.ns_med,
+                r->dt);
     }
 }
 
 static void s_write_rtf_csv(FILE *f, const s_rtf *o, int n)
 {
     fprintf(f, "integrator,noise,omega_dt,omega_dt_far,well_exact,dt_s,steps,steps_contact,simulated_s,wall_s,cpu_s,"
-               "real_time_factor,ns_per_step,steps_per_s,complete,pulloff_spring_N\n");
+               "real_time_factor,rtf_cpu,ns_per_step,steps_per_s,complete,pulloff_spring_N\n");
     for (int i = 0; i < n; i++) {
         const s_rtf *x = &o[i];
-        fprintf(f, "%s,%s,%.6g,%.6g,%d,%.6g,%llu,%llu,%.6g,%.6g,%.6g,%.6g,%.4f,%.6g,%d,%.6g\n", x->integrator, x->noise,
-                x->spec.omega_dt, x->spec.omega_dt_far, x->spec.well_exact, x->dt_s, (unsigned long long)x->steps,
-                (unsigned long long)x->steps_contact, x->sim_s, x->wall_s, x->cpu_s, x->sim_s / x->wall_s,
+        fprintf(f, "%s,%s,%.6g,%.6g,%d,%.6g,%llu,%llu,%.6g,%.6g,%.6g,%.6g,%.6g,%.4f,%.6g,%d,%.6g\n", x->integrator,
+                x->noise, x->spec.omega_dt, x->spec.omega_dt_far, x->spec.well_exact, x->dt_s,
+                (unsigned long long)x->steps, (unsigned long long)x->steps_contact, x->sim_s, x->wall_s, x->cpu_s,
+                x->sim_s / x->wall_s, x->sim_s / x->cpu_s,
                 1e9 * x->wall_s / (double)x->steps, (double)x->steps / x->wall_s, x->complete, x->pulloff_N);
     }
 }
@@ -518,10 +536,12 @@ static void s_write_md(FILE *f, const s_bench *b, const s_rtf *o, int n_rtf)
     char cpu[128];
     s_cpu_model(cpu, sizeof cpu);
     fprintf(f, "## Step cost (bench_step)\n\n");
-    fprintf(f, "Machine: %s, one thread; compiler %s. Median of %d repetitions of >= %.1f s each (CLOCK_MONOTONIC; "
-               "CPU column: CLOCK_PROCESS_CPUTIME_ID). Scene: paper-fig4 (m~ = 0.01, k~ = 0.1, gamma~ = 0.229, "
-               "kT~ = 0.01); paper-vv uses uniform noise (the paper's method, the baseline), the others gaussian.\n\n",
-            cpu, __VERSION__, S_REPS, S_MIN_REP_S);
+    fprintf(f, "Machine: %s, one thread; gcc %s; 1-minute load average %.2f before, %.2f after (other jobs share "
+               "the machine when it is above ~0: then wall times include waiting, the CPU columns do not). Median of "
+               "%d repetitions of >= %.1f s each (CLOCK_MONOTONIC; CPU: CLOCK_PROCESS_CPUTIME_ID). Scene: "
+               "paper-fig4 (m~ = 0.01, k~ = 0.1, gamma~ = 0.229, kT~ = 0.01); paper-vv uses uniform noise (the "
+               "paper's method, the baseline), the others gaussian.\n\n",
+            cpu, __VERSION__, b->load0, b->load1, S_REPS, S_MIN_REP_S);
     fprintf(f, "- kernel: the integrator's run() loop on a prepared kernel, support at rest; in contact at "
                "u_spr = -5 (tensile, half way along the retract) with the tabulated JKR branch (contact_table = 1, "
                "the default), contact-newton: the same with the Newton solve every step (contact_table = 0); "
@@ -534,30 +554,31 @@ static void s_write_md(FILE *f, const s_bench *b, const s_rtf *o, int n_rtf)
                "smaller automatic dt (K_max dt/zeta = 2pi/40 with zeta = m eta = 0.01), so it needs ~15x more "
                "steps per curve; an exact free step covers several integrator steps.\n\n");
     fprintf(f, "| method | integrator | where | dt | ns/step (median) | min - max | CPU ns/step | vs paper-vv | "
-               "Msteps/s | note |\n|---|---|---|---|---|---|---|---|---|---|\n");
+               "vs paper-vv (CPU) | Msteps/s | note |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (int i = 0; i < b->n; i++) {
         const s_row *r = &b->rows[i];
-        fprintf(f, "| %s | %s | %s | %.3g | %.2f | %.2f - %.2f | %.2f | %.2f | %.1f | %s |\n", r->method,
+        fprintf(f, "| %s | %s | %s | %.3g | %.2f | %.2f - %.2f | %.2f | %.2f | %.2f | %.1f | %s |\n", r->method,
                 r->integrator, r->where, r->dt, r->m.ns_med, r->m.ns_min, r->m.ns_max, r->m.ns_cpu_med, r->ratio,
-                1e3 / r->m.ns_med, r->note);
+                r->ratio_cpu, 1e3 / r->m.ns_med, r->note);
     }
     fprintf(f, "\n## Real-time factor of the default scene (paper-fig1, one force curve)\n\n");
-    fprintf(f, "Real-time factor = simulated time / wall time (one thread), defaults otherwise (free_exact = 1, "
+    fprintf(f, "Real-time factor = simulated time / wall time (one thread; \"by CPU time\": / process CPU time, what "
+               "an unshared core gives), defaults otherwise (free_exact = 1, "
                "contact_table = 1). omega_dt = 2pi/40 = 0.157 is the paper's rule; \"far\" is the adaptive step "
                "(omega_dt_far) in contact away from the instability, well_exact the exact linearised contact-well "
                "step there.\n\n");
-    fprintf(f, "| integrator | noise | omega_dt | dt (s) | steps | in contact | simulated (s) | wall (s) | "
-               "real-time factor | ns/step | Msteps/s | pull-off (nN) |\n"
-               "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    fprintf(f, "| integrator | noise | omega_dt | dt (s) | steps | in contact | simulated (s) | wall (s) | CPU (s) | "
+               "real-time factor | RTF by CPU time | ns/step | Msteps/s | pull-off (nN) |\n"
+               "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     char lab[64];
     for (int i = 0; i < n_rtf; i++) {
         const s_rtf *x = &o[i];
         s_rtf_numerics(x, lab, sizeof lab);
-        fprintf(f, "| %s | %s | %s | %.3g | %.3g | %.1f%% | %.2f | %.2f | %.3g%s | %.2f | %.1f | %.4f |\n",
+        fprintf(f, "| %s | %s | %s | %.3g | %.3g | %.1f%% | %.2f | %.2f | %.2f | %.3g%s | %.3g | %.2f | %.1f | %.4f |\n",
                 x->integrator, x->noise, lab, x->dt_s, (double)x->steps,
-                100.0 * (double)x->steps_contact / (double)x->steps, x->sim_s, x->wall_s, x->sim_s / x->wall_s,
-                x->complete ? "" : x->status ? " (failed)" : " (cut)", 1e9 * x->wall_s / (double)x->steps,
-                1e-6 * (double)x->steps / x->wall_s, 1e9 * x->pulloff_N);
+                100.0 * (double)x->steps_contact / (double)x->steps, x->sim_s, x->wall_s, x->cpu_s,
+                x->sim_s / x->wall_s, x->complete ? "" : x->status ? " (failed)" : " (cut)", x->sim_s / x->cpu_s,
+                1e9 * x->wall_s / (double)x->steps, 1e-6 * (double)x->steps / x->wall_s, 1e9 * x->pulloff_N);
     }
     for (int i = 0; i < n_rtf; i++)
         if (!o[i].complete && !o[i].status) {
@@ -593,6 +614,7 @@ int main(int argc, char **argv)
 {
     const char *dir = argc > 1 ? argv[1] : ".";
     static s_bench b; /* static: a few kB of rows, zero-initialised */
+    b.load0 = s_loadavg();
     if (s_bench_kernel(&b) || s_bench_scene(&b))
         return 1;
     s_ratios(&b);
@@ -613,5 +635,6 @@ int main(int argc, char **argv)
     for (size_t i = 0; i < sizeof runs / sizeof runs[0] && n_rtf < S_MAX_RTF; i++)
         if (s_rtf_run(&o[n_rtf], &runs[i]) == 0)
             n_rtf++;
+    b.load1 = s_loadavg();
     return s_emit(dir, &b, o, n_rtf) ? 1 : 0;
 }

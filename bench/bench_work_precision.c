@@ -3,12 +3,14 @@
  * bench_work_precision: cost against error of a campaign statistic, per integrator and time step
  * (physics notes, "Speed against error"). It reports; it never fails.
  *
- * Scene: paper-fig4 (γ̃ = 0.229, k̃ = 0.1, k_BT̃ = 0.01, ṽ = 1e-3, m̃ = 0.01) pressed in: the support
- * starts 0.1 R past the contact point, where the body is drawn at thermal equilibrium on the contact
- * branch, the approach ends 0.01 R later on the height trigger and the retract pulls it off (at
- * u_spr ≈ −9.5, the force minimum and the instability u_spr* = −11.09 still ahead, after ~10⁴ time
- * units: ~10⁴ relaxation times 1/η of the well). Starting closer to the pull is not possible: a body
- * whose support starts behind the contact point (u_spr < 0) starts out of contact.
+ * Scene: paper-fig4 (γ̃ = 0.229, k̃ = 0.1, k_BT̃ = 0.01, ṽ = 1e-3, m̃ = 0.01) started in contact near the
+ * pull (start_in_contact): the support at u_spr = −6.5, y = 4.6 before the quasi-static instability
+ * u_spr* = −11.09, where the spring already pulls (≈ 0.6 F_JKR) but the barrier is still ~5× the one
+ * at which the body escapes. The body is drawn at thermal equilibrium there; the approach ends 0.01 R
+ * later on the height trigger and the retract pulls it off at u_spr ≈ −9.5 ± 0.2 (force minimum and
+ * instability still ahead), ~3000 time units = ~3000 relaxation times 1/η after the start. A start
+ * at y = 10.1 (group "options") gave the same pull-off statistics within 0.5 standard errors at 2.7×
+ * the cost. (The core's speed options are off in these groups.)
  *
  * Each row is one campaign of N curves (indices 0..N−1, the same seeds in every row; common random
  * numbers across time steps are impossible, so rows are independent samples). Statistics in F_JKR:
@@ -19,11 +21,17 @@
  *
  * Groups: underdamped (gjf, baoab, paper-vv with uniform noise = the paper's method; reference gjf at
  * dt₀/4) and overdamped (brownian at ζ = mη = 0.01, a different model with its own reference). The
- * overdamped step is ~15× smaller at the same ω·dt (K_max·dt/ζ), so that group runs N_bd curves.
+ * overdamped step is ~15× smaller at the same ω·dt (K_max·dt/ζ instead of ω_max·dt), so that group
+ * costs ~15× more per curve; N_bd sets its size.
  *
- * Usage: bench_work_precision [outdir [N [N_bd]]]   (defaults ".", 2000, N/10; N_bd = 0 skips the
- * overdamped group). Writes work_precision.csv and work_precision.md, prints the markdown to stdout
- * and progress to stderr.
+ * Group "options": the core's speed options (well_exact: one exact step of the linearised contact well
+ * per sample interval; omega_dt_far: a larger step), which act only in contact farther than y_near
+ * from the instability, against plain gjf and its own dt₀/4 reference, from a start at u_spr = −1
+ * (y = 10.1) that leaves them room.
+ *
+ * Usage: bench_work_precision [outdir [N [N_bd [groups]]]]   (defaults ".", 2000, N,
+ * "underdamped,overdamped,options"; N_bd = 0 skips the overdamped group). Writes work_precision.csv
+ * and work_precision.md, prints the markdown to stdout and progress to stderr.
  */
 #include <math.h>
 #include <stdint.h>
@@ -48,8 +56,6 @@
 static const double s_omega_dts[] = { S_PAPER_OMEGA_DT, 0.3, 0.6, 1.0, 1.5 };
 #define S_NDT ((int)(sizeof s_omega_dts / sizeof s_omega_dts[0]))
 
-static const char *const s_obs_name[S_NOBS] = { "pulloff_spring (obs. 2)", "detach_force (obs. 3)" };
-
 /* ---- clocks ------------------------------------------------------------------------------------ */
 
 static double s_clock_s(clockid_t id)
@@ -59,6 +65,19 @@ static double s_clock_s(clockid_t id)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* The 1-minute load average: other jobs on the machine slow the wall clock, not the CPU clock. */
+static double s_loadavg(void)
+{
+    double l = NAN;
+    FILE *f = fopen("/proc/loadavg", "r");
+    if (f) {
+        if (fscanf(f, "%lf", &l) != 1)
+            l = NAN;
+        fclose(f);
+    }
+    return l;
+}
+
 /* ---- rows -------------------------------------------------------------------------------------- */
 
 typedef struct s_row {
@@ -66,11 +85,15 @@ typedef struct s_row {
     const char *group;
     const vafm_integrator_type *it;
     int noise;
-    double omega_dt, omega_dt_far; /* far: 0 = no adaptive step */
+    double omega_dt;
+    double omega_dt_far; /* the core's adaptive step far from the instability (0: off) */
+    int well_exact;      /* the core's exact contact-well step far from the instability */
+    double uspr_start;   /* reduced support position at the start */
     int is_ref;
     uint64_t N;
     /* derived numerics */
     double dt, stab; /* reduced step and ω_max·dt (K_max·dt/ζ overdamped) actually used */
+    double y_near;   /* u_spr − u_spr* below which the options stop acting */
     /* results */
     uint64_t n_ok, n_failed, n_flagged, steps;
     double cpu_s, wall_s;
@@ -91,19 +114,39 @@ static const char *s_noise_name(int noise)
     return noise == VAFM_NOISE_UNIFORM ? "uniform" : "gaussian";
 }
 
+static int s_has_options(const s_row *r)
+{
+    return r->omega_dt_far > 0 || r->well_exact;
+}
+
+static void s_label(const s_row *r, char *buf, size_t len)
+{
+    if (r->well_exact)
+        snprintf(buf, len, "%.4g + well_exact", r->omega_dt);
+    else if (r->omega_dt_far > 0)
+        snprintf(buf, len, "%.4g (far %.3g)", r->omega_dt, r->omega_dt_far);
+    else
+        snprintf(buf, len, "%.4g%s", r->omega_dt, r->is_ref ? " (ref)" : "");
+}
+
 /* ---- the scene --------------------------------------------------------------------------------- */
+
+#define S_USPR_START (-6.5)     /* reduced: see the file comment */
+#define S_USPR_START_FAR (-1.0) /* the options group: room for the far region */
 
 static void s_scene(vafm_params *p, const s_row *r)
 {
     vafm_params_preset(p, "paper-fig4", NULL);
     const double R = p->R_m;
-    p->start_height_m = -0.1 * R;
+    p->start_in_contact = 1;
+    p->start_height_m = -r->uspr_start * R;
     p->trigger = VAFM_TRIGGER_HEIGHT;
-    p->trigger_height_m = -0.11 * R;
+    p->trigger_height_m = p->start_height_m - 0.01 * R;
     p->integrator = r->it;
     p->noise = r->noise;
     p->omega_dt = r->omega_dt;
     p->omega_dt_far = r->omega_dt_far;
+    p->well_exact = r->well_exact;
 }
 
 static double s_F_jkr_N(const vafm_params *p)
@@ -175,12 +218,17 @@ static int s_run_row(s_row *r)
     }
     r->dt = nm.dt;
     r->stab = nm.stab;
-    for (int j = 0; j < S_NOBS; j++)
+    r->y_near = nm.y_near;
+    for (int j = 0; j < S_NOBS; j++) {
         if (!(r->obs[j] = malloc(r->N * sizeof(double))))
             return -1;
-    fprintf(stderr, "  %s %s (%s noise) omega_dt %.5g%s, dt %.4g, %llu curves\n", r->group, r->it->name,
-            s_noise_name(r->noise), r->omega_dt, r->omega_dt_far > 0 ? " (adaptive)" : "", r->dt,
-            (unsigned long long)r->N);
+        for (uint64_t i = 0; i < r->N; i++)
+            r->obs[j][i] = NAN; /* a curve never delivered stays out of the statistics */
+    }
+    char lab[48];
+    s_label(r, lab, sizeof lab);
+    fprintf(stderr, "  %s %s (%s noise) omega_dt %s, dt %.4g, %llu curves\n", r->group, r->it->name,
+            s_noise_name(r->noise), lab, r->dt, (unsigned long long)r->N);
     vafm_campaign_spec spec;
     memset(&spec, 0, sizeof spec);
     spec.curves_per_point = r->N;
@@ -261,14 +309,6 @@ static int s_compare(s_row *r, const s_row *ref)
 
 /* ---- output ------------------------------------------------------------------------------------ */
 
-static void s_label(const s_row *r, char *buf, size_t len)
-{
-    if (r->omega_dt_far > 0)
-        snprintf(buf, len, "%.4g (far %.3g)", r->omega_dt, r->omega_dt_far);
-    else
-        snprintf(buf, len, "%.4g%s", r->omega_dt, r->is_ref ? " (ref)" : "");
-}
-
 static double s_steps_per_curve(const s_row *r)
 {
     return (double)r->steps / (double)r->N;
@@ -276,8 +316,8 @@ static double s_steps_per_curve(const s_row *r)
 
 static void s_write_csv(FILE *f, const s_row *rows, int n)
 {
-    fprintf(f, "group,integrator,noise,omega_dt,omega_dt_far,is_ref,dt_reduced,omega_max_dt,steps_per_curve,n,n_ok,"
-               "n_failed,n_flagged,cpu_s,wall_s,curves_per_s");
+    fprintf(f, "group,integrator,noise,omega_dt,omega_dt_far,well_exact,uspr_start,is_ref,dt_reduced,omega_max_dt,"
+               "steps_per_curve,n,n_ok,n_failed,n_flagged,cpu_s,wall_s,curves_per_s");
     for (int j = 0; j < S_NOBS; j++) {
         const char *o = j ? "obs3" : "obs2";
         fprintf(f, ",%s_mean,%s_se,%s_bias,%s_se_combined,%s_bias_over_se,%s_ks,%s_ks_crit", o, o, o, o, o, o, o);
@@ -285,8 +325,9 @@ static void s_write_csv(FILE *f, const s_row *rows, int n)
     fputc('\n', f);
     for (int i = 0; i < n; i++) {
         const s_row *r = &rows[i];
-        fprintf(f, "%s,%s,%s,%.6g,%.6g,%d,%.6g,%.6g,%.6g,%llu,%llu,%llu,%llu,%.4f,%.4f,%.6g", r->group, r->it->name,
-                s_noise_name(r->noise), r->omega_dt, r->omega_dt_far, r->is_ref, r->dt, r->stab, s_steps_per_curve(r),
+        fprintf(f, "%s,%s,%s,%.6g,%.6g,%d,%.6g,%d,%.6g,%.6g,%.6g,%llu,%llu,%llu,%llu,%.4f,%.4f,%.6g", r->group,
+                r->it->name, s_noise_name(r->noise), r->omega_dt, r->omega_dt_far, r->well_exact, r->uspr_start,
+                r->is_ref, r->dt, r->stab, s_steps_per_curve(r),
                 (unsigned long long)r->N, (unsigned long long)r->n_ok, (unsigned long long)r->n_failed,
                 (unsigned long long)r->n_flagged, r->cpu_s, r->wall_s, (double)r->N / r->wall_s);
         for (int j = 0; j < S_NOBS; j++)
@@ -315,7 +356,7 @@ static void s_write_tables(FILE *f, const s_row *rows, int n)
     for (int i = 0; i < n; i++) {
         const s_row *r = &rows[i];
         s_label(r, lab, sizeof lab);
-        fprintf(f, "| %s | %s | %s | %s | %.3g | %.3g | %.1f | %.1f | %.1f |", r->group, r->it->name,
+        fprintf(f, "| %s | %s | %s | %s | %.3g | %.3g | %.2f | %.2f | %.1f |", r->group, r->it->name,
                 s_noise_name(r->noise), lab, r->dt, s_steps_per_curve(r), r->cpu_s, r->wall_s,
                 (double)r->N / r->wall_s);
         s_md_obs_cells(f, r, 0);
@@ -341,13 +382,61 @@ static int s_within(const s_row *r)
     return 1;
 }
 
+/* Per integrator of a group: the largest ω·dt whose row, and every smaller one, is within 2 se_c. */
+static void s_write_largest_dt(FILE *f, const s_row *rows, int n, const char *group)
+{
+    const vafm_integrator_type *seen[8];
+    int n_seen = 0;
+    fprintf(f, "Largest omega_dt with it and every smaller step within %.0f se_c on both observables:", S_Z_OK);
+    for (int i = 0; i < n; i++) {
+        const s_row *r = &rows[i];
+        int known = 0;
+        for (int k = 0; k < n_seen; k++)
+            known |= seen[k] == r->it;
+        if (strcmp(r->group, group) || r->is_ref || s_has_options(r) || known || n_seen == 8)
+            continue;
+        seen[n_seen++] = r->it;
+        double largest = NAN;
+        for (int j = i; j < n; j++) { /* the rows of one integrator come in increasing ω·dt */
+            const s_row *q = &rows[j];
+            if (q->it != r->it || strcmp(q->group, group) || q->is_ref || s_has_options(q))
+                continue;
+            if (!s_within(q))
+                break;
+            largest = q->omega_dt;
+        }
+        if (isnan(largest))
+            fprintf(f, "%s %s none", n_seen > 1 ? "," : "", r->it->name);
+        else
+            fprintf(f, "%s %s %.3g", n_seen > 1 ? "," : "", r->it->name, largest);
+    }
+    fprintf(f, ". ");
+}
+
+/* gjf and baoab fed the same normals: how far apart their means are (largest over the common steps). */
+static double s_gjf_baoab_gap(const s_row *rows, int n)
+{
+    double gap = NAN;
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++)
+            if (rows[i].it == vafm_integrator_gjf && rows[j].it == vafm_integrator_baoab && !rows[i].is_ref &&
+                !s_has_options(&rows[i]) && !strcmp(rows[i].group, rows[j].group) &&
+                rows[i].omega_dt == rows[j].omega_dt)
+                for (int o = 0; o < S_NOBS; o++) {
+                    double d = fabs(rows[i].mean[o] - rows[j].mean[o]);
+                    if (isnan(gap) || d > gap)
+                        gap = d;
+                }
+    return gap;
+}
+
 /* The reading: per group, the cheapest row whose bias is within 2 combined standard errors on both
  * observables, against the group's baseline (the paper's method at the paper's step, or the
  * overdamped integrator at that ω·dt). */
 static void s_write_reading(FILE *f, const s_row *rows, int n)
 {
-    const char *groups[] = { "underdamped", "overdamped" };
-    for (int g = 0; g < 2; g++) {
+    const char *groups[] = { "underdamped", "overdamped", "options" };
+    for (int g = 0; g < 3; g++) {
         const s_row *best = NULL, *base = NULL;
         int n_rows = 0, n_out = 0, n_ks = 0;
         for (int i = 0; i < n; i++) {
@@ -359,8 +448,8 @@ static void s_write_reading(FILE *f, const s_row *rows, int n)
                 n_out++;
             if (r->ks[0] > r->ks_crit[0] || r->ks[1] > r->ks_crit[1])
                 n_ks++;
-            if (r->omega_dt == S_PAPER_OMEGA_DT && r->omega_dt_far == 0 &&
-                (r->it == vafm_integrator_paper_vv || r->it->overdamped))
+            /* the baseline: the paper's step without options, the paper's method where the group has it */
+            if (r->omega_dt == S_PAPER_OMEGA_DT && !s_has_options(r) && (!base || r->it == vafm_integrator_paper_vv))
                 base = r;
             if (s_within(r) && (!best || r->cpu_s < best->cpu_s))
                 best = r;
@@ -371,6 +460,8 @@ static void s_write_reading(FILE *f, const s_row *rows, int n)
         fprintf(f, "%s: %d of %d rows have a bias beyond %.0f combined standard errors on at least one observable, "
                    "%d exceed the 5%% KS critical value on at least one. ",
                 groups[g], n_out, n_rows, S_Z_OK, n_ks);
+        if (g < 2)
+            s_write_largest_dt(f, rows, n, groups[g]);
         if (best) {
             s_label(best, lab, sizeof lab);
             fprintf(f, "The cheapest within %.0f standard errors on both observables is %s (%s noise) at omega_dt = %s: "
@@ -384,23 +475,49 @@ static void s_write_reading(FILE *f, const s_row *rows, int n)
             fprintf(f, "No row is within %.0f standard errors on both observables.\n\n", S_Z_OK);
         }
     }
+    uint64_t excluded = 0, failed = 0, flagged = 0;
+    for (int i = 0; i < n; i++) {
+        excluded += rows[i].N - rows[i].n_ok;
+        failed += rows[i].n_failed;
+        flagged += rows[i].n_flagged;
+    }
+    fprintf(f, "Curves left out of the statistics (failed, no contact, early or no detachment): %llu, of which %llu "
+               "failed; curves with any flag (including a recontact after the pull-off, which are kept): %llu.\n\n",
+            (unsigned long long)excluded, (unsigned long long)failed, (unsigned long long)flagged);
+    double gap = s_gjf_baoab_gap(rows, n);
+    if (!isnan(gap))
+        fprintf(f, "gjf and baoab draw the same normals and differ only at O((eta dt)^3) in their damping and noise "
+                   "coefficients (eta dt <= 0.1 here): their means agree to %.1e F_JKR at every step, so their rows "
+                   "are one measurement, not two.\n",
+                gap);
 }
 
-static void s_write_md(FILE *f, const s_row *rows, int n, uint64_t N, uint64_t N_bd)
+static void s_write_md(FILE *f, const s_row *rows, int n, uint64_t N, uint64_t N_bd, double load0, double load1)
 {
     fprintf(f, "## Work against precision (bench_work_precision)\n\n");
-    fprintf(f, "Scene: paper-fig4 (gamma~ = 0.229, k~ = 0.1, kT~ = 0.01, v~ = 1e-3, m~ = 0.01) pressed in 0.1 R, "
-               "height trigger 0.01 R further, retract through the pull-off; the body starts at thermal "
-               "equilibrium in contact. Curves 0..N-1 (same seeds) per row, N = %llu (overdamped group: %llu), "
-               "via vafm_campaign_run on all cores. CPU s = CLOCK_PROCESS_CPUTIME_ID over the campaign (all "
-               "threads); curves/s by wall time. Forces in F_JKR = 3 pi gamma R / 2. Reference per group: the same "
-               "family at dt0/4 (omega_dt = %.5f), dt0 = the paper's omega_dt = 2pi/40. bias/se_c uses "
-               "se_c = sqrt(se^2 + se_ref^2); KS: two-sample distance to the reference, ** where above the 5%% "
-               "critical value 1.36 sqrt(2/N) (= %.4f at N = %llu) or where |bias| > 2 se_c. omega_dt is "
-               "omega_max dt at the stiffest contact the scene may reach (K_max dt/zeta for brownian); dt is "
-               "reduced (unit 1/eta).\n\n",
-            (unsigned long long)N, (unsigned long long)N_bd, S_REF_OMEGA_DT, 1.36 * sqrt(2.0 / (double)N),
-            (unsigned long long)N);
+    fprintf(f, "Scene: paper-fig4 (gamma~ = 0.229, k~ = 0.1, kT~ = 0.01, v~ = 1e-3, m~ = 0.01) started in contact "
+               "at u_spr = %.1f (y = %.1f before the quasi-static instability u_spr* = -11.09; start_in_contact, the "
+               "body drawn at thermal equilibrium), height trigger 0.01 R later, retract through the pull-off "
+               "(at u_spr = -9.5 +- 0.2). Curves 0..N-1 (same seeds) per row, N = %llu (overdamped group: %llu), "
+               "via vafm_campaign_run on all cores (load average %.2f before, %.2f after). CPU s = "
+               "CLOCK_PROCESS_CPUTIME_ID over the campaign (all threads); curves/s by wall time. Forces in F_JKR = "
+               "3 pi gamma R / 2; F2 = pulloff_spring_N (the paper's pull-off force: most tensile spring force), "
+               "F3 = detach_force_N. Reference per group: the same family at dt0/4 (omega_dt = %.5f), dt0 = the "
+               "paper's omega_dt = 2pi/40. bias/se_c uses se_c = sqrt(se^2 + se_ref^2); KS: two-sample distance to "
+               "the reference; ** where |bias| > 2 se_c or KS is above its 5%% critical value 1.36 sqrt(2/N) "
+               "(= %.4f at N = %llu). omega_dt is omega_max dt at the stiffest contact the scene may reach "
+               "(K_max dt/zeta for brownian); dt is reduced (unit 1/eta).\n\n",
+            S_USPR_START, S_USPR_START + 11.094265, (unsigned long long)N, (unsigned long long)N_bd, load0, load1,
+            S_REF_OMEGA_DT, 1.36 * sqrt(2.0 / (double)N), (unsigned long long)N);
+    for (int i = 0; i < n; i++)
+        if (!strcmp(rows[i].group, "options")) {
+            fprintf(f, "Group options: the core's speed options against plain gjf, from a start farther from the "
+                       "pull (u_spr = %.1f, y = %.1f) with its own gjf dt0/4 reference. Both act only in contact "
+                       "with y > y_near = %.2f (near_barrier_kT = its default): well_exact takes one exact step of "
+                       "the linearised contact well per sample interval, omega_dt_far a larger integrator step.\n\n",
+                    rows[i].uspr_start, rows[i].uspr_start + 11.094265, rows[i].y_near);
+            break;
+        }
     s_write_tables(f, rows, n);
     fprintf(f, "\n");
     s_write_reading(f, rows, n);
@@ -416,7 +533,7 @@ static FILE *s_open(const char *dir, const char *name)
     return f;
 }
 
-static int s_emit(const char *dir, const s_row *rows, int n, uint64_t N, uint64_t N_bd)
+static int s_emit(const char *dir, const s_row *rows, int n, uint64_t N, uint64_t N_bd, double load0, double load1)
 {
     FILE *f = s_open(dir, "work_precision.csv");
     if (!f)
@@ -425,9 +542,9 @@ static int s_emit(const char *dir, const s_row *rows, int n, uint64_t N, uint64_
     fclose(f);
     if (!(f = s_open(dir, "work_precision.md")))
         return -1;
-    s_write_md(f, rows, n, N, N_bd);
+    s_write_md(f, rows, n, N, N_bd, load0, load1);
     fclose(f);
-    s_write_md(stdout, rows, n, N, N_bd);
+    s_write_md(stdout, rows, n, N, N_bd, load0, load1);
     return 0;
 }
 
@@ -435,7 +552,7 @@ static int s_emit(const char *dir, const s_row *rows, int n, uint64_t N, uint64_
 
 #define S_MAX_ROWS 32
 
-static int s_plan(s_row *rows, uint64_t N, uint64_t N_bd)
+static int s_plan(s_row *rows, uint64_t N, uint64_t N_bd, const char *groups)
 {
     int n = 0;
     const struct {
@@ -446,29 +563,48 @@ static int s_plan(s_row *rows, uint64_t N, uint64_t N_bd)
         { &vafm_integrator_baoab, VAFM_NOISE_GAUSSIAN },
         { &vafm_integrator_paper_vv, VAFM_NOISE_UNIFORM },
     };
-    s_row base = { .group = "underdamped", .it = vafm_integrator_gjf, .noise = VAFM_NOISE_GAUSSIAN, .N = N };
-    rows[n] = base;
-    rows[n].omega_dt = S_REF_OMEGA_DT;
-    rows[n++].is_ref = 1;
-    for (size_t k = 0; k < sizeof under / sizeof under[0]; k++)
-        for (int d = 0; d < S_NDT; d++) {
-            rows[n] = base;
-            rows[n].it = *under[k].it;
-            rows[n].noise = under[k].noise;
-            rows[n++].omega_dt = s_omega_dts[d];
-        }
-    /* the adaptive step: the paper's step near the instability, a large one in the deep well before it */
-    rows[n] = base;
-    rows[n].omega_dt = S_PAPER_OMEGA_DT;
-    rows[n++].omega_dt_far = 1.0;
-    if (N_bd > 0) {
-        s_row bd = { .group = "overdamped", .it = vafm_integrator_brownian, .noise = VAFM_NOISE_GAUSSIAN, .N = N_bd };
+    const s_row ud = { .group = "underdamped", .it = vafm_integrator_gjf, .noise = VAFM_NOISE_GAUSSIAN,
+                       .uspr_start = S_USPR_START, .N = N };
+    if (strstr(groups, "underdamped")) {
+        rows[n] = ud;
+        rows[n].omega_dt = S_REF_OMEGA_DT;
+        rows[n++].is_ref = 1;
+        for (size_t k = 0; k < sizeof under / sizeof under[0]; k++)
+            for (int d = 0; d < S_NDT; d++) {
+                rows[n] = ud;
+                rows[n].it = *under[k].it;
+                rows[n].noise = under[k].noise;
+                rows[n++].omega_dt = s_omega_dts[d];
+            }
+    }
+    if (N_bd > 0 && strstr(groups, "overdamped")) {
+        const s_row bd = { .group = "overdamped", .it = vafm_integrator_brownian, .noise = VAFM_NOISE_GAUSSIAN,
+                           .uspr_start = S_USPR_START, .N = N_bd };
         rows[n] = bd;
         rows[n].omega_dt = S_REF_OMEGA_DT;
         rows[n++].is_ref = 1;
         for (int d = 0; d < S_NDT; d++) {
             rows[n] = bd;
             rows[n++].omega_dt = s_omega_dts[d];
+        }
+    }
+    if (strstr(groups, "options")) {
+        /* the core's speed options against plain gjf, from a start with room for them to act */
+        const struct {
+            double omega_dt, omega_dt_far;
+            int well_exact, is_ref;
+        } opt[] = {
+            { S_REF_OMEGA_DT, 0.0, 0, 1 }, { S_PAPER_OMEGA_DT, 0.0, 0, 0 }, { S_PAPER_OMEGA_DT, 1.0, 0, 0 },
+            { S_PAPER_OMEGA_DT, 0.0, 1, 0 }, { 0.6, 0.0, 0, 0 }, { 0.6, 0.0, 1, 0 },
+        };
+        for (size_t k = 0; k < sizeof opt / sizeof opt[0]; k++) {
+            rows[n] = ud;
+            rows[n].group = "options";
+            rows[n].uspr_start = S_USPR_START_FAR;
+            rows[n].omega_dt = opt[k].omega_dt;
+            rows[n].omega_dt_far = opt[k].omega_dt_far;
+            rows[n].well_exact = opt[k].well_exact;
+            rows[n++].is_ref = opt[k].is_ref;
         }
     }
     return n;
@@ -487,14 +623,15 @@ int main(int argc, char **argv)
     uint64_t N = argc > 2 ? s_parse_count(argv[2], S_N_DEFAULT) : S_N_DEFAULT;
     if (N < 2)
         N = 2;
-    uint64_t N_bd = argc > 3 ? s_parse_count(argv[3], N / 10) : N / 10;
+    uint64_t N_bd = argc > 3 ? s_parse_count(argv[3], N) : N;
     if (N_bd == 1)
         N_bd = 2;
+    const char *groups = argc > 4 ? argv[4] : "underdamped,overdamped,options";
     static s_row rows[S_MAX_ROWS];
-    int n = s_plan(rows, N, N_bd), rc = 0;
+    int n = s_plan(rows, N, N_bd, groups), rc = 0;
     fprintf(stderr, "work-precision: %d rows, N = %llu (overdamped N = %llu)\n", n, (unsigned long long)N,
             (unsigned long long)N_bd);
-    double t0 = s_clock_s(CLOCK_MONOTONIC);
+    double t0 = s_clock_s(CLOCK_MONOTONIC), load0 = s_loadavg();
     const s_row *ref = NULL;
     for (int i = 0; i < n && !rc; i++) {
         if (rows[i].is_ref)
@@ -503,7 +640,7 @@ int main(int argc, char **argv)
     }
     fprintf(stderr, "work-precision: %.0f s wall in all\n", s_clock_s(CLOCK_MONOTONIC) - t0);
     if (!rc)
-        rc = s_emit(dir, rows, n, N, N_bd);
+        rc = s_emit(dir, rows, n, N, N_bd, load0, s_loadavg());
     for (int i = 0; i < n; i++)
         s_row_free(&rows[i]);
     return rc ? 1 : 0;

@@ -1387,6 +1387,187 @@ static void test_kill_resume(void)
     ENSURE(s_files_eq(path, "t_h5_uninterrupted.h5", why, sizeof why));
 }
 
+/* Kills that land inside appends and flushes: a child appends small synthetic curves with a flush
+ * after each, and is killed 0–3 ms after its first flush, round after round. HDF5 writes a flush's
+ * metadata in place and in no crash-safe order; the journaling driver (h5_journal.c) must keep every
+ * file readable with every flushed curve, and the final file must equal the synthetic curves. */
+static void flush_child(const char *path, int resume, int fd)
+{
+    vafm_error e = { 0 };
+    vafm_h5_writer *w = NULL;
+    vafm_h5_writer_opts o;
+    vafm_h5_writer_opts_default(&o);
+    o.resume = resume;
+    o.overwrite = !resume;
+    vafm_params p;
+    s_fig4(&p);
+    if (vafm_h5_writer_open(&w, path, &o, &e) || vafm_h5_writer_set_provenance(w, &p, NULL, &e)) {
+        fprintf(stderr, "flush child: %s\n", e.message);
+        _exit(1);
+    }
+    for (uint64_t i = vafm_h5_writer_count(w);; i++) {
+        syn s;
+        syn_make(&s, 400, 0.05, i);
+        if (vafm_h5_writer_append(w, &s.c, &s.truth, &e) || vafm_h5_writer_flush(w, &e)) {
+            fprintf(stderr, "flush child: %s\n", e.message);
+            _exit(1);
+        }
+        syn_free(&s);
+        if (write(fd, &i, sizeof i) != (ssize_t)sizeof i)
+            _exit(1);
+    }
+}
+
+static void test_kill_during_flush(void)
+{
+    const char *path = "t_h5_killflush.h5";
+    remove(path);
+    vafm_error e = { 0 };
+    uint64_t flushed = 0;
+    int rounds = LONG_OR(80, 30), bad = 0;
+    for (int r = 0; r < rounds && !bad; r++) {
+        int pfd[2];
+        if (pipe(pfd))
+            break;
+        fflush(NULL);
+        pid_t pid = fork();
+        if (pid == 0) {
+            close(pfd[0]);
+            flush_child(path, r > 0, pfd[1]);
+        }
+        close(pfd[1]);
+        uint64_t idx;
+        if (read(pfd[0], &idx, sizeof idx) == (ssize_t)sizeof idx)
+            flushed = idx + 1;
+        struct timespec ts = { 0, (long)(s_unif() * 3e6) };
+        nanosleep(&ts, NULL);
+        kill(pid, SIGKILL);
+        while (read(pfd[0], &idx, sizeof idx) == (ssize_t)sizeof idx)
+            flushed = idx + 1;
+        close(pfd[0]);
+        int st = 0;
+        waitpid(pid, &st, 0);
+        ENSURE_MSG(WIFSIGNALED(st) && WTERMSIG(st) == SIGKILL, "round %d: child status %d", r, st);
+        vafm_h5_reader *rd = NULL;
+        int rc = vafm_h5_reader_open(&rd, path, &e);
+        ENSURE_MSG(rc == 0, "round %d: %s", r, e.message);
+        if (rc) {
+            bad = 1;
+            break;
+        }
+        ENSURE(vafm_h5_reader_count(rd) >= flushed);
+        vafm_h5_curve c;
+        vafm_h5_truth t;
+        if (flushed) {
+            rc = vafm_h5_reader_curve(rd, flushed - 1, &c, &e);
+            ENSURE_MSG(rc == 0, "round %d, curve %llu: %s", r, (unsigned long long)flushed - 1, e.message);
+            ENSURE(vafm_h5_reader_truth(rd, flushed - 1, &t) == 0);
+        }
+        vafm_h5_reader_destroy(&rd);
+    }
+    vafm_h5_writer_opts o;
+    vafm_h5_writer_opts_default(&o);
+    o.resume = 1;
+    vafm_h5_writer *w = NULL;
+    int rc = vafm_h5_writer_open(&w, path, &o, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    uint64_t n = vafm_h5_writer_count(w);
+    ENSURE(n >= flushed && n <= flushed + 1);
+    ENSURE(vafm_h5_writer_close(&w, &e) == 0);
+    ENSURE_MSG(vafm_h5_check(path, &e) == 0, "%s", e.message);
+    vafm_h5_reader *rd = NULL;
+    ENSURE(vafm_h5_reader_open(&rd, path, &e) == 0);
+    for (uint64_t i = 0; rd && i < n; i++) {
+        syn s;
+        syn_make(&s, 400, 0.05, i);
+        vafm_h5_curve c;
+        vafm_h5_truth t;
+        char why[200] = "";
+        rc = vafm_h5_reader_curve(rd, (size_t)i, &c, &e);
+        ENSURE_MSG(rc == 0 && s_curve_eq(&c, &s.c, 1, why, sizeof why), "curve %llu: %s %s", (unsigned long long)i,
+                   rc ? e.message : "", why);
+        ENSURE(vafm_h5_reader_truth(rd, i, &t) == 0 && s_truth_eq(&t, &s.truth));
+        syn_free(&s);
+    }
+    vafm_h5_reader_destroy(&rd);
+    fprintf(stderr, "  %d kills inside appends and flushes, %llu curves kept\n", rounds, (unsigned long long)n);
+}
+
+/* The journal step by step: a child dies at each step of a flush's commit (h5_journal.c). Before the
+ * trailer is complete the file holds the previous flush; after it, vafm replays the journal (a reader in
+ * memory, a resume on disk) and the file holds the new one. */
+extern int vafm_h5i_journal_crash_at;
+
+static void test_journal_steps(void)
+{
+    for (int step = 1; step <= 4; step++) {
+        char path[64];
+        snprintf(path, sizeof path, "t_h5_journal_%d.h5", step);
+        remove(path);
+        fflush(NULL);
+        pid_t pid = fork();
+        if (pid == 0) {
+            vafm_error e = { 0 };
+            vafm_h5_writer *w = NULL;
+            vafm_params p;
+            s_fig4(&p);
+            if (vafm_h5_writer_open(&w, path, NULL, &e) || vafm_h5_writer_set_provenance(w, &p, NULL, &e))
+                _exit(1);
+            for (uint64_t i = 0; i < 12; i++) {
+                syn s;
+                syn_make(&s, 300, 0.05, i);
+                if (vafm_h5_writer_append(w, &s.c, &s.truth, &e))
+                    _exit(1);
+                syn_free(&s);
+                if (i == 10 && vafm_h5_writer_flush(w, &e))
+                    _exit(1);
+            }
+            vafm_h5i_journal_crash_at = step; /* the next flush dies at this step */
+            vafm_h5_writer_flush(w, &e);
+            _exit(2);
+        }
+        int st = 0;
+        waitpid(pid, &st, 0);
+        ENSURE_MSG(WIFEXITED(st) && WEXITSTATUS(st) == 0, "step %d: child status %d", step, st);
+        size_t want = step == 1 ? 11 : 12;
+        vafm_error e = { 0 };
+        vafm_h5_reader *r = NULL;
+        int rc = vafm_h5_reader_open(&r, path, &e);
+        ENSURE_MSG(rc == 0, "step %d: %s", step, e.message);
+        vafm_h5_provenance pv = { 0 };
+        if (!rc)
+            vafm_h5_reader_provenance(r, &pv);
+        ENSURE_MSG(!rc && vafm_h5_reader_count(r) >= want && pv.truth_rows == want, "step %d: %zu curves, %zu rows",
+                   step, r ? vafm_h5_reader_count(r) : 0, pv.truth_rows);
+        for (size_t i = 0; !rc && i < want; i++) {
+            vafm_h5_curve c;
+            int rr = vafm_h5_reader_curve(r, i, &c, &e);
+            ENSURE_MSG(rr == 0, "step %d curve %zu: %s", step, i, e.message);
+        }
+        vafm_h5_reader_destroy(&r);
+        vafm_h5_writer_opts o;
+        vafm_h5_writer_opts_default(&o);
+        o.resume = 1;
+        vafm_h5_writer *w = NULL;
+        rc = vafm_h5_writer_open(&w, path, &o, &e);
+        ENSURE_MSG(rc == 0 && vafm_h5_writer_count(w) == want, "step %d: resume %s", step, e.message);
+        ENSURE(vafm_h5_writer_close(&w, &e) == 0);
+        ENSURE_MSG(vafm_h5_check(path, &e) == 0, "step %d: %s", step, e.message);
+        /* after the resume the file is plain HDF5 again: HDF5's own driver reads it */
+        hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+        ENSURE(f >= 0);
+        hsize_t n = 0;
+        if (f >= 0) {
+            H5Gget_info_by_name(f, "/", &(H5G_info_t){ 0 }, H5P_DEFAULT);
+            H5G_info_t gi;
+            if (H5Gget_info(f, &gi) >= 0)
+                n = gi.nlinks;
+            H5Fclose(f);
+        }
+        ENSURE(n == want);
+    }
+}
+
 /* A writer destroyed without close (what a crash leaves, minus the kill): the flushed curves and their
  * rows survive, the unflushed trailing curve is dropped on resume. */
 static void test_resume_trailing(void)
@@ -1465,8 +1646,10 @@ int main(int argc, char **argv)
     S_RUN(test_bad_files);
     S_RUN(test_writer_refusals);
     S_RUN(test_resume_trailing);
+    S_RUN(test_journal_steps);
     S_RUN(test_campaign_roundtrip);
     S_RUN(test_damaged_files);
     S_RUN(test_kill_resume);
+    S_RUN(test_kill_during_flush);
     return harness_done();
 }

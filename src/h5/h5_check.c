@@ -159,6 +159,11 @@ static int s_dataset(s_ctx *x, hid_t g, const char *gname, const char *name, int
         vafm_h5i_err(x->err, rc = VAFM_ENOMEM, obj, "%s: %s: out of memory", x->path, obj);
         goto done;
     }
+    if (vafm_h5i_storage_complete(o, dim)) {
+        vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L2] %s: %s: part of the data has no storage (damaged chunk index)",
+                     x->path, obj);
+        goto done;
+    }
     if (H5Dread(o, c->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, *data) < 0) {
         vafm_h5i_err_hdf5(x->err, rc = VAFM_EFORMAT, obj, "[L2] %s: %s: data cannot be read (damaged)", x->path, obj);
         goto done;
@@ -443,9 +448,19 @@ static int s_check(s_ctx *x)
     }
     if (H5Fis_hdf5(path) <= 0)
         FAIL("L2", "", "not an HDF5 file");
-    x->file = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+    if (fapl >= 0 && vafm_h5i_fapl_journal(fapl)) {
+        H5Pclose(fapl);
+        fapl = -1;
+    }
+    x->file = H5Fopen(path, H5F_ACC_RDONLY, fapl >= 0 ? fapl : H5P_DEFAULT);
+    if (fapl >= 0)
+        H5Pclose(fapl);
     if (x->file < 0)
         FAIL_H5("L2", "", "damaged HDF5 file");
+    char why[200];
+    if (vafm_h5i_gheap_check(x->file, path, why, sizeof why))
+        FAIL("L2", "", "%s", why);
     int rc;
     char *s = NULL;
     if ((rc = s_vlen_str(x, "L3", x->file, "/", "software", &s)))

@@ -4,11 +4,14 @@
  * channels, the ground-truth row type, attribute input/output, HDF5 error capture and value rules.
  */
 #include <ctype.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "h5/h5_internal.h"
 
@@ -321,10 +324,10 @@ int vafm_h5i_attr_get(hid_t loc, const char *name, vafm_h5i_val *v)
                 goto done;
             v->s = calloc(1, v->size + 1);
             mt = H5Tcopy(H5T_C_S1);
-            if (!v->s || mt < 0 || H5Tset_size(mt, v->size) < 0 || H5Tset_strpad(mt, H5T_STR_NULLTERM) < 0)
-                goto done;
-            /* read raw bytes: a NULLPAD/SPACEPAD string is converted to NULLTERM by HDF5 */
-            if (H5Tset_size(mt, v->size + 1) < 0 || H5Aread(a, mt, v->s) < 0)
+            /* one byte more than stored, NUL-terminated: HDF5 converts NULLPAD/SPACEPAD strings; the
+             * character set must match, HDF5 does not convert between ASCII and UTF-8 */
+            if (!v->s || mt < 0 || H5Tset_size(mt, v->size + 1) < 0 || H5Tset_strpad(mt, H5T_STR_NULLTERM) < 0 ||
+                H5Tset_cset(mt, v->cset) < 0 || H5Aread(a, mt, v->s) < 0)
                 goto done;
         }
         if (!v->s)
@@ -653,4 +656,145 @@ const char *vafm_h5i_rule_tip(const double *tip, const double *hm, const double 
         }
     }
     return NULL;
+}
+
+/* ---- defences ------------------------------------------------------------------------------------- */
+
+static uint64_t s_le(const unsigned char *p, int n)
+{
+    uint64_t v = 0;
+    for (int i = n - 1; i >= 0; i--)
+        v = v << 8 | p[i];
+    return v;
+}
+
+/* Validate the collection at byte pos (its signature already seen). @return 0 valid or not a collection
+ * (HDF5 refuses a wrong version by itself), −1 damaged. */
+static int s_rd(int fd, const char *path, void **jstate, unsigned char *buf, size_t n, uint64_t off)
+{
+    /* what HDF5 will see: the file, with a journal left by a killed flush overlaid */
+    if (pread(fd, buf, n, (off_t)off) != (ssize_t)n)
+        return -1;
+    return vafm_h5i_journal_overlay(path, buf, off, n, jstate);
+}
+
+static int s_gcol(int fd, const char *path, void **js, uint64_t pos, uint64_t fsize, char *why, size_t len)
+{
+    unsigned char h[16];
+    if (pos + 16 > fsize || s_rd(fd, path, js, h, 16, pos) || memcmp(h, "GCOL", 4) || h[4] != 1)
+        return 0;
+    uint64_t size = s_le(h + 8, 8);
+    if (size < 16 || size > fsize - pos) {
+        snprintf(why, len, "global heap collection at byte %llu claims %llu bytes, past the end of the file",
+                 (unsigned long long)pos, (unsigned long long)size);
+        return -1;
+    }
+    unsigned char *c = malloc((size_t)size);
+    if (!c || s_rd(fd, path, js, c, (size_t)size, pos)) {
+        free(c);
+        snprintf(why, len, "global heap collection at byte %llu cannot be read", (unsigned long long)pos);
+        return -1;
+    }
+    int rc = 0;
+    uint64_t p = 16, prev = 0;
+    while (p < size) {
+        if (p + 16 > size)
+            break; /* a tail too small for an object header is free space */
+        uint64_t idx = s_le(c + p, 2), osize = s_le(c + p + 8, 8), need;
+        if (idx == 0) {
+            need = osize; /* free space, header included; it comes last */
+            if (need < 16 || need != size - p) {
+                rc = -1;
+                break;
+            }
+        } else {
+            if (osize > size || idx <= prev) {
+                rc = -1;
+                break;
+            }
+            need = 16 + ((osize + 7) & ~(uint64_t)7);
+            if (need > size - p) {
+                rc = -1;
+                break;
+            }
+            prev = idx;
+        }
+        p += need;
+    }
+    if (rc)
+        snprintf(why, len, "global heap collection at byte %llu (variable-length strings) is damaged: object at offset %llu",
+                 (unsigned long long)pos, (unsigned long long)p);
+    free(c);
+    return rc;
+}
+
+int vafm_h5i_gheap_check(hid_t file, const char *path, char *why, size_t len)
+{
+    haddr_t eoa = HADDR_UNDEF;
+    if (H5Fget_eoa(file, &eoa) < 0 || eoa == HADDR_UNDEF)
+        return -2;
+    int fd = open(path, O_RDONLY);
+    struct stat st;
+    if (fd < 0 || fstat(fd, &st)) {
+        if (fd >= 0)
+            close(fd);
+        return -2;
+    }
+    uint64_t fsize = (uint64_t)st.st_size < (uint64_t)eoa ? (uint64_t)st.st_size : (uint64_t)eoa;
+    enum { BLK = 1 << 20 };
+    unsigned char *b = malloc(BLK + 4);
+    int rc = b ? 0 : -2;
+    void *js = NULL;
+    for (uint64_t off = 0; !rc && off < fsize; off += BLK) {
+        size_t want = (size_t)(fsize - off < BLK + 3 ? fsize - off : BLK + 3);
+        if (s_rd(fd, path, &js, b, want, off)) {
+            rc = -2;
+            break;
+        }
+        ssize_t got = (ssize_t)want;
+        /* signatures starting in this block (the 3 extra bytes catch one that straddles blocks) */
+        const unsigned char *p = b, *end = b + got;
+        while (!rc && (p = memmem(p, (size_t)(end - p), "GCOL", 4)) != NULL) {
+            uint64_t at = off + (uint64_t)(p - b);
+            if (p - b >= BLK)
+                break;
+            rc = s_gcol(fd, path, &js, at, fsize, why, len);
+            p++;
+        }
+    }
+    vafm_h5i_journal_overlay(path, NULL, 0, 0, &js);
+    free(b);
+    close(fd);
+    return rc;
+}
+
+int vafm_h5i_storage_complete(hid_t d, hsize_t n)
+{
+    hid_t dcpl = H5Dget_create_plist(d);
+    if (dcpl < 0)
+        return -1;
+    int rc = 0;
+    H5D_layout_t layout = H5Pget_layout(dcpl);
+    if (layout == H5D_CHUNKED) {
+        hsize_t c = 0;
+        if (H5Pget_chunk(dcpl, 1, &c) != 1 || c == 0) {
+            rc = -1;
+        } else {
+            for (hsize_t off = 0; off < n && !rc; off += c) {
+                unsigned mask = 0;
+                haddr_t addr = HADDR_UNDEF;
+                hsize_t size = 0;
+                if (H5Dget_chunk_info_by_coord(d, &off, &mask, &addr, &size) < 0 || addr == HADDR_UNDEF || mask != 0 ||
+                    size == 0)
+                    rc = -1;
+            }
+        }
+    } else if (layout == H5D_CONTIGUOUS) {
+        if (n > 0 && H5Dget_offset(d) == HADDR_UNDEF)
+            rc = -1;
+    } else if (layout != H5D_COMPACT) {
+        rc = -1; /* virtual datasets point into other files */
+    }
+    H5Pclose(dcpl);
+    return rc;
 }

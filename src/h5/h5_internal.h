@@ -11,21 +11,20 @@
  * fixed-length ones as bytes (then "imaging mode" never equals "force-distance" and the file is not
  * detected). So every string vafm writes is a scalar variable-length UTF-8 string, like h5py's.
  *
- * Durability without a journal. HDF5 has none, and SWMR forbids creating groups, so a kill -9 is
- * survived by construction instead:
+ * Durability. HDF5 has no journal and SWMR forbids creating groups, so vafm adds one underneath:
  *  - the file format is pinned to the 1.8 format (libver bounds V18..V18): checksummed superblock v2,
- *    object headers and dense link/attribute storage, so damage is detected, and no superblock v3
+ *    object headers and dense link/attribute storage, so damage is detected, and no superblock-v3
  *    "file is open for write" flag that would lock a killed file until h5clear;
- *  - raw data are written when a curve is appended (to space past the last flush's end of file; the
- *    sec2 driver keeps raw data and metadata in separate free lists, so freed metadata is never
- *    overwritten by raw data before the next flush);
- *  - metadata stay in HDF5's cache until vafm_h5_writer_flush(), which writes them and the superblock;
+ *  - a journaling file driver (h5_journal.c) makes each H5Fflush atomic for a killed process: writes
+ *    into the last flushed state are buffered, journaled at the end of the file, applied, and the
+ *    journal cut off; a complete journal left by a kill is replayed when vafm opens the file;
  *  - the ground truth of the curves appended since the last flush goes into one new root attribute
- *    ("vafm ground truth from <first>") written in the same flush, so a curve counts as complete only
- *    with its row. Resume keeps the longest prefix 0..c−1 of groups that pass the layout check and have
- *    a row (the last ones are also read back through their Fletcher-32 checksums), deletes the rest and
- *    merges the rows into "vafm ground truth"; a clean close merges them too.
- * The window left is a kill during H5Fflush itself (tens of microseconds per flush).
+ *    ("vafm ground truth from <first>") in the same flush, so a curve counts as complete only with its
+ *    row. Resume keeps the longest prefix 0..c−1 of groups that pass the layout check and have a row
+ *    (the last two are read back through their Fletcher-32 checksums), deletes the rest and merges the
+ *    rows into "vafm ground truth"; a clean close merges them too.
+ * Damage HDF5 1.10 does not catch by itself (global heap, v1 chunk index) is caught before HDF5 trips
+ * over it (vafm_h5i_gheap_check, vafm_h5i_storage_complete).
  */
 #ifndef VAFM_H5_INTERNAL_H
 #define VAFM_H5_INTERNAL_H
@@ -175,6 +174,39 @@ const char *vafm_h5i_rule_time(const double *t, size_t n, size_t *at);
 const char *vafm_h5i_rule_tip(const double *tip, const double *hm, const double *f, double k, size_t n,
                               size_t *at);
 const char *vafm_h5i_rule_finite(const double *x, size_t n, size_t *at);
+
+/* ---- the journaling file driver (h5_journal.c) ----------------------------------------------------- */
+
+/** Use the journaling driver on a file access property list (writer, reader, checker): flushes become
+ *  atomic for a killed process, and a journal left by one is replayed on open. @return 0 or −1. */
+int vafm_h5i_fapl_journal(hid_t fapl);
+
+/** Overlay the pages of a complete journal left at the end of `path` (if any) on buf = file[off, off+n).
+ *  *state caches the journal between calls (start with NULL); call with n == 0 to free it. */
+int vafm_h5i_journal_overlay(const char *path, unsigned char *buf, uint64_t off, size_t n, void **state);
+
+/** Test hook (tests/test_h5.c only): die at step 1–4 of the next commit (h5_journal.c). */
+extern int vafm_h5i_journal_crash_at;
+
+/* ---- defences against damage HDF5 1.10 does not detect ------------------------------------------- */
+
+/**
+ * Validate every global-heap collection ("GCOL") of a file before HDF5 parses one. Variable-length
+ * strings live there, without a checksum, and HDF5 1.10 trusts the object sizes and indices it finds
+ * (it asserts instead of checking, then copies out of bounds). The scan mirrors HDF5's parse: objects
+ * must lie inside their collection, indices increase, free space comes last. Only the file's allocated
+ * space (HDF5's end of allocation of the open file) is scanned: past it lie bytes of a killed writer that
+ * HDF5 never reads. Cost: one pass over the file. @return 0, or −1 with a reason in why (a damaged
+ * collection), or −2 (the file cannot be read).
+ */
+int vafm_h5i_gheap_check(hid_t file, const char *path, char *why, size_t len);
+
+/**
+ * Every element of a 1-D dataset has storage: a damaged (unchecksummed) v1 B-tree chunk index can lose
+ * a chunk or clear its filter mask, and HDF5 then returns fill values or unfiltered bytes without an
+ * error. @return 0 or −1.
+ */
+int vafm_h5i_storage_complete(hid_t d, hsize_t n);
 
 /* ---- reading one curve group (reader, writer's resume) -------------------------------------------- */
 

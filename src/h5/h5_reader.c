@@ -356,6 +356,10 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
             buf->cap[ci] = need;
         }
         void *dst = c->is_segment ? (void *)buf->seg : (void *)buf->d[ci];
+        if (vafm_h5i_storage_complete(o, (hsize_t)*n)) {
+            vafm_h5i_err(err, rc, obj, "%s: %s: part of the data has no storage (damaged chunk index)", path, obj);
+            goto done;
+        }
         if (*n && H5Dread(o, c->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT,
                           dst) < 0) {
             vafm_h5i_err_hdf5(err, rc, obj, "%s: %s: data cannot be read (damaged file or checksum mismatch)", path, obj);
@@ -607,14 +611,22 @@ static int s_reader_open(vafm_h5_reader *r, const char *path, vafm_error *err)
         return VAFM_EFORMAT;
     }
     hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
-    if (fapl >= 0)
-        H5Pset_fclose_degree(fapl, H5F_CLOSE_STRONG);
+    if (fapl >= 0 && (H5Pset_fclose_degree(fapl, H5F_CLOSE_STRONG) < 0 || vafm_h5i_fapl_journal(fapl))) {
+        H5Pclose(fapl);
+        fapl = -1;
+    }
     r->file = H5Fopen(path, H5F_ACC_RDONLY, fapl >= 0 ? fapl : H5P_DEFAULT);
     if (fapl >= 0)
         H5Pclose(fapl);
     if (r->file < 0) {
         vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "", "%s: damaged or truncated HDF5 file, cannot be opened", path);
         return VAFM_EFORMAT;
+    }
+    char why[200];
+    int g = vafm_h5i_gheap_check(r->file, path, why, sizeof why);
+    if (g) {
+        vafm_h5i_err(err, g == -1 ? VAFM_EFORMAT : VAFM_EIO, "", "%s: %s", path, g == -1 ? why : "cannot be read");
+        return g == -1 ? VAFM_EFORMAT : VAFM_EIO;
     }
     int rc;
     if ((rc = s_root_string(r->file, path, "software", 1, &r->software, err)) ||

@@ -57,7 +57,7 @@ static hid_t s_fapl(void)
     /* 1.8 format: checksummed metadata, and no superblock-v3 "open for write" flag that would keep a
      * killed file locked until h5clear (h5_internal.h) */
     if (H5Pset_libver_bounds(fapl, H5F_LIBVER_V18, H5F_LIBVER_V18) < 0 ||
-        H5Pset_fclose_degree(fapl, H5F_CLOSE_STRONG) < 0) {
+        H5Pset_fclose_degree(fapl, H5F_CLOSE_STRONG) < 0 || vafm_h5i_fapl_journal(fapl)) {
         H5Pclose(fapl);
         return -1;
     }
@@ -260,6 +260,11 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
         H5Pclose(fapl);
     if (w->file < 0) {
         vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "", "%s: cannot be resumed: damaged HDF5 file", w->path);
+        return VAFM_EFORMAT;
+    }
+    char why[200];
+    if (vafm_h5i_gheap_check(w->file, w->path, why, sizeof why)) {
+        vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: cannot be resumed: %s", w->path, why);
         return VAFM_EFORMAT;
     }
     char *fmt = NULL;
@@ -641,7 +646,7 @@ static int s_check_curve(const vafm_h5_writer *w, const vafm_h5_curve *c, const 
 static int s_write_channel(vafm_h5_writer *w, hid_t g, const vafm_h5i_chan *ch, const void *data, size_t n)
 {
     hsize_t dim = n;
-    hid_t sp = H5Screate_simple(1, &dim, NULL), dcpl = H5Pcreate(H5P_DATASET_CREATE), d = -1;
+    hid_t sp = H5Screate_simple(1, &dim, NULL), dcpl = H5Pcreate(H5P_DATASET_CREATE), dapl = -1, d = -1;
     int rc = -1;
     if (sp < 0 || dcpl < 0)
         goto done;
@@ -656,7 +661,11 @@ static int s_write_channel(vafm_h5_writer *w, hid_t g, const vafm_h5i_chan *ch, 
         if (w->o.fletcher32 && H5Pset_fletcher32(dcpl) < 0)
             goto done;
     }
-    d = H5Dcreate2(g, ch->name, ch->is_segment ? H5T_STD_U8LE : H5T_IEEE_F64LE, sp, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    /* no chunk cache: the one chunk is written once, straight through the filters */
+    dapl = H5Pcreate(H5P_DATASET_ACCESS);
+    if (dapl < 0 || H5Pset_chunk_cache(dapl, 0, 0, 1.0) < 0)
+        goto done;
+    d = H5Dcreate2(g, ch->name, ch->is_segment ? H5T_STD_U8LE : H5T_IEEE_F64LE, sp, H5P_DEFAULT, dcpl, dapl);
     if (d < 0)
         goto done;
     if (H5Dwrite(d, ch->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0)
@@ -667,6 +676,8 @@ static int s_write_channel(vafm_h5_writer *w, hid_t g, const vafm_h5i_chan *ch, 
 done:
     if (d >= 0 && H5Dclose(d) < 0)
         rc = -1;
+    if (dapl >= 0)
+        H5Pclose(dapl);
     if (dcpl >= 0)
         H5Pclose(dcpl);
     if (sp >= 0)
