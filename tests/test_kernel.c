@@ -275,6 +275,68 @@ static void test_well_vs_plain_dwell(void)
     ENSURE_MSG(fabs(v1 / v0 - 1.0) <= 5.0 * sr, "dwell force variance ratio %.5f, 5 sigma = %.3g", v1 / v0, 5.0 * sr);
 }
 
+typedef struct s_tipacc {
+    double sum, sum2;
+    long n;
+} s_tipacc;
+
+static int s_collect_tip(void *user, const vafm_samples *blk)
+{
+    s_tipacc *a = user;
+    for (size_t i = 0; i < blk->n; i++)
+        if (blk->segment[i] == VAFM_SEG_DWELL) {
+            a->sum += blk->tip_m[i];
+            a->sum2 += blk->tip_m[i] * blk->tip_m[i];
+            a->n++;
+        }
+    return 0;
+}
+
+/* The contact friction channel (eta_cont, the paper's Γ_cont) obeys the fluctuation–dissipation
+ * theorem on its own: in a held contact, the tip's variance is k_BT/K_tot (K_tot = k + dF/du at the
+ * equilibrium) with or without it. k_BT̃ = 1e-4 keeps the anharmonic correction (~F″σ/K ≈ 1e-3) below
+ * the statistical error. Point samples every 2 /η; N = LONG_OR(20000, 4000) each, σ(var)/var = √(2/N)
+ * (samples decorrelate within 2/η_tot), 5σ bounds. A missing contact-channel noise would give the
+ * factor η/(η + η_cont) = 1/5. */
+static void test_contact_channel_fdt(void)
+{
+    const int N = LONG_OR(20000, 4000);
+    const double eta_c[2] = { 0.0, 4.0 };
+    for (int j = 0; j < 2; j++) {
+        vafm_params p;
+        vafm_params_preset(&p, "paper-fig4", NULL);
+        vafm_reduced r;
+        vafm_units_reduce(&p, &r);
+        r.kT = 1e-4;
+        r.eta_cont = eta_c[j];
+        vafm_units_from_reduced(&p, &r);
+        vafm_scale sc = vafm_units_scale(&p);
+        p.trigger = VAFM_TRIGGER_HEIGHT;
+        p.start_height_m = -1.0 * sc.length_m;
+        p.trigger_height_m = p.start_height_m - 1e-6 * sc.length_m;
+        p.antialias = VAFM_ANTIALIAS_POINT;
+        p.dwell_s = N / p.sample_rate_Hz;
+        vafm_sim *s = NULL;
+        vafm_curve_result res;
+        s_tipacc a = { 0.0, 0.0, 0 };
+        ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+        ENSURE(vafm_sim_curve(s, 7, s_collect_tip, &a, &res) == 0);
+        vafm_sim_destroy(&s);
+        double mean = a.sum / a.n, var = a.sum2 / a.n - mean * mean;
+        /* equilibrium at u_spr = 1 (pressed 1 R): K_tot = k + dF/du there */
+        double ueq, Feq;
+        ENSURE(vafm_theory_equilibrium(r.gamma, r.k, 1.0, &ueq, &Feq) == 0);
+        vafm_contact c;
+        vafm_contact_init(&c, vafm_contact_jkr, r.gamma);
+        vafm_contact_eval ev;
+        ENSURE(vafm_contact_eval_at(&c, ueq, &ev) == 0);
+        double expect = r.kT / (r.k + ev.dFdu) * sc.length_m * sc.length_m;
+        ENSURE_MSG(fabs(var / expect - 1.0) <= 5.0 * sqrt(2.0 / a.n), "eta_cont %g: var/expected %.4f (5 sigma %.3f)",
+                   eta_c[j], var / expect, 5.0 * sqrt(2.0 / a.n));
+        ENSURE_REL(-mean / sc.length_m, ueq, 1e-2);
+    }
+}
+
 int main(void)
 {
     RUN_TEST(test_table_accuracy);
@@ -283,5 +345,6 @@ int main(void)
     RUN_TEST(test_start_in_contact);
     RUN_TEST(test_well3_closed_form);
     RUN_TEST(test_well_vs_plain_dwell);
+    RUN_TEST(test_contact_channel_fdt);
     return harness_done();
 }
