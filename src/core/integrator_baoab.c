@@ -20,24 +20,22 @@ static long s_run(vafm_kernel *K, long n)
     const vafm_jkr_table *jtab = K->jtab;
     vafm_khot h;
     s_khot_load(K, &h);
-    double w = K->w;
     long i = 0;
     while (i < n) {
         const vafm_kcoef *c = &K->co[h.in_contact];
         const double vref = K->v_spr / c->eta_tot;
-        w += half_dt_m * h.f;
-        h.u += half_dt * w;
-        w = vref + c->ou_c1 * (w - vref);
+        h.w += half_dt_m * h.f;
+        h.u += half_dt * h.w;
+        h.w = vref + c->ou_c1 * (h.w - vref);
         if (thermal)
-            w += c->ou_c3 * s_kernel_noise(K);
-        h.u += half_dt * w;
+            h.w += c->ou_c3 * s_kernel_noise(K);
+        h.u += half_dt * h.w;
         s_khot_post_move(K, jtab, &h);
-        w += half_dt_m * h.f;
+        h.w += half_dt_m * h.f;
         i++;
         if (h.event)
             break;
     }
-    K->w = w;
     s_khot_store(K, &h, i);
     return i;
 }

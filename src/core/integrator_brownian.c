@@ -19,7 +19,6 @@ static long s_run(vafm_kernel *K, long n)
     const vafm_jkr_table *jtab = K->jtab;
     vafm_khot h;
     s_khot_load(K, &h);
-    double w = K->w;
     long i = 0;
     while (i < n) {
         const vafm_kcoef *c = &K->co[h.in_contact];
@@ -27,13 +26,12 @@ static long s_run(vafm_kernel *K, long n)
         if (thermal)
             du += c->bd_sig * s_kernel_noise(K);
         h.u += du;
-        w = du * inv_dt;
+        h.w = du * inv_dt;
         s_khot_post_move(K, jtab, &h);
         i++;
         if (h.event)
             break;
     }
-    K->w = w;
     s_khot_store(K, &h, i);
     return i;
 }

@@ -22,20 +22,18 @@ static long s_run(vafm_kernel *K, long n)
     const vafm_jkr_table *jtab = K->jtab;
     vafm_khot h;
     s_khot_load(K, &h);
-    double w = K->w;
     long i = 0;
     while (i < n) {
         const vafm_kcoef *c = &K->co[h.in_contact];
         const double f = h.f + drift;
         const double beta = thermal ? c->gjf_sig * s_kernel_noise(K) : 0.0;
-        h.u += c->gjf_b * (dt * w + half_dt_m * dt * f + half_dt_m * beta);
+        h.u += c->gjf_b * (dt * h.w + half_dt_m * dt * f + half_dt_m * beta);
         s_khot_post_move(K, jtab, &h);
-        w = c->gjf_a * w + half_dt_m * (c->gjf_a * f + h.f + drift) + c->gjf_b * inv_m * beta;
+        h.w = c->gjf_a * h.w + half_dt_m * (c->gjf_a * f + h.f + drift) + c->gjf_b * inv_m * beta;
         i++;
         if (h.event)
             break;
     }
-    K->w = w;
     s_khot_store(K, &h, i);
     return i;
 }

@@ -31,19 +31,17 @@ static long s_run(vafm_kernel *K, long n)
     const vafm_jkr_table *jtab = K->jtab;
     vafm_khot h;
     s_khot_load(K, &h);
-    double w = K->w;
     long i = 0;
     while (i < n) {
-        w += half_dt_m * h.f; /* h.f holds the total force of the last evaluation */
-        h.u += dt * w;
+        h.w += half_dt_m * h.f; /* h.f holds the total force of the last evaluation */
+        h.u += dt * h.w;
         s_khot_post_move(K, jtab, &h);
-        h.f = s_total(K, &K->co[h.in_contact], h.f, w);
-        w += half_dt_m * h.f;
+        h.f = s_total(K, &K->co[h.in_contact], h.f, h.w);
+        h.w += half_dt_m * h.f;
         i++;
         if (h.event)
             break;
     }
-    K->w = w;
     s_khot_store(K, &h, i);
     return i;
 }

@@ -79,7 +79,7 @@ static inline double s_kernel_noise(vafm_kernel *K)
  * compiler would otherwise store and reload every field each step). */
 typedef struct vafm_khot {
     int64_t n;
-    double u, u_spr, s, Fc, f;
+    double u, w, u_spr, s, Fc, f;
     double acc_u, acc_uspr, fs_min;
     long acc_n;
     int in_contact, event;
@@ -90,6 +90,7 @@ static inline void s_khot_load(const vafm_kernel *K, vafm_khot *h)
 {
     h->n = K->n;
     h->u = K->u;
+    h->w = K->w;
     h->u_spr = K->u_spr;
     h->s = K->s;
     h->Fc = K->Fc;
@@ -108,6 +109,7 @@ static inline void s_khot_store(vafm_kernel *K, const vafm_khot *h, long steps)
     K->n = h->n;
     K->t = K->t0 + (double)h->n * K->dt;
     K->u = h->u;
+    K->w = h->w;
     K->u_spr = h->u_spr;
     K->s = h->s;
     K->Fc = h->Fc;
