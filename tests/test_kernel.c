@@ -213,7 +213,9 @@ static void test_well3_closed_form(void)
  * paper-fig4 (k̃ 0.1, k_BT̃ 0.01), pressed in 1 R, dwell of N_s samples of 20 time units each (10× the
  * well's relaxation time 2/η, so samples are independent). Means agree within 5 standard errors of the
  * difference; variances within 5σ of their ratio (σ ≈ √(2/N_s) each). */
+/* Sums of one channel over the dwell samples. */
 typedef struct s_acc {
+    int tip; /* 0: force_N, 1: tip_m */
     double sum, sum2;
     long n;
 } s_acc;
@@ -221,10 +223,11 @@ typedef struct s_acc {
 static int s_collect_dwell(void *user, const vafm_samples *blk)
 {
     s_acc *a = user;
+    const double *x = a->tip ? blk->tip_m : blk->force_N;
     for (size_t i = 0; i < blk->n; i++)
         if (blk->segment[i] == VAFM_SEG_DWELL) {
-            a->sum += blk->force_N[i];
-            a->sum2 += blk->force_N[i] * blk->force_N[i];
+            a->sum += x[i];
+            a->sum2 += x[i] * x[i];
             a->n++;
         }
     return 0;
@@ -245,7 +248,7 @@ static void s_dwell_stats(int well, int n_samples, double *mean, double *var, lo
     p.dwell_s = n_samples / p.sample_rate_Hz;
     vafm_sim *s = NULL;
     vafm_curve_result res;
-    s_acc a = { 0.0, 0.0, 0 };
+    s_acc a = { 0, 0.0, 0.0, 0 };
     ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
     ENSURE(vafm_sim_curve(s, 3, s_collect_dwell, &a, &res) == 0);
     vafm_sim_destroy(&s);
@@ -275,23 +278,6 @@ static void test_well_vs_plain_dwell(void)
     ENSURE_MSG(fabs(v1 / v0 - 1.0) <= 5.0 * sr, "dwell force variance ratio %.5f, 5 sigma = %.3g", v1 / v0, 5.0 * sr);
 }
 
-typedef struct s_tipacc {
-    double sum, sum2;
-    long n;
-} s_tipacc;
-
-static int s_collect_tip(void *user, const vafm_samples *blk)
-{
-    s_tipacc *a = user;
-    for (size_t i = 0; i < blk->n; i++)
-        if (blk->segment[i] == VAFM_SEG_DWELL) {
-            a->sum += blk->tip_m[i];
-            a->sum2 += blk->tip_m[i] * blk->tip_m[i];
-            a->n++;
-        }
-    return 0;
-}
-
 /* The contact friction channel (eta_cont, the paper's Γ_cont) obeys the fluctuation–dissipation
  * theorem on its own: in a held contact, the tip's variance is k_BT/K_tot (K_tot = k + dF/du at the
  * equilibrium) with or without it. k_BT̃ = 1e-4 keeps the anharmonic correction (~F″σ/K ≈ 1e-3) below
@@ -318,9 +304,9 @@ static void test_contact_channel_fdt(void)
         p.dwell_s = N / p.sample_rate_Hz;
         vafm_sim *s = NULL;
         vafm_curve_result res;
-        s_tipacc a = { 0.0, 0.0, 0 };
+        s_acc a = { 1, 0.0, 0.0, 0 };
         ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-        ENSURE(vafm_sim_curve(s, 7, s_collect_tip, &a, &res) == 0);
+        ENSURE(vafm_sim_curve(s, 7, s_collect_dwell, &a, &res) == 0);
         vafm_sim_destroy(&s);
         double mean = a.sum / a.n, var = a.sum2 / a.n - mean * mean;
         /* equilibrium at u_spr = 1 (pressed 1 R): K_tot = k + dF/du there */
