@@ -168,7 +168,8 @@ static int s_on_curve(void *user, const vafm_campaign_curve *c)
     s_collect *col = user;
     s_row *r = col->row;
     const vafm_curve_result *res = &c->result;
-    const int bad_flags = VAFM_CURVE_NO_CONTACT | VAFM_CURVE_EARLY_DETACH | VAFM_CURVE_NO_DETACH | VAFM_CURVE_NO_TRIGGER;
+    const int bad_flags =
+        VAFM_CURVE_NO_CONTACT | VAFM_CURVE_EARLY_DETACH | VAFM_CURVE_NO_DETACH | VAFM_CURVE_NO_TRIGGER;
     double o[S_NOBS] = { res->pulloff_spring_N / col->F_jkr_N, res->detach_force_N / col->F_jkr_N };
     int ok = c->status == 0 && !(res->flags & bad_flags) && isfinite(o[0]) && isfinite(o[1]);
     if (c->status)
@@ -464,7 +465,8 @@ static void s_write_reading(FILE *f, const s_row *rows, int n)
             s_write_largest_dt(f, rows, n, groups[g]);
         if (best) {
             s_label(best, lab, sizeof lab);
-            fprintf(f, "The cheapest within %.0f standard errors on both observables is %s (%s noise) at omega_dt = %s: "
+            fprintf(f, "The cheapest within %.0f standard errors on both observables is %s (%s noise) at omega_dt = "
+                       "%s: "
                        "%.1f CPU s for %llu curves",
                     S_Z_OK, best->it->name, s_noise_name(best->noise), lab, best->cpu_s, (unsigned long long)best->N);
             if (base && base != best)

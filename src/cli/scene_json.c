@@ -5,8 +5,10 @@
  * (%.17g for reals), which is what makes `vafm params --json` → --scene an exact round trip.
  * JSON types are checked per parameter kind first: a string where a number belongs is an error here,
  * not a silent conversion.
+ * The same code reads the scene and the campaign grid that vafm stores in its HDF5 files (vafm info).
  */
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
@@ -145,6 +147,29 @@ static int s_apply_preset(vafm_params *p, const char *path, const json_t *root, 
     return 0;
 }
 
+/* Apply a parsed scene object (its preset first, then every other key). */
+static int s_apply_root(vafm_params *p, const char *path, json_t *root, char *preset, size_t preset_len,
+                        vafm_error *err)
+{
+    char what[sizeof err->message];
+    if (!json_is_object(root)) {
+        snprintf(what, sizeof what, "a scene file must hold one JSON object {\"name\": value, ...}, not %s",
+                 s_type_name(root));
+        s_fail(err, VAFM_EFORMAT, "scene", path, what);
+        return VAFM_EFORMAT;
+    }
+    int r = s_apply_preset(p, path, root, preset, preset_len, err);
+    const char *key;
+    json_t *v;
+    json_object_foreach(root, key, v) {
+        if (r)
+            break;
+        if (strcmp(key, "preset") != 0)
+            r = s_apply_key(p, path, key, v, err);
+    }
+    return r;
+}
+
 int vafm_cli_scene_load(vafm_params *p, const char *path, char *preset, size_t preset_len, vafm_error *err)
 {
     if (preset && preset_len)
@@ -166,22 +191,101 @@ int vafm_cli_scene_load(vafm_params *p, const char *path, char *preset, size_t p
         s_fail(err, io ? VAFM_EIO : VAFM_EFORMAT, "scene", path, what);
         return io ? VAFM_EIO : VAFM_EFORMAT;
     }
-    if (!json_is_object(root)) {
-        snprintf(what, sizeof what, "a scene file must hold one JSON object {\"name\": value, ...}, not %s",
-                 s_type_name(root));
-        s_fail(err, VAFM_EFORMAT, "scene", path, what);
+    int r = s_apply_root(p, path, root, preset, preset_len, err);
+    json_decref(root);
+    return r;
+}
+
+int vafm_cli_scene_parse(vafm_params *p, const char *text, const char *origin, vafm_error *err)
+{
+    char what[sizeof err->message];
+    json_error_t je;
+    json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &je);
+    if (!root) {
+        snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
+        s_fail(err, VAFM_EFORMAT, "scene", origin, what);
+        return VAFM_EFORMAT;
+    }
+    int r = s_apply_root(p, origin, root, NULL, 0, err);
+    json_decref(root);
+    return r;
+}
+
+/* ---- campaign grids ------------------------------------------------------------------------------ */
+
+/* A JSON list of numbers into a malloc'd array (NULL for an absent or empty list). */
+static int s_grid_list(const json_t *root, const char *key, double **out, size_t *n)
+{
+    *out = NULL;
+    *n = 0;
+    const json_t *a = json_object_get(root, key);
+    if (!a)
+        return 0;
+    if (!json_is_array(a))
+        return -1;
+    size_t m = json_array_size(a);
+    if (!m)
+        return 0;
+    double *v = calloc(m, sizeof *v);
+    if (!v)
+        return -1;
+    for (size_t i = 0; i < m; i++) {
+        const json_t *x = json_array_get(a, i);
+        if (!json_is_number(x)) {
+            free(v);
+            return -1;
+        }
+        v[i] = json_number_value(x);
+    }
+    *out = v;
+    *n = m;
+    return 0;
+}
+
+int vafm_cli_grid_parse(const char *text, const char *origin, vafm_cli_grid *g, vafm_error *err)
+{
+    memset(g, 0, sizeof *g);
+    char what[sizeof err->message];
+    json_error_t je;
+    json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &je);
+    if (!root || !json_is_object(root)) {
+        if (root)
+            snprintf(what, sizeof what, "the grid is %s, not a JSON object", s_type_name(root));
+        else
+            snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
+        s_fail(err, VAFM_EFORMAT, "grid", origin, what);
         json_decref(root);
         return VAFM_EFORMAT;
     }
-    int r = s_apply_preset(p, path, root, preset, preset_len, err);
-    const char *key;
-    json_t *v;
-    json_object_foreach(root, key, v) {
-        if (r)
-            break;
-        if (strcmp(key, "preset") != 0)
-            r = s_apply_key(p, path, key, v, err);
+    const char *bad = NULL;
+    if (s_grid_list(root, "T_K", &g->T_K, &g->n_T))
+        bad = "T_K";
+    else if (s_grid_list(root, "v_m_per_s", &g->v_m_per_s, &g->n_v))
+        bad = "v_m_per_s";
+    else if (s_grid_list(root, "k_N_per_m", &g->k_N_per_m, &g->n_k))
+        bad = "k_N_per_m";
+    const json_t *n = json_object_get(root, "curves_per_point");
+    if (!bad && n) {
+        if (json_is_integer(n) && json_integer_value(n) >= 1)
+            g->curves_per_point = (uint64_t)json_integer_value(n);
+        else
+            bad = "curves_per_point";
     }
     json_decref(root);
-    return r;
+    if (bad) {
+        snprintf(what, sizeof what, "grid key '%s' is not %s", bad,
+                 strcmp(bad, "curves_per_point") ? "a list of numbers" : "an integer >= 1");
+        s_fail(err, VAFM_EFORMAT, bad, origin, what);
+        vafm_cli_grid_free(g);
+        return VAFM_EFORMAT;
+    }
+    return 0;
+}
+
+void vafm_cli_grid_free(vafm_cli_grid *g)
+{
+    free(g->T_K);
+    free(g->v_m_per_s);
+    free(g->k_N_per_m);
+    memset(g, 0, sizeof *g);
 }

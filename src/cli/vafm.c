@@ -3,24 +3,29 @@
  * vafm: the command-line tool. A thin layer over the library: it resolves a scene (preset, JSON scene
  * file, --NAME=VALUE overrides, in that order), runs curves through vafm_sim / vafm_campaign_run, and
  * prints what came out. No physics here: every number shown is either a library result or a unit
- * conversion of one (F_JKR = 3πγR/2 is the force unit the physics notes use).
+ * conversion of one (F_JKR = 3πγR/2 is the force unit the physics notes use). campaign, info and
+ * export write and read HDF5 force-curve files through vafm/h5.h (protocol/hdf5.md).
  *
- * Exit status: 0 success, 1 runtime error (a curve failed, I/O), 2 usage or parameter error. Every
- * parameter error repeats the library's vafm_error message, which names the field, value and range.
+ * Exit status: 0 success, 1 runtime error (a curve failed, I/O, a damaged file), 2 usage or parameter
+ * error. Every parameter error repeats the library's vafm_error message, which names the field, value
+ * and range.
  */
 #include <errno.h>
 #include <inttypes.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
 #include "vafm/campaign.h"
 #include "vafm/common.h"
 #include "vafm/contact.h"
+#include "vafm/h5.h"
 #include "vafm/integrator.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
@@ -70,7 +75,7 @@ static double s_now(void)
 
 enum s_opt {
     O_HELP, O_VERSION, O_QUIET, O_PROGRESS, O_PRESET, O_SCENE, O_INDEX, O_N, O_THREADS, O_FIRST, O_CSV,
-    O_T, O_V, O_K, O_JSON, O_TUNE, S_NOPT
+    O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, S_NOPT
 };
 
 typedef struct s_option {
@@ -88,6 +93,9 @@ static const s_option s_options[S_NOPT] = {
     [O_CSV] = { "--csv", NULL, 1 },         [O_T] = { "--T", NULL, 1 },
     [O_V] = { "--v", NULL, 1 },             [O_K] = { "--k", NULL, 1 },
     [O_JSON] = { "--json", NULL, 0 },       [O_TUNE] = { "--tune", NULL, 0 },
+    [O_OUT] = { "--out", "-o", 1 },         [O_RESUME] = { "--resume", NULL, 0 },
+    [O_OVERWRITE] = { "--overwrite", NULL, 0 }, [O_FLUSH] = { "--flush-interval", NULL, 1 },
+    [O_GZIP] = { "--gzip", NULL, 1 },       [O_CURVE] = { "--curve", NULL, 1 },
 };
 
 #define M(o) (1u << (o))
@@ -109,6 +117,7 @@ typedef struct s_args {
     s_override *ov;          /* parameter overrides, in order */
     int n_ov;
     const char *topic;       /* `vafm help TOPIC` */
+    const char *file;        /* the FILE of `vafm info` and `vafm export` */
 } s_args;
 
 /* ---- commands (table at the end of the file) --------------------------------------------------- */
@@ -120,11 +129,11 @@ struct s_command {
     int scene;           /* 1: takes scene options and parameter overrides */
     const char *summary; /* one line for the command list */
     const char *usage;   /* synopsis and option lines */
+    int file;            /* 1: takes one FILE argument */
 };
 
 static const s_command *s_command_at(int i);
 static const s_command *s_command_find(const char *name);
-static int s_cmd_not_yet(const s_args *a);
 
 /* ---- number parsing --------------------------------------------------------------------------- */
 
@@ -262,6 +271,10 @@ static int s_parse_positional(s_args *a, const char *arg)
         a->topic = arg;
         return 0;
     }
+    if (a->cmd->file && !a->file) {
+        a->file = arg;
+        return 0;
+    }
     s_error("unexpected argument '%s' (see vafm --help)", arg);
     return S_EXIT_USAGE;
 }
@@ -296,9 +309,6 @@ static int s_parse_args(s_args *a, int argc, char **argv)
                                                         : s_parse_positional(a, argv[i]);
         if (r)
             return r;
-        /* The arguments of a command that does not exist yet are not ours to judge. */
-        if (a->cmd && a->cmd->fn == s_cmd_not_yet)
-            return 0;
     }
     if (!a->cmd)
         a->cmd = s_command_find("run");
@@ -873,7 +883,7 @@ static int s_grid_parse(const s_args *a, s_grid *g)
     uint64_t N = 1, threads = 0, first = 0;
     int rc = 0;
     if (!a->val[O_N]) {
-        s_error("vafm curves: -n N (curves per grid point) is required");
+        s_error("vafm %s: -n N (curves per grid point) is required", a->cmd->name);
         return S_EXIT_USAGE;
     }
     if ((rc = s_parse_u64("-n", a->val[O_N], 1, 1000000000ULL, &N)) ||
@@ -891,7 +901,7 @@ static int s_grid_parse(const s_args *a, s_grid *g)
     g->spec.first_curve = first;
     size_t np = vafm_campaign_points(&g->spec);
     if ((double)np * (double)N > (double)S_MAX_TOTAL_CURVES) {
-        s_error("vafm curves: %zu grid points x %" PRIu64 " curves is too many", np, N);
+        s_error("vafm %s: %zu grid points x %" PRIu64 " curves is too many", a->cmd->name, np, N);
         return S_EXIT_USAGE;
     }
     if (first > N * np) {
@@ -901,19 +911,31 @@ static int s_grid_parse(const s_args *a, s_grid *g)
     return 0;
 }
 
+/* The per-point statistics of a campaign (vafm curves, vafm campaign, vafm info). */
+static void s_print_statistics(FILE *o, const vafm_params *base, const vafm_campaign_spec *spec,
+                               const s_point_stats *stats)
+{
+    fprintf(o, "statistics   over curves with a pull-off (no-contact and no-detach curves left out); "
+               "sd sample, sem = sd/sqrt(n), skew g1\n");
+    size_t np = vafm_campaign_points(spec);
+    for (size_t i = 0; i < np; i++) {
+        vafm_params p;
+        vafm_campaign_point_params(base, spec, i, &p);
+        s_print_point(o, i, &p, &stats[i]);
+    }
+}
+
+static void s_print_campaign_line(FILE *o, const vafm_campaign_spec *spec, uint64_t done, double wall)
+{
+    fprintf(o, "campaign     %zu grid point(s) x %" PRIu64 " curves, %" PRIu64 " run in %.3f s (%.4g curves/s)\n",
+            vafm_campaign_points(spec), spec->curves_per_point, done, wall, wall > 0 ? (double)done / wall : 0.0);
+}
+
 static void s_print_curves_summary(FILE *o, const s_scene *sc, const s_grid *g, const s_curves *cv, double wall)
 {
     s_print_provenance(o, sc);
-    size_t np = vafm_campaign_points(&g->spec);
-    fprintf(o, "campaign     %zu grid point(s) x %" PRIu64 " curves, %" PRIu64 " run in %.3f s (%.4g curves/s)\n",
-            np, g->spec.curves_per_point, cv->done, wall, wall > 0 ? (double)cv->done / wall : 0.0);
-    fprintf(o, "statistics   over curves with a pull-off (no-contact and no-detach curves left out); "
-               "sd sample, sem = sd/sqrt(n), skew g1\n");
-    for (size_t i = 0; i < np; i++) {
-        vafm_params p;
-        vafm_campaign_point_params(&sc->p, &g->spec, i, &p);
-        s_print_point(o, i, &p, &cv->stats[i]);
-    }
+    s_print_campaign_line(o, &g->spec, cv->done, wall);
+    s_print_statistics(o, &sc->p, &g->spec, cv->stats);
 }
 
 /* With no grid lists the base scene is the only point: check it here for a plain error message
@@ -981,6 +1003,633 @@ static int s_cmd_curves(const s_args *a)
     return rc ? rc : crc;
 }
 
+/* ---- HDF5 files: shared helpers ------------------------------------------------------------------ */
+
+/* A real option in [lo, hi]. */
+static int s_parse_real(const char *opt, const char *text, double lo, double hi, const char *unit, double *out)
+{
+    char *end = NULL;
+    double v = strtod(text, &end);
+    if (end == text || *end != '\0' || !(v >= lo && v <= hi)) {
+        s_error("%s: '%s' is not a number in [%g, %g]%s%s", opt, text, lo, hi, unit[0] ? " " : "", unit);
+        return S_EXIT_USAGE;
+    }
+    *out = v;
+    return 0;
+}
+
+static double s_file_mb(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) ? 0.0 : (double)st.st_size / 1e6;
+}
+
+/* Per-point statistics of every curve of a vafm file, from its ground truth, in curve order (so a
+ * resumed campaign prints the same numbers as an uninterrupted one). @return curves without a row. */
+static uint64_t s_truth_stats(const vafm_h5_reader *r, size_t np, s_point_stats *stats)
+{
+    uint64_t missing = 0;
+    size_t n = vafm_h5_reader_count(r);
+    for (uint64_t i = 0; i < n; i++) {
+        vafm_h5_truth t;
+        if (vafm_h5_reader_truth(r, i, &t) || t.point >= np)
+            missing++;
+        else
+            s_stats_add(&stats[t.point], &t.result);
+    }
+    return missing;
+}
+
+/* ---- vafm campaign: one HDF5 file ------------------------------------------------------------------ */
+
+/*
+ * The curves reach s_camp_curve in index order, one at a time, from whichever worker finished the next
+ * one, and go into the file at once (vafm_h5_writer_append). They become durable only with a flush,
+ * which rewrites the file's metadata: flushing after every curve cost 7.7% of a paper-fig4 campaign's
+ * wall time, so a flusher thread flushes by time instead, --flush-interval seconds after the previous
+ * flush whenever curves wait (a curve never waits longer, even when the next one is slow to come), and
+ * the close at the end flushes the rest. A kill -9 at any moment loses at most the curves of the last
+ * interval; --resume recomputes exactly those. One mutex serialises every call into the writer: the
+ * HDF5 library is not thread-safe.
+ */
+
+#define S_MAX_FLUSH_INTERVAL_S 86400.0
+
+typedef struct s_camp {
+    vafm_h5_writer *w;
+    pthread_mutex_t mu;  /* the writer and the fields up to werr */
+    pthread_cond_t wake; /* the flusher: curves pending, or stop */
+    double interval;     /* seconds between flushes */
+    double last_flush;   /* s_now() at the end of the last flush */
+    uint64_t pending;    /* curves appended since */
+    uint64_t flushes;
+    double writer_s;     /* wall time spent inside the writer (open, append, flush, close) */
+    int stop;            /* the flusher ends */
+    int werr_code;       /* the first writer error */
+    vafm_error werr;
+    char session_id[48]; /* "seed S": with the curve id (its index) it reproduces the curve */
+    s_progress pg;       /* the fields below belong to the delivering worker */
+    uint64_t done, total;
+    int fail_status;
+    uint64_t fail_index;
+} s_camp;
+
+static void s_camp_werr(s_camp *cp, int code, const vafm_error *e)
+{
+    if (!cp->werr_code) {
+        cp->werr_code = code;
+        cp->werr = *e;
+    }
+}
+
+/* With the lock held. */
+static void s_camp_flush(s_camp *cp)
+{
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    double t0 = s_now();
+    int r = vafm_h5_writer_flush(cp->w, &e);
+    double t1 = s_now();
+    cp->writer_s += t1 - t0;
+    cp->last_flush = t1;
+    cp->pending = 0;
+    cp->flushes++;
+    if (r)
+        s_camp_werr(cp, r, &e);
+}
+
+static void *s_camp_flusher(void *arg)
+{
+    s_camp *cp = arg;
+    pthread_mutex_lock(&cp->mu);
+    while (!cp->stop) {
+        if (!cp->pending || cp->werr_code) {
+            pthread_cond_wait(&cp->wake, &cp->mu);
+            continue;
+        }
+        double due = cp->last_flush + cp->interval;
+        if (s_now() >= due) {
+            s_camp_flush(cp);
+            continue;
+        }
+        struct timespec ts;
+        ts.tv_sec = (time_t)due;
+        ts.tv_nsec = (long)((due - (double)ts.tv_sec) * 1e9);
+        pthread_cond_timedwait(&cp->wake, &cp->mu, &ts);
+    }
+    pthread_mutex_unlock(&cp->mu);
+    return NULL;
+}
+
+static void s_camp_progress(s_camp *cp)
+{
+    if (!s_progress_due(&cp->pg))
+        return;
+    double wall = s_now() - cp->pg.t0, rate = (double)cp->done / wall;
+    char line[160];
+    snprintf(line, sizeof line, "%" PRIu64 "/%" PRIu64 " curves, %.3g curves/s, ETA %.0f s", cp->done, cp->total,
+             rate, rate > 0 ? (double)(cp->total - cp->done) / rate : 0.0);
+    s_progress_line(&cp->pg, line);
+}
+
+/* Called in index order, one at a time. A failed curve stops the campaign, as in vafm curves. */
+static int s_camp_curve(void *user, const vafm_campaign_curve *c)
+{
+    s_camp *cp = user;
+    if (c->status) {
+        cp->fail_status = c->status;
+        cp->fail_index = c->index;
+        return 1;
+    }
+    vafm_h5_curve hc;
+    vafm_h5_curve_from_sim(&hc, &c->samples, c->params, &c->result);
+    char cid[24];
+    snprintf(cid, sizeof cid, "%" PRIu64, c->index);
+    hc.meta.session_id = cp->session_id;
+    hc.meta.curve_id = cid;
+    vafm_h5_truth t;
+    memset(&t, 0, sizeof t);
+    t.point = c->point;
+    t.T_K = c->params->T_K;
+    t.v_m_per_s = c->params->v_retract_m_per_s;
+    t.k_N_per_m = c->params->k_N_per_m;
+    t.result = c->result;
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    pthread_mutex_lock(&cp->mu);
+    double t0 = s_now();
+    int r = vafm_h5_writer_append(cp->w, &hc, &t, &e);
+    cp->writer_s += s_now() - t0;
+    if (r)
+        s_camp_werr(cp, r, &e);
+    else if (cp->pending++ == 0)
+        pthread_cond_signal(&cp->wake);
+    int stop = cp->werr_code != 0;
+    pthread_mutex_unlock(&cp->mu);
+    if (stop)
+        return 1;
+    cp->done++;
+    s_camp_progress(cp);
+    return 0;
+}
+
+/* Every grid point's scene, checked before the file is created (so a bad grid leaves no file behind). */
+static int s_check_points(const vafm_params *base, const vafm_campaign_spec *spec)
+{
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    for (size_t i = 0; i < vafm_campaign_points(spec); i++) {
+        vafm_params p;
+        vafm_campaign_point_params(base, spec, i, &p);
+        int r = vafm_params_validate(&p, &err);
+        if (r) {
+            s_error("grid point %zu (T = %g K, v = %g m/s, k = %g N/m): %s", i, p.T_K, p.v_retract_m_per_s,
+                    p.k_N_per_m, err.message[0] ? err.message : vafm_strerror(r));
+            return s_exit_of(r);
+        }
+    }
+    return 0;
+}
+
+typedef struct s_camp_opts {
+    const char *out;
+    int resume, overwrite, gzip;
+    double interval;
+    double mb_before; /* size of the file continued by --resume */
+} s_camp_opts;
+
+static int s_camp_parse(const s_args *a, s_camp_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->out = a->val[O_OUT];
+    o->resume = a->on[O_RESUME];
+    o->overwrite = a->on[O_OVERWRITE];
+    o->interval = 1.0;
+    uint64_t gz = 0;
+    int rc = 0;
+    if ((a->val[O_FLUSH] &&
+         (rc = s_parse_real("--flush-interval", a->val[O_FLUSH], 0.0, S_MAX_FLUSH_INTERVAL_S, "s", &o->interval))) ||
+        (a->val[O_GZIP] && (rc = s_parse_u64("--gzip", a->val[O_GZIP], 0, 9, &gz))))
+        return rc;
+    o->gzip = (int)gz;
+    if (!o->out) {
+        s_error("vafm campaign: --out FILE.h5 (the HDF5 file to write) is required");
+        return S_EXIT_USAGE;
+    }
+    if (o->resume && o->overwrite) {
+        s_error("vafm campaign: --resume continues %s and --overwrite replaces it; give one of them", o->out);
+        return S_EXIT_USAGE;
+    }
+    struct stat st;
+    int exists = stat(o->out, &st) == 0;
+    if (exists && !o->resume && !o->overwrite) {
+        s_error("vafm campaign: %s exists already; --resume continues it, --overwrite replaces it", o->out);
+        return S_EXIT_USAGE;
+    }
+    if (!exists && o->resume) {
+        s_error("vafm campaign: --resume: %s cannot be resumed: %s", o->out, strerror(errno));
+        return S_EXIT_USAGE;
+    }
+    o->mb_before = o->resume ? (double)st.st_size / 1e6 : 0.0;
+    return 0;
+}
+
+/* Open (create or resume) the file and record or compare the provenance. */
+static int s_camp_open(s_camp *cp, const s_camp_opts *o, const s_scene *sc, const vafm_campaign_spec *spec)
+{
+    vafm_h5_writer_opts wo;
+    vafm_h5_writer_opts_default(&wo);
+    wo.resume = o->resume;
+    wo.overwrite = o->overwrite;
+    wo.gzip_level = o->gzip;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    double t0 = s_now();
+    int r = vafm_h5_writer_open(&cp->w, o->out, &wo, &err);
+    if (!r && (r = vafm_h5_writer_set_provenance(cp->w, &sc->p, spec, &err)) != 0) {
+        vafm_error ignored;
+        vafm_h5_writer_close(&cp->w, &ignored);
+    }
+    cp->writer_s += s_now() - t0;
+    return r ? s_report(&err, r) : 0;
+}
+
+static void s_camp_summary(FILE *o, const s_scene *sc, const vafm_campaign_spec *spec, const s_camp_opts *co,
+                           const s_camp *cp, uint64_t first, double wall)
+{
+    uint64_t in_file = first + cp->done;
+    double mb = s_file_mb(co->out);
+    s_print_provenance(o, sc);
+    fprintf(o, "file         %s: %" PRIu64 " curves (%" PRIu64 " kept from before, %" PRIu64 " new), %.4g MB written, "
+               "%.4g MB on disk\n",
+            co->out, in_file, first, cp->done, mb - co->mb_before, mb);
+    s_print_campaign_line(o, spec, cp->done, wall);
+    fprintf(o, "writer       %.3f s in open, append, flush and close = %.2f%% of the wall time; %" PRIu64
+               " flush(es) (every %g s and at the end), %.4g MB/s\n",
+            cp->writer_s, wall > 0 ? 100.0 * cp->writer_s / wall : 0.0, cp->flushes + 1, co->interval,
+            wall > 0 ? (mb - co->mb_before) / wall : 0.0);
+    /* The statistics cover every curve of the file, from its ground truth. */
+    vafm_h5_reader *r = NULL;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    size_t np = vafm_campaign_points(spec);
+    s_point_stats *stats = calloc(np, sizeof *stats);
+    if (stats && !vafm_h5_reader_open(&r, co->out, &err)) {
+        s_truth_stats(r, np, stats);
+        s_print_statistics(o, &sc->p, spec, stats);
+    } else {
+        fprintf(o, "statistics   n/a: %s\n", stats ? err.message : "out of memory");
+    }
+    vafm_h5_reader_destroy(&r);
+    free(stats);
+}
+
+static int s_cmd_campaign(const s_args *a)
+{
+    s_grid g;
+    s_scene sc;
+    s_camp_opts co;
+    int rc = s_grid_parse(a, &g);
+    if (rc || (rc = s_curves_check(a, &sc, &g)) != 0 || (rc = s_camp_parse(a, &co)) != 0 ||
+        (rc = s_check_points(&sc.p, &g.spec)) != 0) {
+        s_grid_free(&g);
+        return rc;
+    }
+    s_camp cp;
+    memset(&cp, 0, sizeof cp);
+    cp.interval = co.interval;
+    snprintf(cp.session_id, sizeof cp.session_id, "seed %" PRIu64, sc.p.seed);
+    s_progress_init(&cp.pg, a);
+    double t_start = cp.pg.t0;
+    if ((rc = s_camp_open(&cp, &co, &sc, &g.spec)) != 0) {
+        s_grid_free(&g);
+        return rc;
+    }
+    uint64_t first = vafm_h5_writer_count(cp.w);
+    uint64_t total = g.spec.curves_per_point * (uint64_t)vafm_campaign_points(&g.spec);
+    g.spec.first_curve = first < total ? first : total;
+    g.spec.keep_samples = 1;
+    cp.total = total - g.spec.first_curve;
+    if (co.resume && !a->on[O_QUIET])
+        fprintf(stderr, "vafm: %s holds %" PRIu64 " of the campaign's %" PRIu64 " curves; running the rest\n", co.out,
+                first, total);
+
+    pthread_condattr_t ca;
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC); /* the flusher's deadlines are s_now() times */
+    pthread_cond_init(&cp.wake, &ca);
+    pthread_condattr_destroy(&ca);
+    pthread_mutex_init(&cp.mu, NULL);
+    cp.last_flush = s_now();
+    pthread_t flusher;
+    int started = pthread_create(&flusher, NULL, s_camp_flusher, &cp) == 0;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = started ? vafm_campaign_run(&sc.p, &g.spec, s_camp_curve, &cp, &err) : VAFM_ENOMEM;
+    if (started) {
+        pthread_mutex_lock(&cp.mu);
+        cp.stop = 1;
+        pthread_cond_signal(&cp.wake);
+        pthread_mutex_unlock(&cp.mu);
+        pthread_join(flusher, NULL);
+    } else {
+        snprintf(err.message, sizeof err.message, "cannot start the flusher thread");
+    }
+    pthread_mutex_destroy(&cp.mu);
+    pthread_cond_destroy(&cp.wake);
+    s_progress_end(&cp.pg);
+
+    /* A clean close merges the ground truth into one table; the file holds every curve delivered. */
+    vafm_error cerr;
+    memset(&cerr, 0, sizeof cerr);
+    double t0 = s_now();
+    int cr = vafm_h5_writer_close(&cp.w, &cerr);
+    double t1 = s_now();
+    cp.writer_s += t1 - t0;
+    double wall = t1 - t_start;
+
+    if (cp.fail_status) {
+        s_error("curve %" PRIu64 " failed: %s; %s holds the %" PRIu64 " curve(s) before it", cp.fail_index,
+                vafm_strerror(cp.fail_status), co.out, first + cp.done);
+        rc = S_EXIT_RUNTIME;
+    } else if (cp.werr_code) {
+        s_error("%s", cp.werr.message[0] ? cp.werr.message : vafm_strerror(cp.werr_code));
+        rc = S_EXIT_RUNTIME;
+    } else if (r && r != VAFM_EABORT) {
+        rc = s_report(&err, r);
+    } else if (cr) {
+        s_error("%s", cerr.message[0] ? cerr.message : vafm_strerror(cr));
+        rc = S_EXIT_RUNTIME;
+    }
+    if (!rc)
+        s_camp_summary(stdout, &sc, &g.spec, &co, &cp, first, wall);
+    s_grid_free(&g);
+    return rc;
+}
+
+/* ---- vafm info ------------------------------------------------------------------------------------ */
+
+static int s_need_file(const s_args *a)
+{
+    if (a->file)
+        return 0;
+    s_error("vafm %s: FILE (an HDF5 force-curve file) is required (see vafm %s --help)", a->cmd->name,
+            a->cmd->name);
+    return S_EXIT_USAGE;
+}
+
+static int s_open_reader(const char *path, vafm_h5_reader **r)
+{
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int rc = vafm_h5_reader_open(r, path, &err);
+    if (rc) {
+        s_error("%s", err.message[0] ? err.message : vafm_strerror(rc));
+        return S_EXIT_RUNTIME; /* not this layout, damaged, truncated: the file is at fault, not the call */
+    }
+    return 0;
+}
+
+/* "%12.6g" of v·scale, or "-" when absent. */
+static const char *s_num(char *buf, size_t len, double v, double scale)
+{
+    if (isnan(v))
+        snprintf(buf, len, "-");
+    else
+        snprintf(buf, len, "%.6g", v * scale);
+    return buf;
+}
+
+static void s_print_list(FILE *o, const char *name, const double *v, size_t n, const char *unit)
+{
+    fprintf(o, " %s ", name);
+    if (!n)
+        fputs("(the scene's)", o);
+    for (size_t i = 0; i < n; i++)
+        fprintf(o, "%s%.6g", i ? "," : "", v[i]);
+    if (n)
+        fprintf(o, " %s", unit);
+    fputc(';', o);
+}
+
+typedef struct s_info_prov {
+    int scene_ok, grid_ok;
+    vafm_params p;
+    vafm_cli_grid grid;
+    vafm_campaign_spec spec;
+} s_info_prov;
+
+static void s_info_provenance(FILE *o, const char *path, const vafm_h5_provenance *pv, s_info_prov *ip)
+{
+    memset(ip, 0, sizeof *ip);
+    fprintf(o, "software     %s %s\n", pv->software, pv->software_version);
+    if (!pv->is_vafm) {
+        fprintf(o, "provenance   none (no root attribute 'vafm format version': not written by vafm)\n");
+        return;
+    }
+    fprintf(o, "vafm format  %d.%d, created %s, seed %" PRIu64 ", ground truth for %zu curve(s)\n", pv->format_major,
+            pv->format_minor, pv->created ? pv->created : "(unknown)", pv->seed, pv->truth_rows);
+    char origin[512];
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    if (pv->grid_json) {
+        snprintf(origin, sizeof origin, "%s: root attribute 'vafm grid'", path);
+        ip->grid_ok = !vafm_cli_grid_parse(pv->grid_json, origin, &ip->grid, &err);
+        if (ip->grid_ok) {
+            vafm_campaign_spec *sp = &ip->spec;
+            sp->T_K = ip->grid.T_K;
+            sp->n_T = ip->grid.n_T;
+            sp->v_m_per_s = ip->grid.v_m_per_s;
+            sp->n_v = ip->grid.n_v;
+            sp->k_N_per_m = ip->grid.k_N_per_m;
+            sp->n_k = ip->grid.n_k;
+            sp->curves_per_point = ip->grid.curves_per_point;
+            fprintf(o, "grid         %zu point(s) x ", vafm_campaign_points(sp));
+            if (sp->curves_per_point)
+                fprintf(o, "%" PRIu64 " curves = %" PRIu64 " curves;", sp->curves_per_point,
+                        sp->curves_per_point * (uint64_t)vafm_campaign_points(sp));
+            else
+                fputs("? curves;", o);
+            s_print_list(o, "T", sp->T_K, sp->n_T, "K");
+            s_print_list(o, "v", sp->v_m_per_s, sp->n_v, "m/s");
+            s_print_list(o, "k", sp->k_N_per_m, sp->n_k, "N/m");
+            fputc('\n', o);
+        } else {
+            fprintf(o, "grid         cannot be read: %s\n", err.message);
+        }
+    }
+    if (!pv->scene_json) {
+        fprintf(o, "scene        (none recorded)\n");
+        return;
+    }
+    snprintf(origin, sizeof origin, "%s: root attribute 'vafm scene'", path);
+    vafm_params_default(&ip->p);
+    ip->scene_ok = !vafm_cli_scene_parse(&ip->p, pv->scene_json, origin, &err);
+    if (ip->scene_ok) {
+        fprintf(o, "scene        as stored in the file (vafm info --json prints all of it as a --scene file)\n");
+        s_print_scene_si(o, &ip->p);
+    } else {
+        fprintf(o, "scene        cannot be read: %s\n", err.message);
+    }
+}
+
+static void s_info_curve_line(FILE *o, const vafm_h5_curve *c, const vafm_h5_reader *r, int is_vafm)
+{
+    size_t nseg[3] = { 0, 0, 0 };
+    for (size_t j = 0; j < c->n; j++)
+        if (c->segment[j] < 3)
+            nseg[c->segment[j]]++;
+    const vafm_h5_meta *m = &c->meta;
+    char b[5][32];
+    fprintf(o, "  %6" PRIu64 " %8zu %8zu %8zu %6zu %12s %12s %12s %12s", c->group, c->n, nseg[0], nseg[1], nseg[2],
+            s_num(b[0], sizeof b[0], m->spring_constant_N_per_m, 1.0),
+            s_num(b[1], sizeof b[1], m->speed_approach_m_per_s, 1.0),
+            s_num(b[2], sizeof b[2], m->speed_retract_m_per_s, 1.0), s_num(b[3], sizeof b[3], m->duration_s, 1.0));
+    vafm_h5_truth t;
+    if (is_vafm && !vafm_h5_reader_truth(r, c->group, &t))
+        fprintf(o, " | %5" PRIu64 " %6d %5d %12s %12s", t.point, t.status, t.result.flags,
+                s_num(b[0], sizeof b[0], t.result.pulloff_sampled_N, 1e9),
+                s_num(b[1], sizeof b[1], t.result.detach_force_N, 1e9));
+    else if (is_vafm)
+        fputs(" | (no ground truth)", o);
+    fputc('\n', o);
+}
+
+static int s_cmd_info(const s_args *a)
+{
+    vafm_h5_reader *r = NULL;
+    int rc = s_need_file(a);
+    if (rc || (rc = s_open_reader(a->file, &r)) != 0)
+        return rc;
+    vafm_h5_provenance pv;
+    vafm_h5_reader_provenance(r, &pv);
+    if (a->on[O_JSON]) {
+        if (pv.scene_json)
+            puts(pv.scene_json);
+        else
+            s_error("%s: no vafm scene in this file (root attribute 'vafm scene')", a->file);
+        vafm_h5_reader_destroy(&r);
+        return pv.scene_json ? S_EXIT_OK : S_EXIT_RUNTIME;
+    }
+    size_t n = vafm_h5_reader_count(r);
+    printf("file         %s, %.4g MB, %zu curve(s)\n", a->file, s_file_mb(a->file), n);
+    s_info_prov ip;
+    s_info_provenance(stdout, a->file, &pv, &ip);
+    printf("curves       points per segment (0 approach, 1 retract, 2 dwell); SI%s\n",
+           pv.is_vafm ? "; ground truth: pull-off forces tensile, nN" : "");
+    printf("  %6s %8s %8s %8s %6s %12s %12s %12s %12s", "curve", "points", "approach", "retract", "dwell",
+           "k_N_per_m", "v_appr_m/s", "v_retr_m/s", "duration_s");
+    if (pv.is_vafm)
+        printf(" | %5s %6s %5s %12s %12s", "point", "status", "flags", "pulloff_samp", "detach_force");
+    putchar('\n');
+    uint64_t damaged = 0;
+    for (size_t i = 0; i < n; i++) {
+        vafm_h5_curve c;
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        int cr = vafm_h5_reader_curve(r, i, &c, &err);
+        if (cr) {
+            fflush(stdout);
+            s_error("%s", err.message[0] ? err.message : vafm_strerror(cr));
+            damaged++;
+            continue;
+        }
+        s_info_curve_line(stdout, &c, r, pv.is_vafm);
+    }
+    if (pv.is_vafm && ip.scene_ok && ip.grid_ok && n) {
+        size_t np = vafm_campaign_points(&ip.spec);
+        s_point_stats *stats = calloc(np, sizeof *stats);
+        if (stats) {
+            uint64_t missing = s_truth_stats(r, np, stats);
+            s_print_statistics(stdout, &ip.p, &ip.spec, stats);
+            if (missing)
+                printf("  (%" PRIu64 " curve(s) without a ground-truth row left out)\n", missing);
+            free(stats);
+        }
+    }
+    vafm_cli_grid_free(&ip.grid);
+    vafm_h5_reader_destroy(&r);
+    vafm_error cerr;
+    memset(&cerr, 0, sizeof cerr);
+    int ck = vafm_h5_check(a->file, &cerr);
+    if (!ck)
+        printf("conformance  ok: every rule of protocol/hdf5.md (L1-L16%s)\n", pv.is_vafm ? ", V1-V4" : "");
+    else
+        printf("conformance  FAILED: %s\n", cerr.message[0] ? cerr.message : vafm_strerror(ck));
+    if (damaged) {
+        s_error("%s: %" PRIu64 " of %zu curve(s) cannot be read", a->file, damaged, n);
+        return S_EXIT_RUNTIME;
+    }
+    return S_EXIT_OK;
+}
+
+/* ---- vafm export ---------------------------------------------------------------------------------- */
+
+/* One value of a CSV cell: %.17g (reads back bit for bit), or empty when absent. */
+static int s_cell(FILE *f, const char *sep, double v, int present)
+{
+    return present ? fprintf(f, "%s%.17g", sep, v) : fprintf(f, "%s", sep);
+}
+
+static int s_export_rows(FILE *f, const vafm_h5_curve *c)
+{
+    double k = c->meta.spring_constant_N_per_m;
+    int has_k = isfinite(k) && k > 0;
+    const double *h = c->height_piezo_m ? c->height_piezo_m : c->height_measured_m;
+    const double *hm = c->height_measured_m ? c->height_measured_m : c->height_piezo_m;
+    for (size_t i = 0; i < c->n; i++) {
+        double fi = c->force_N[i];
+        /* tip position as stored; else nanite's convention, height (measured) + force / k (protocol/csv.md) */
+        double tip = c->tip_position_m ? c->tip_position_m[i] : has_k && hm ? hm[i] + fi / k : NAN;
+        if (s_cell(f, "", c->time_s ? c->time_s[i] : 0.0, c->time_s != NULL) < 0 ||
+            s_cell(f, ",", h ? h[i] : 0.0, h != NULL) < 0 || s_cell(f, ",", has_k ? fi / k : 0.0, has_k) < 0 ||
+            s_cell(f, ",", fi, 1) < 0 || s_cell(f, ",", tip, !isnan(tip)) < 0 ||
+            fprintf(f, ",%u\n", (unsigned)c->segment[i]) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+static int s_cmd_export(const s_args *a)
+{
+    int rc = s_need_file(a);
+    if (rc)
+        return rc;
+    if (!a->val[O_CURVE]) {
+        s_error("vafm export: --curve I (the curve to export; vafm info lists them) is required");
+        return S_EXIT_USAGE;
+    }
+    vafm_h5_reader *r = NULL;
+    if ((rc = s_open_reader(a->file, &r)) != 0)
+        return rc;
+    size_t n = vafm_h5_reader_count(r);
+    uint64_t i = 0;
+    if (!n) {
+        s_error("--curve: %s holds no curves", a->file);
+        rc = S_EXIT_USAGE;
+    } else {
+        rc = s_parse_u64("--curve", a->val[O_CURVE], 0, (uint64_t)n - 1, &i);
+    }
+    vafm_h5_curve c;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int cr = rc ? 0 : vafm_h5_reader_curve(r, (size_t)i, &c, &err);
+    if (!rc && cr) {
+        s_error("%s", err.message[0] ? err.message : vafm_strerror(cr));
+        rc = S_EXIT_RUNTIME;
+    }
+    FILE *f = NULL;
+    if (!rc && !(f = s_open_out(a->val[O_CSV])))
+        rc = S_EXIT_RUNTIME;
+    if (!rc) {
+        fputs("time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
+        int bad = s_export_rows(f, &c) < 0;
+        rc = s_close_out(f, a->val[O_CSV], bad);
+    }
+    vafm_h5_reader_destroy(&r);
+    return rc;
+}
+
 /* ---- vafm params / presets / integrators ------------------------------------------------------ */
 
 static int s_print_json(const vafm_params *p)
@@ -1038,13 +1687,6 @@ static int s_cmd_integrators(const s_args *a)
     return S_EXIT_OK;
 }
 
-static int s_cmd_not_yet(const s_args *a)
-{
-    fprintf(stderr, "vafm %s: not yet implemented (HDF5 campaign files are issue #3); use `vafm curves --csv`\n",
-            a->cmd->name);
-    return S_EXIT_USAGE;
-}
-
 /* ---- help ------------------------------------------------------------------------------------- */
 
 static void s_print_param_help(FILE *o)
@@ -1074,14 +1716,15 @@ static void s_print_param_help(FILE *o)
 }
 
 static const char s_scene_help[] =
-    "\nSCENE (run, curves, samples, params), applied in this order:\n"
+    "\nSCENE (run, curves, samples, params, campaign), applied in this order:\n"
     "  --preset NAME        start from a preset (default " S_DEFAULT_PRESET "; see `vafm presets`)\n"
     "  --scene FILE.json    apply a JSON object {\"preset\": NAME, \"<parameter>\": value, ...};\n"
     "                       its preset comes first; `vafm params --json` writes one\n"
     "  --NAME=VALUE         set a parameter (see PARAMETERS); also --NAME VALUE; in command-line order\n";
 
 static const char s_exit_help[] = "\nEXIT STATUS\n"
-                                  "  0 success, 1 runtime error (a curve failed, output failed),\n"
+                                  "  0 success, 1 runtime error (a curve failed, output failed,\n"
+                                  "  a file is damaged or unreadable),\n"
                                   "  2 usage or parameter error (the message names the field, value and range)\n";
 
 static void s_print_usage(FILE *o)
@@ -1134,7 +1777,7 @@ static const s_command s_commands[] = {
       "vafm run [SCENE] [--index N] [--progress] [--quiet]\n"
       "  --index N            curve index = its random stream (default 0)\n"
       "  --progress           report progress on stderr even when it is not a terminal\n"
-      "  -q, --quiet          no progress\n" },
+      "  -q, --quiet          no progress\n", 0 },
     { "curves", s_cmd_curves,
       S_GENERAL | M(O_N) | M(O_THREADS) | M(O_FIRST) | M(O_CSV) | M(O_T) | M(O_V) | M(O_K) | M(O_PROGRESS) |
           M(O_QUIET),
@@ -1148,7 +1791,7 @@ static const s_command s_commands[] = {
       "  --v LIST             piezo speeds (approach and retract), m/s\n"
       "  --k LIST             spring constants, N/m\n"
       "  --progress           report progress on stderr even when it is not a terminal\n"
-      "  -q, --quiet          no progress (and no summary when the CSV goes to stdout)\n" },
+      "  -q, --quiet          no progress (and no summary when the CSV goes to stdout)\n", 0 },
     { "samples", s_cmd_samples, S_GENERAL | M(O_INDEX) | M(O_CSV) | M(O_TUNE) | M(O_PROGRESS) | M(O_QUIET), 1,
       "one curve's (or a thermal tune's) output samples as CSV",
       "vafm samples [SCENE] [--index N] [--csv FILE|-] [--tune]\n"
@@ -1156,16 +1799,46 @@ static const s_command s_commands[] = {
       "  --csv FILE|-         output file (default '-': stdout);\n"
       "                       columns time_s,height_m,deflection_m,force_N,tip_m,segment\n"
       "                       (segment 0 approach, 1 retract, 2 dwell, 3 tune)\n"
-      "  --tune               a thermal tune (free cantilever) of tune_duration_s instead of a curve\n" },
+      "  --tune               a thermal tune (free cantilever) of tune_duration_s instead of a curve\n", 0 },
     { "params", s_cmd_params, S_GENERAL | M(O_JSON), 1, "print the resolved scene as a table or JSON",
       "vafm params [SCENE] [--json]\n"
-      "  --json               JSON object (accepted back by --scene)\n" },
-    { "presets", s_cmd_presets, S_GENERAL, 0, "list the scene presets", "vafm presets\n" },
-    { "integrators", s_cmd_integrators, S_GENERAL, 0, "list the time integrators", "vafm integrators\n" },
-    { "help", s_cmd_help, S_GENERAL, 0, "this text, or one command's (vafm help COMMAND)", NULL },
-    { "campaign", s_cmd_not_yet, S_GENERAL, 0, "not yet implemented (HDF5 campaign files are issue #3)", NULL },
-    { "info", s_cmd_not_yet, S_GENERAL, 0, "not yet implemented (HDF5 campaign files are issue #3)", NULL },
-    { "export", s_cmd_not_yet, S_GENERAL, 0, "not yet implemented (HDF5 campaign files are issue #3)", NULL },
+      "  --json               JSON object (accepted back by --scene)\n", 0 },
+    { "presets", s_cmd_presets, S_GENERAL, 0, "list the scene presets", "vafm presets\n", 0 },
+    { "integrators", s_cmd_integrators, S_GENERAL, 0, "list the time integrators", "vafm integrators\n", 0 },
+    { "help", s_cmd_help, S_GENERAL, 0, "this text, or one command's (vafm help COMMAND)", NULL, 0 },
+    { "campaign", s_cmd_campaign,
+      S_GENERAL | M(O_N) | M(O_OUT) | M(O_THREADS) | M(O_T) | M(O_V) | M(O_K) | M(O_RESUME) | M(O_OVERWRITE) |
+          M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET),
+      1, "a grid of N curves per point on all cores into one HDF5 file (afmformats layout), resumable",
+      "vafm campaign -n N --out FILE.h5 [SCENE] [--T LIST] [--v LIST] [--k LIST] [--threads T]\n"
+      "              [--resume | --overwrite] [--flush-interval S] [--gzip L] [--progress | --quiet]\n"
+      "  -n N                 curves per grid point (required)\n"
+      "  -o, --out FILE.h5    the file: one group per curve with its channels, the scene, grid, seed and\n"
+      "                       every curve's ground truth (protocol/hdf5.md; read by afmformats, nanite, PyJibe)\n"
+      "  --T, --v, --k LIST   grid lists as for vafm curves (K, m/s, N/m; T slowest, then v, then k)\n"
+      "  --threads T          worker threads (default 0: all cores); the file does not depend on it\n"
+      "  --resume             continue FILE (same scene and grid, else refused naming the field): keep its\n"
+      "                       complete curves and run the rest; the result equals an uninterrupted run\n"
+      "  --overwrite          replace an existing FILE (without --resume or --overwrite it is refused)\n"
+      "  --flush-interval S   make the curves durable every S seconds (default 1; 0: after each curve);\n"
+      "                       a kill -9 loses at most the curves of the last S seconds\n"
+      "  --gzip L             compress the channels: shuffle + deflate at level L (1-9; default 0: off)\n"
+      "  --progress           report progress on stderr even when it is not a terminal\n"
+      "  -q, --quiet          no progress\n", 0 },
+    { "info", s_cmd_info, S_GENERAL | M(O_JSON), 0,
+      "summarise an HDF5 force-curve file (vafm's or another program's) and check its conformance",
+      "vafm info FILE [--json]\n"
+      "  FILE                 an HDF5 file of the afmformats layout: curves, provenance, per-point\n"
+      "                       statistics (vafm files), conformance to protocol/hdf5.md (a broken rule is\n"
+      "                       reported; exit 1 only when the file or a curve cannot be read)\n"
+      "  --json               print only the scene the file was written with (a --scene file)\n",
+      1 },
+    { "export", s_cmd_export, S_GENERAL | M(O_CURVE) | M(O_CSV), 0, "one curve of an HDF5 file as CSV",
+      "vafm export FILE --curve I [--csv OUT|-]\n"
+      "  --curve I            the curve, 0 to count-1 (vafm info lists them)\n"
+      "  --csv OUT|-          output file (default '-': stdout); the columns of vafm samples;\n"
+      "                       empty where the file lacks the channel (protocol/csv.md)\n",
+      1 },
 };
 #define S_NCOMMANDS ((int)(sizeof s_commands / sizeof s_commands[0]))
 
@@ -1193,7 +1866,7 @@ static int s_dispatch(const s_args *a)
         return S_EXIT_OK;
     }
     if (a->on[O_HELP]) {
-        if (!a->explicit_cmd || c->fn == s_cmd_help || c->fn == s_cmd_not_yet)
+        if (!a->explicit_cmd || c->fn == s_cmd_help)
             s_print_usage(stdout);
         else
             s_print_command_help(stdout, c);

@@ -1,0 +1,487 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The command decoder. Every request is checked completely (types, names, ranges) before anything is
+ * executed, so the control loop only ever runs well-formed commands and a bad request changes nothing.
+ */
+#include "daemon/cmd_json.h"
+#include <inttypes.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void vafmd_settings_default(vafmd_settings *s)
+{
+    s->speed = 1.0;
+    s->free_run = 0;
+    s->sensitivity_m_per_V = 50e-9;
+    s->block_s = 5e-3;
+    s->hwm = 1000;
+}
+
+void vafmd_err_set(vafmd_err *e, const char *code, const char *field, const char *fmt, ...)
+{
+    e->code = code;
+    snprintf(e->field, sizeof e->field, "%s", field ? field : "");
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(e->message, sizeof e->message, fmt, ap);
+    va_end(ap);
+}
+
+/* ---- daemon settings: a small field table of their own, next to the core's ---------------------- */
+
+enum { S_SET_REAL, S_SET_BOOL, S_SET_INT };
+typedef struct s_setting {
+    const char *name;
+    int kind;
+    const char *unit;
+    double min, max;
+    int read_only; /* fixed once the sockets are bound */
+    const char *doc;
+} s_setting;
+
+static const s_setting s_settings[] = {
+    { "speed", S_SET_REAL, "", 0.01, 1000, 0, "pacing speed factor (1: real time; applies from the next run)" },
+    { "free_run", S_SET_BOOL, "", 0, 1, 0, "true: no pacing, blocks are released as fast as computed" },
+    { "sensitivity_m_per_V", S_SET_REAL, "m/V", 1e-12, 1e-3, 0,
+      "detector sensitivity (InvOLS): vDeflection_V = deflection_m / sensitivity" },
+    { "block_s", S_SET_REAL, "s", 1e-3, 1e-2, 0, "duration of the samples of one data block" },
+    { "hwm", S_SET_INT, "messages", 1, 1e7, 1, "stream send high-water mark per subscriber (--hwm; read-only)" },
+};
+#define S_N_SETTINGS (sizeof s_settings / sizeof s_settings[0])
+
+static const s_setting *s_setting_find(const char *name)
+{
+    for (size_t i = 0; i < S_N_SETTINGS; i++)
+        if (!strcmp(s_settings[i].name, name))
+            return &s_settings[i];
+    return NULL;
+}
+
+static json_t *s_setting_value(const vafmd_settings *s, const s_setting *f)
+{
+    if (!strcmp(f->name, "speed"))
+        return json_real(s->speed);
+    if (!strcmp(f->name, "free_run"))
+        return json_boolean(s->free_run);
+    if (!strcmp(f->name, "sensitivity_m_per_V"))
+        return json_real(s->sensitivity_m_per_V);
+    if (!strcmp(f->name, "block_s"))
+        return json_real(s->block_s);
+    return json_integer(s->hwm);
+}
+
+static int s_setting_apply(vafmd_settings *s, const s_setting *f, json_t *v, vafmd_err *e)
+{
+    if (f->read_only) {
+        vafmd_err_set(e, VAFMD_E_READ_ONLY, f->name, "'%s' is fixed at start-up (command-line option)", f->name);
+        return -1;
+    }
+    if (f->kind == S_SET_BOOL) {
+        if (!json_is_boolean(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' must be true or false", f->name);
+            return -1;
+        }
+        s->free_run = json_is_true(v);
+        return 0;
+    }
+    if (!json_is_number(v)) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' must be a number (%s)", f->name, f->unit);
+        return -1;
+    }
+    double x = json_number_value(v);
+    if (!(x >= f->min && x <= f->max)) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, f->name, "%s = %.17g is outside [%g, %g] %s", f->name, x, f->min,
+                      f->max, f->unit);
+        return -1;
+    }
+    if (!strcmp(f->name, "speed"))
+        s->speed = x;
+    else if (!strcmp(f->name, "sensitivity_m_per_V"))
+        s->sensitivity_m_per_V = x;
+    else if (!strcmp(f->name, "block_s"))
+        s->block_s = x;
+    return 0;
+}
+
+/* ---- scene parameters through the core's field table ------------------------------------------ */
+
+json_t *vafmd_param_value(const vafm_params *p, const vafm_param_info *f)
+{
+    char buf[128];
+    if (vafm_params_get(p, f->name, buf, sizeof buf))
+        return json_null();
+    switch (f->kind) {
+    case VAFM_PARAM_REAL: return json_real(strtod(buf, NULL));
+    case VAFM_PARAM_BOOL: return json_boolean(!strcmp(buf, "true"));
+    default: return json_string(buf); /* CHOICE names; SEED as decimal text (JSON numbers lose 2^64) */
+    }
+}
+
+static void s_range_text(const vafm_param_info *f, char *buf, size_t len)
+{
+    switch (f->kind) {
+    case VAFM_PARAM_REAL: snprintf(buf, len, "[%g, %g] %s", f->min, f->max, f->unit); break;
+    case VAFM_PARAM_CHOICE: snprintf(buf, len, "one of %s", f->choices); break;
+    case VAFM_PARAM_BOOL: snprintf(buf, len, "true or false"); break;
+    default: snprintf(buf, len, "an integer in [0, 2^64-1] (number or decimal string)"); break;
+    }
+}
+
+/* Apply one scene value; the JSON type must match the field's kind. */
+static int s_param_apply(vafm_params *p, const vafm_param_info *f, json_t *v, vafmd_err *e)
+{
+    char text[64], allowed[128];
+    s_range_text(f, allowed, sizeof allowed);
+    int ok_type = 1;
+    switch (f->kind) {
+    case VAFM_PARAM_REAL:
+        ok_type = json_is_number(v);
+        if (ok_type)
+            snprintf(text, sizeof text, "%.17g", json_number_value(v));
+        break;
+    case VAFM_PARAM_CHOICE:
+        ok_type = json_is_string(v) && json_string_length(v) < sizeof text &&
+                  strlen(json_string_value(v)) == json_string_length(v); /* no embedded NUL */
+        if (ok_type)
+            snprintf(text, sizeof text, "%s", json_string_value(v));
+        break;
+    case VAFM_PARAM_BOOL:
+        ok_type = json_is_boolean(v);
+        if (ok_type)
+            snprintf(text, sizeof text, "%s", json_is_true(v) ? "true" : "false");
+        break;
+    default: /* SEED */
+        if (json_is_integer(v) && json_integer_value(v) >= 0)
+            snprintf(text, sizeof text, "%" PRIu64, (uint64_t)json_integer_value(v));
+        else if (json_is_string(v) && json_string_length(v) > 0 && json_string_length(v) <= 20 &&
+                 strspn(json_string_value(v), "0123456789") == json_string_length(v))
+            snprintf(text, sizeof text, "%s", json_string_value(v));
+        else
+            ok_type = 0;
+        break;
+    }
+    if (!ok_type) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' has the wrong type: expected %s", f->name, allowed);
+        return -1;
+    }
+    vafm_error verr = { 0 };
+    int rc = vafm_params_set(p, f->name, text, &verr);
+    if (rc) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, f->name, "%s (allowed: %s)",
+                      verr.message[0] ? verr.message : "invalid value", allowed);
+        return -1;
+    }
+    return 0;
+}
+
+/* ---- decoding ------------------------------------------------------------------------------------ */
+
+static const char *const s_cmd_names[] = { "hello", "get", "set", "presets", "curve", "tune",
+                                           "abort", "status", "shutdown", "campaign", "log" };
+
+const char *vafmd_cmd_name(int kind)
+{
+    return kind >= 0 && kind < (int)(sizeof s_cmd_names / sizeof *s_cmd_names) ? s_cmd_names[kind] : "?";
+}
+
+/* Keys each command accepts besides "cmd" and "id" (space separated, each enclosed in spaces). */
+static const char *const s_cmd_keys[] = {
+    [VAFMD_CMD_HELLO] = " ",
+    [VAFMD_CMD_GET] = " names info ",
+    [VAFMD_CMD_SET] = " preset values ",
+    [VAFMD_CMD_PRESETS] = " ",
+    [VAFMD_CMD_CURVE] = " index client_run_id ",
+    [VAFMD_CMD_TUNE] = " index client_run_id duration_s ",
+    [VAFMD_CMD_ABORT] = " ",
+    [VAFMD_CMD_STATUS] = " ",
+    [VAFMD_CMD_SHUTDOWN] = " ",
+    [VAFMD_CMD_CAMPAIGN] = NULL, /* not implemented: any arguments */
+    [VAFMD_CMD_LOG] = NULL,
+};
+
+static int s_key_allowed(int kind, const char *key)
+{
+    if (!strcmp(key, "cmd") || !strcmp(key, "id"))
+        return 1;
+    const char *keys = s_cmd_keys[kind];
+    if (!keys)
+        return 1;
+    size_t n = strlen(key);
+    if (n == 0 || n > 32 || strchr(key, ' '))
+        return 0;
+    char pat[40];
+    snprintf(pat, sizeof pat, " %s ", key);
+    return strstr(keys, pat) != NULL;
+}
+
+int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
+{
+    memset(c, 0, sizeof *c);
+    if (len > VAFMD_MAX_CMD_BYTES) {
+        vafmd_err_set(e, VAFMD_E_TOO_LARGE, "", "request of %zu bytes exceeds the limit of %d bytes", len,
+                      VAFMD_MAX_CMD_BYTES);
+        return -1;
+    }
+    json_error_t jerr;
+    json_t *root = json_loadb(buf, len, JSON_REJECT_DUPLICATES, &jerr);
+    if (!root) {
+        vafmd_err_set(e, VAFMD_E_MALFORMED, "", "not valid JSON: %s (line %d, column %d)", jerr.text, jerr.line,
+                      jerr.column);
+        return -1;
+    }
+    int rc = vafmd_cmd_decode_json(root, c, e);
+    json_decref(root);
+    return rc;
+}
+
+int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
+{
+    memset(c, 0, sizeof *c);
+    if (!json_is_object(root)) {
+        vafmd_err_set(e, VAFMD_E_MALFORMED, "", "a request must be a JSON object {\"cmd\": NAME, ...}");
+        return -1;
+    }
+    json_t *cmd = json_object_get(root, "cmd");
+    if (!cmd) {
+        vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "cmd", "the request has no \"cmd\"");
+        return -1;
+    }
+    if (!json_is_string(cmd)) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "cmd", "\"cmd\" must be a string");
+        return -1;
+    }
+    int kind = -1;
+    for (int i = 0; i < (int)(sizeof s_cmd_names / sizeof *s_cmd_names); i++)
+        if (!strcmp(json_string_value(cmd), s_cmd_names[i]) && strlen(s_cmd_names[i]) == json_string_length(cmd))
+            kind = i;
+    if (kind < 0) {
+        vafmd_err_set(e, VAFMD_E_UNKNOWN_COMMAND, "cmd", "unknown command '%.64s' (known: hello get set presets "
+                      "curve tune abort status shutdown campaign log)", json_string_value(cmd));
+        return -1;
+    }
+    const char *key;
+    json_t *v;
+    json_object_foreach(root, key, v) {
+        if (!s_key_allowed(kind, key)) {
+            vafmd_err_set(e, VAFMD_E_UNKNOWN_FIELD, key, "'%s' does not take the argument '%.64s'",
+                          s_cmd_names[kind], key);
+            return -1;
+        }
+    }
+    c->kind = kind;
+    c->id = json_object_get(root, "id");
+    if ((v = json_object_get(root, "names")) != NULL) {
+        if (!json_is_array(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "names", "\"names\" must be an array of strings");
+            return -1;
+        }
+        size_t i;
+        json_t *n;
+        json_array_foreach(v, i, n) if (!json_is_string(n))
+        {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "names", "\"names\" must be an array of strings");
+            return -1;
+        }
+        c->names = v;
+    }
+    if ((v = json_object_get(root, "info")) != NULL) {
+        if (!json_is_boolean(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "info", "\"info\" must be true or false");
+            return -1;
+        }
+        c->info = json_is_true(v);
+    }
+    if ((v = json_object_get(root, "preset")) != NULL) {
+        if (!json_is_string(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "preset", "\"preset\" must be a preset name (string)");
+            return -1;
+        }
+        c->preset = json_string_value(v);
+    }
+    if ((v = json_object_get(root, "values")) != NULL) {
+        if (!json_is_object(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "values", "\"values\" must be an object {name: value}");
+            return -1;
+        }
+        c->values = v;
+    }
+    if (kind == VAFMD_CMD_SET && !c->preset && !c->values) {
+        vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "values", "'set' needs \"values\" and/or \"preset\"");
+        return -1;
+    }
+    if ((v = json_object_get(root, "index")) != NULL && s_cmd_keys[kind]) {
+        if (!json_is_integer(v) || json_integer_value(v) < 0) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "index", "\"index\" must be an integer in [0, 2^63-1]");
+            return -1;
+        }
+        c->has_index = 1;
+        c->index = (uint64_t)json_integer_value(v);
+    }
+    if ((v = json_object_get(root, "client_run_id")) != NULL && s_cmd_keys[kind]) {
+        if (!json_is_string(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "client_run_id", "\"client_run_id\" must be a string");
+            return -1;
+        }
+        size_t n = json_string_length(v);
+        if (n < 1 || n > VAFMD_CLIENT_RUN_ID_MAX || strlen(json_string_value(v)) != n) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "client_run_id",
+                          "\"client_run_id\" must have 1 to %d characters (no NUL)", VAFMD_CLIENT_RUN_ID_MAX);
+            return -1;
+        }
+        memcpy(c->client_run_id, json_string_value(v), n + 1);
+    }
+    if ((v = json_object_get(root, "duration_s")) != NULL && s_cmd_keys[kind]) {
+        if (!json_is_number(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "duration_s", "\"duration_s\" must be a number (s)");
+            return -1;
+        }
+        const vafm_param_info *f = vafm_param_find("tune_duration_s");
+        double x = json_number_value(v);
+        if (f && !(x >= f->min && x <= f->max)) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s", "duration_s = %.17g is outside [%g, %g] s", x,
+                          f->min, f->max);
+            return -1;
+        }
+        c->has_duration = 1;
+        c->duration_s = x;
+    }
+    c->root = json_incref(root);
+    return 0;
+}
+
+void vafmd_cmd_free(vafmd_cmd *c)
+{
+    if (c->root)
+        json_decref(c->root);
+    memset(c, 0, sizeof *c);
+}
+
+int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd_err *e)
+{
+    vafm_params np = *p;
+    vafmd_settings ns = *s;
+    if (c->preset) {
+        vafm_error verr = { 0 };
+        if (strlen(c->preset) != json_string_length(json_object_get(c->root, "preset")) ||
+            vafm_params_preset(&np, c->preset, &verr)) {
+            vafmd_err_set(e, VAFMD_E_NOT_FOUND, "preset", "%s", verr.message[0] ? verr.message : "unknown preset");
+            return -1;
+        }
+    }
+    if (c->values) {
+        const char *key;
+        json_t *v;
+        json_object_foreach(c->values, key, v) {
+            const vafm_param_info *f = vafm_param_find(key);
+            const s_setting *st = f ? NULL : s_setting_find(key);
+            if (f) {
+                if (s_param_apply(&np, f, v, e))
+                    return -1;
+            } else if (st) {
+                if (s_setting_apply(&ns, st, v, e))
+                    return -1;
+            } else {
+                vafmd_err_set(e, VAFMD_E_UNKNOWN_FIELD, key, "no parameter or setting named '%.64s'", key);
+                return -1;
+            }
+        }
+    }
+    vafm_error verr = { 0 };
+    int rc = vafm_params_validate(&np, &verr);
+    if (rc) {
+        vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "the resulting scene is invalid: %s", verr.message);
+        return -1;
+    }
+    *p = np;
+    *s = ns;
+    return 0;
+}
+
+static json_t *s_info_param(const vafm_param_info *f)
+{
+    json_t *o = json_object();
+    static const char *const kinds[] = { "real", "choice", "seed", "bool" };
+    json_object_set_new(o, "kind", json_string(f->kind >= 0 && f->kind < 4 ? kinds[f->kind] : "?"));
+    json_object_set_new(o, "unit", json_string(f->unit));
+    if (f->kind == VAFM_PARAM_REAL) {
+        json_object_set_new(o, "min", json_real(f->min));
+        json_object_set_new(o, "max", json_real(f->max));
+    }
+    if (f->kind == VAFM_PARAM_CHOICE)
+        json_object_set_new(o, "choices", json_string(f->choices));
+    json_object_set_new(o, "doc", json_string(f->doc));
+    return o;
+}
+
+static json_t *s_info_setting(const s_setting *f)
+{
+    json_t *o = json_object();
+    json_object_set_new(o, "kind", json_string(f->kind == S_SET_BOOL ? "bool" : f->kind == S_SET_INT ? "integer"
+                                                                                                         : "real"));
+    json_object_set_new(o, "unit", json_string(f->unit));
+    if (f->kind != S_SET_BOOL) {
+        json_object_set_new(o, "min", json_real(f->min));
+        json_object_set_new(o, "max", json_real(f->max));
+    }
+    json_object_set_new(o, "read_only", json_boolean(f->read_only));
+    json_object_set_new(o, "doc", json_string(f->doc));
+    return o;
+}
+
+json_t *vafmd_get_values(const vafm_params *p, const vafmd_settings *s, const vafmd_cmd *c, vafmd_err *e)
+{
+    json_t *vals = json_object(), *info = c->info ? json_object() : NULL;
+    if (c->names) {
+        size_t i;
+        json_t *n;
+        json_array_foreach(c->names, i, n) {
+            const char *name = json_string_value(n);
+            const vafm_param_info *f = vafm_param_find(name);
+            const s_setting *st = f ? NULL : s_setting_find(name);
+            if (!f && !st) {
+                vafmd_err_set(e, VAFMD_E_UNKNOWN_FIELD, name, "no parameter or setting named '%.64s'", name);
+                json_decref(vals);
+                json_decref(info);
+                return NULL;
+            }
+            json_object_set_new(vals, name, f ? vafmd_param_value(p, f) : s_setting_value(s, st));
+            if (info)
+                json_object_set_new(info, name, f ? s_info_param(f) : s_info_setting(st));
+        }
+    } else {
+        for (int i = 0; i < vafm_param_count(); i++) {
+            const vafm_param_info *f = vafm_param_at(i);
+            json_object_set_new(vals, f->name, vafmd_param_value(p, f));
+            if (info)
+                json_object_set_new(info, f->name, s_info_param(f));
+        }
+        for (size_t i = 0; i < S_N_SETTINGS; i++) {
+            json_object_set_new(vals, s_settings[i].name, s_setting_value(s, &s_settings[i]));
+            if (info)
+                json_object_set_new(info, s_settings[i].name, s_info_setting(&s_settings[i]));
+        }
+    }
+    json_t *r = json_object();
+    json_object_set_new(r, "values", vals);
+    if (info)
+        json_object_set_new(r, "info", info);
+    return r;
+}
+
+json_t *vafmd_error_reply(const vafmd_err *e, json_t *id)
+{
+    json_t *r = json_object();
+    json_object_set_new(r, "status", json_string("error"));
+    json_object_set_new(r, "code", json_string(e->code ? e->code : VAFMD_E_INTERNAL));
+    /* json_string rejects invalid UTF-8 (a message may quote client bytes): fall back to plain text */
+    json_t *m = json_string(e->message);
+    json_object_set_new(r, "message", m ? m : json_string("(message not representable)"));
+    json_t *f = e->field[0] ? json_string(e->field) : json_null();
+    json_object_set_new(r, "field", f ? f : json_string("?"));
+    if (id)
+        json_object_set(r, "id", id);
+    return r;
+}

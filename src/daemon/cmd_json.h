@@ -1,0 +1,77 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The vafmd command decoder (protocol/wire.md, "Commands"): bytes → a checked command, or an error
+ * with a stable code, a message and the offending field. No I/O and no global state, so it can be
+ * fuzzed on its own (tests/fuzz_cmd.c). It never aborts on any input.
+ */
+#ifndef VAFMD_CMD_JSON_H
+#define VAFMD_CMD_JSON_H
+#include <jansson.h>
+#include <stddef.h>
+#include <stdint.h>
+#include "daemon/daemon.h"
+
+enum vafmd_cmd_kind {
+    VAFMD_CMD_HELLO, VAFMD_CMD_GET, VAFMD_CMD_SET, VAFMD_CMD_PRESETS, VAFMD_CMD_CURVE, VAFMD_CMD_TUNE,
+    VAFMD_CMD_ABORT, VAFMD_CMD_STATUS, VAFMD_CMD_SHUTDOWN, VAFMD_CMD_CAMPAIGN, VAFMD_CMD_LOG,
+};
+
+/* Stable error codes (protocol/wire.md lists them). */
+#define VAFMD_E_MALFORMED "malformed"
+#define VAFMD_E_TOO_LARGE "too_large"
+#define VAFMD_E_UNKNOWN_COMMAND "unknown_command"
+#define VAFMD_E_UNKNOWN_FIELD "unknown_field"
+#define VAFMD_E_MISSING_FIELD "missing_field"
+#define VAFMD_E_WRONG_TYPE "wrong_type"
+#define VAFMD_E_OUT_OF_RANGE "out_of_range"
+#define VAFMD_E_NOT_FOUND "not_found"
+#define VAFMD_E_INVALID_SCENE "invalid_scene"
+#define VAFMD_E_READ_ONLY "read_only"
+#define VAFMD_E_STATE "state"
+#define VAFMD_E_BUSY "busy"
+#define VAFMD_E_NOT_IMPLEMENTED "not_implemented"
+#define VAFMD_E_INTERNAL "internal"
+
+typedef struct vafmd_err {
+    const char *code;  /* one of VAFMD_E_* (static) */
+    char field[64];    /* offending field or "" */
+    char message[400];
+} vafmd_err;
+
+#define VAFMD_CLIENT_RUN_ID_MAX 64
+
+typedef struct vafmd_cmd {
+    int kind;              /* enum vafmd_cmd_kind */
+    json_t *root;          /* owned: the whole request */
+    json_t *id;            /* borrowed: the client's "id", echoed in the reply, or NULL */
+    json_t *names;         /* get: borrowed array of names, or NULL (all) */
+    int info;              /* get: 1 adds unit, range and doc per name */
+    const char *preset;    /* set: borrowed preset name, or NULL */
+    json_t *values;        /* set: borrowed object {name: value}, or NULL */
+    int has_index;
+    uint64_t index;        /* curve/tune: RNG stream index */
+    char client_run_id[VAFMD_CLIENT_RUN_ID_MAX + 1]; /* "" if none */
+    int has_duration;
+    double duration_s;     /* tune: overrides tune_duration_s */
+} vafmd_cmd;
+
+/** Decode one request. @return 0 (free c with vafmd_cmd_free) or -1 with e filled (c holds nothing). */
+int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e);
+/** Same from an already parsed object (takes a reference of its own). */
+int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e);
+void vafmd_cmd_free(vafmd_cmd *c);
+
+/** Apply a decoded `set` (preset first, then values) to p and s, all or nothing: the result must pass
+ *  vafm_params_validate. @return 0 or -1 with e filled (p and s untouched). */
+int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd_err *e);
+/** The values (and with info, the descriptions) of the names asked for, or all. NULL with e filled if a
+ *  name is unknown. */
+json_t *vafmd_get_values(const vafm_params *p, const vafmd_settings *s, const vafmd_cmd *c, vafmd_err *e);
+/** One scene or setting value as JSON (REAL: number, CHOICE: string, BOOL: bool, SEED: string). */
+json_t *vafmd_param_value(const vafm_params *p, const vafm_param_info *f);
+/** {"status":"error","code":..,"message":..,"field":..|null[,"id":..]} */
+json_t *vafmd_error_reply(const vafmd_err *e, json_t *id);
+void vafmd_err_set(vafmd_err *e, const char *code, const char *field, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+const char *vafmd_cmd_name(int kind);
+#endif

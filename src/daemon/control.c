@@ -1,0 +1,332 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The control loop: one REP socket, one request at a time, every request answered exactly once.
+ *
+ * The control thread owns the scene and the settings. Starting a run builds (and so validates) the
+ * simulation here, where an error can still be answered, then hands it to the simulation thread through
+ * the SPSC ring. Whether a run is in progress is known without asking the simulation thread: runs
+ * started here minus runs the simulation thread reports as done.
+ */
+#include <errno.h>
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <zmq.h>
+#include "daemon/cmd_json.h"
+#include "daemon/daemon.h"
+#include "vafm/wire.h"
+
+/* Client run ids seen lately: a retried start with the same id gets the same run back. */
+#define S_HISTORY 32
+typedef struct s_hist {
+    char client_run_id[VAFMD_CLIENT_RUN_ID_MAX + 1];
+    uint64_t run_id;
+    int kind;
+} s_hist;
+
+static s_hist s_history[S_HISTORY];
+static unsigned s_history_n;
+
+static const s_hist *s_history_find(const char *id)
+{
+    for (unsigned i = 0; i < S_HISTORY && i < s_history_n; i++)
+        if (!strcmp(s_history[i].client_run_id, id))
+            return &s_history[i];
+    return NULL;
+}
+
+static const char *const s_channels[VAFMD_N_CHANNELS][2] = {
+    { "height_m", "m" }, { "deflection_m", "m" }, { "force_N", "N" }, { "vDeflection_V", "V" }, { "tip_m", "m" },
+};
+
+static json_t *s_ok(const vafmd_cmd *c)
+{
+    json_t *r = json_object();
+    json_object_set_new(r, "status", json_string("ok"));
+    json_object_set_new(r, "cmd", json_string(vafmd_cmd_name(c->kind)));
+    if (c->id)
+        json_object_set(r, "id", c->id);
+    return r;
+}
+
+static int s_busy(const vafmd *d)
+{
+    return d->runs_started != atomic_load_explicit(&d->sh.runs_done, memory_order_acquire);
+}
+
+static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
+{
+    json_t *r = s_ok(c);
+    json_object_set_new(r, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));
+    json_object_set_new(r, "daemon", json_string("vafmd"));
+    json_object_set_new(r, "daemon_version", json_string(VAFMD_VERSION));
+    json_object_set_new(r, "library_version", json_string(vafm_version()));
+    json_object_set_new(r, "capabilities",
+                        json_pack("[sssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
+                                  "status", "shutdown"));
+    json_object_set_new(r, "not_implemented", json_pack("[sss]", "campaign", "log", "curve_security"));
+    json_t *ch = json_array();
+    for (int i = 0; i < VAFMD_N_CHANNELS; i++)
+        json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_channels[i][0], "unit", s_channels[i][1],
+                                            "dtype", "<f8"));
+    json_object_set_new(r, "channels", ch);
+    json_object_set_new(r, "max_request_bytes", json_integer(VAFMD_MAX_CMD_BYTES));
+    return r;
+}
+
+static json_t *s_presets(const vafmd_cmd *c)
+{
+    json_t *r = s_ok(c), *a = json_array();
+    for (int i = 0; i < vafm_preset_count(); i++)
+        json_array_append_new(a, json_pack("{s:s,s:s}", "name", vafm_preset_name(i), "description",
+                                           vafm_preset_description(i)));
+    json_object_set_new(r, "presets", a);
+    return r;
+}
+
+static json_t *s_status(const vafmd *d, const vafmd_cmd *c)
+{
+    const vafmd_shared *sh = &d->sh;
+    json_t *r = s_ok(c);
+    int busy = s_busy(d);
+    int st = atomic_load(&sh->state);
+    json_object_set_new(r, "state", json_string(!busy ? "idle" : st == VAFMD_RUNNING ? "running" : "starting"));
+    /* One run at a time: while busy, the run in progress is the last one started here (the simulation
+     * thread may not have picked it up yet). */
+    json_object_set_new(r, "run_id", busy ? json_integer((json_int_t)(d->next_run_id - 1)) : json_null());
+    json_object_set_new(r, "last_run_id", d->next_run_id > 1 ? json_integer((json_int_t)(d->next_run_id - 1))
+                                                             : json_null());
+    json_object_set_new(r, "runs_started", json_integer((json_int_t)d->runs_started));
+    json_object_set_new(r, "runs_done", json_integer((json_int_t)atomic_load(&sh->runs_done)));
+    json_object_set_new(r, "run_samples", json_integer((json_int_t)atomic_load(&sh->run_samples)));
+    json_object_set_new(r, "samples", json_integer((json_int_t)atomic_load(&sh->samples)));
+    json_object_set_new(r, "blocks", json_integer((json_int_t)atomic_load(&sh->blocks)));
+    json_object_set_new(r, "late_blocks", json_integer((json_int_t)atomic_load(&sh->late_blocks)));
+    json_object_set_new(r, "worst_late_ns", json_integer((json_int_t)atomic_load(&sh->worst_late_ns)));
+    json_object_set_new(r, "dropped", json_integer((json_int_t)atomic_load(&sh->dropped)));
+    uint64_t seq = atomic_load(&sh->seq);
+    json_object_set_new(r, "last_seq", seq ? json_integer((json_int_t)(seq - 1)) : json_null());
+    json_object_set_new(r, "speed", json_real(d->set.speed));
+    json_object_set_new(r, "free_run", json_boolean(d->set.free_run));
+    return r;
+}
+
+static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+{
+    int kind = c->kind == VAFMD_CMD_TUNE ? VAFMD_RUN_TUNE : VAFMD_RUN_CURVE;
+    if (c->client_run_id[0]) {
+        const s_hist *h = s_history_find(c->client_run_id);
+        if (h) {
+            if (h->kind != kind) {
+                vafmd_err_set(e, VAFMD_E_STATE, "client_run_id", "client_run_id '%s' was used for a %s", h->client_run_id,
+                              h->kind == VAFMD_RUN_TUNE ? "tune" : "curve");
+                return NULL;
+            }
+            json_t *r = s_ok(c);
+            json_object_set_new(r, "run_id", json_integer((json_int_t)h->run_id));
+            json_object_set_new(r, "client_run_id", json_string(h->client_run_id));
+            json_object_set_new(r, "duplicate", json_true());
+            return r;
+        }
+    }
+    if (s_busy(d)) {
+        vafmd_err_set(e, VAFMD_E_STATE, "cmd", "a run is in progress (run %" PRIu64 "); abort it or wait for its end",
+                      d->next_run_id - 1);
+        return NULL;
+    }
+    vafm_params p = d->scene;
+    if (c->has_duration) {
+        char buf[64];
+        snprintf(buf, sizeof buf, "%.17g", c->duration_s);
+        vafm_error verr = { 0 };
+        if (vafm_params_set(&p, "tune_duration_s", buf, &verr)) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s", "%s", verr.message);
+            return NULL;
+        }
+    }
+    vafm_sim *sim = NULL;
+    vafm_error verr = { 0 };
+    int rc = vafm_sim_new(&sim, &p, &verr);
+    if (rc) {
+        vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "cannot build the simulation: %s",
+                      verr.message[0] ? verr.message : vafm_strerror(rc));
+        return NULL;
+    }
+    uint64_t run_id = d->next_run_id;
+    size_t block_n = vafmd_block_samples(p.sample_rate_Hz, d->set.block_s);
+    char *scene = malloc(65536);
+    json_t *scene_json = NULL;
+    if (scene && vafm_params_to_json(&p, scene, 65536) > 0)
+        scene_json = json_loads(scene, 0, NULL);
+    free(scene);
+    json_t *ch = json_array();
+    for (int i = 0; i < VAFMD_N_CHANNELS; i++)
+        json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_channels[i][0], "unit", s_channels[i][1],
+                                            "dtype", "<f8"));
+    json_t *start = json_object();
+    json_object_set_new(start, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));
+    json_object_set_new(start, "run_id", json_integer((json_int_t)run_id));
+    json_object_set_new(start, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
+    json_object_set_new(start, "kind", json_string(kind == VAFMD_RUN_TUNE ? "tune" : "curve"));
+    json_object_set_new(start, "index", json_integer((json_int_t)(c->has_index ? c->index : 0)));
+    json_object_set_new(start, "sample_rate_Hz", json_real(p.sample_rate_Hz));
+    json_object_set_new(start, "block_samples", json_integer((json_int_t)block_n));
+    json_object_set_new(start, "dt_s", json_real(vafm_sim_dt(sim)));
+    json_object_set_new(start, "sensitivity_m_per_V", json_real(d->set.sensitivity_m_per_V));
+    json_object_set_new(start, "speed", json_real(d->set.speed));
+    json_object_set_new(start, "free_run", json_boolean(d->set.free_run));
+    json_object_set_new(start, "channels", ch);
+    json_object_set_new(start, "segments", json_pack("{s:i,s:i,s:i,s:i}", "approach", VAFM_SEG_APPROACH, "retract",
+                                                     VAFM_SEG_RETRACT, "dwell", VAFM_SEG_DWELL, "tune", VAFM_SEG_TUNE));
+    json_object_set_new(start, "scene", scene_json ? scene_json : json_null());
+    vafmd_sim_cmd sc;
+    memset(&sc, 0, sizeof sc);
+    sc.type = VAFMD_SIM_START;
+    sc.kind = kind;
+    sc.run_id = run_id;
+    sc.index = c->has_index ? c->index : 0;
+    sc.sim = sim;
+    sc.start_json = json_dumps(start, JSON_COMPACT);
+    sc.set = d->set;
+    snprintf(sc.client_run_id, sizeof sc.client_run_id, "%s", c->client_run_id);
+    json_decref(start);
+    if (!sc.start_json || !vafmd_ring_push(&d->ring, &sc)) {
+        free(sc.start_json);
+        vafm_sim_destroy(&sim);
+        vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
+        return NULL;
+    }
+    d->next_run_id++;
+    d->runs_started++;
+    if (c->client_run_id[0]) {
+        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
+        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
+        h->run_id = run_id;
+        h->kind = kind;
+    }
+    json_t *r = s_ok(c);
+    json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
+    json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
+    json_object_set_new(r, "duplicate", json_false());
+    json_object_set_new(r, "block_samples", json_integer((json_int_t)block_n));
+    return r;
+}
+
+/* Execute one decoded command. *quit is set by `shutdown`. */
+static json_t *s_execute(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    json_t *r = NULL;
+    switch (c->kind) {
+    case VAFMD_CMD_HELLO: return s_hello(d, c);
+    case VAFMD_CMD_PRESETS: return s_presets(c);
+    case VAFMD_CMD_STATUS: return s_status(d, c);
+    case VAFMD_CMD_GET: {
+        json_t *v = vafmd_get_values(&d->scene, &d->set, c, e);
+        if (!v)
+            return NULL;
+        r = s_ok(c);
+        json_object_update(r, v);
+        json_decref(v);
+        return r;
+    }
+    case VAFMD_CMD_SET:
+        if (vafmd_apply_set(&d->scene, &d->set, c, e))
+            return NULL;
+        r = s_ok(c);
+        json_object_set_new(r, "applies_to", json_string(s_busy(d) ? "next_run" : "now"));
+        return r;
+    case VAFMD_CMD_CURVE:
+    case VAFMD_CMD_TUNE: return s_start(d, c, e);
+    case VAFMD_CMD_ABORT: {
+        if (!s_busy(d)) {
+            vafmd_err_set(e, VAFMD_E_STATE, "cmd", "no run is in progress");
+            return NULL;
+        }
+        vafmd_sim_cmd sc;
+        memset(&sc, 0, sizeof sc);
+        sc.type = VAFMD_SIM_ABORT;
+        if (!vafmd_ring_push(&d->ring, &sc)) {
+            vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
+            return NULL;
+        }
+        r = s_ok(c);
+        json_object_set_new(r, "run_id", json_integer((json_int_t)(d->next_run_id - 1)));
+        return r;
+    }
+    case VAFMD_CMD_SHUTDOWN: *quit = 1; return s_ok(c);
+    case VAFMD_CMD_CAMPAIGN:
+        vafmd_err_set(e, VAFMD_E_NOT_IMPLEMENTED, "cmd", "'campaign' is not yet implemented in this vafmd");
+        return NULL;
+    case VAFMD_CMD_LOG:
+        vafmd_err_set(e, VAFMD_E_NOT_IMPLEMENTED, "cmd", "'log' (HDF5 logging) is not yet implemented in this vafmd");
+        return NULL;
+    default: vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "command not handled"); return NULL;
+    }
+}
+
+static void s_reply(void *rep, json_t *r)
+{
+    char *text = json_dumps(r, JSON_COMPACT);
+    json_decref(r);
+    if (!text)
+        text = strdup("{\"status\":\"error\",\"code\":\"internal\",\"message\":\"reply encoding failed\","
+                      "\"field\":null}");
+    if (text) {
+        while (zmq_send(rep, text, strlen(text), 0) < 0 && errno == EINTR)
+            ;
+        free(text);
+    }
+}
+
+int vafmd_control_loop(vafmd *d)
+{
+    int quit = 0;
+    while (!quit && !*d->stop) {
+        zmq_pollitem_t it = { d->rep, 0, ZMQ_POLLIN, 0 };
+        int n = zmq_poll(&it, 1, 200);
+        if (n < 0) {
+            if (errno == EINTR)
+                continue;
+            return 1;
+        }
+        if (n == 0 || !(it.revents & ZMQ_POLLIN))
+            continue;
+        zmq_msg_t msg;
+        zmq_msg_init(&msg);
+        if (zmq_msg_recv(&msg, d->rep, 0) < 0) {
+            zmq_msg_close(&msg);
+            if (errno == EINTR || errno == EAGAIN)
+                continue;
+            return 1;
+        }
+        /* A request is one frame; further frames are drained so that the REP state machine can reply. */
+        int parts = 1;
+        while (zmq_msg_more(&msg)) {
+            zmq_msg_t more;
+            zmq_msg_init(&more);
+            int rc = zmq_msg_recv(&more, d->rep, 0);
+            int again = rc >= 0 && zmq_msg_more(&more);
+            zmq_msg_close(&more);
+            parts++;
+            if (!again)
+                break;
+        }
+        vafmd_err e = { 0 };
+        vafmd_cmd c;
+        json_t *r = NULL;
+        if (parts > 1)
+            vafmd_err_set(&e, VAFMD_E_MALFORMED, "", "a request is one single-frame message (got %d frames)", parts);
+        else if (vafmd_cmd_decode(zmq_msg_data(&msg), zmq_msg_size(&msg), &c, &e) == 0) {
+            r = s_execute(d, &c, &quit, &e);
+            if (!r)
+                r = vafmd_error_reply(&e, c.id);
+            vafmd_cmd_free(&c);
+        }
+        if (!r)
+            r = vafmd_error_reply(&e, NULL);
+        zmq_msg_close(&msg);
+        s_reply(d->rep, r);
+    }
+    return 0;
+}

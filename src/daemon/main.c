@@ -1,0 +1,278 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * vafmd: the virtual AFM as an instrument daemon. Commands (JSON) on a REP socket, the sample stream on
+ * an XPUB socket (protocol/wire.md). The main thread runs the control loop; one thread simulates.
+ */
+#include <errno.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <jansson.h>
+#include <zmq.h>
+#include "daemon/cmd_json.h"
+#include "daemon/daemon.h"
+#include "vafm/wire.h"
+
+static volatile sig_atomic_t s_stop;
+
+static void s_on_signal(int sig)
+{
+    (void)sig;
+    s_stop = 1;
+}
+
+static const char s_usage[] =
+    "vafmd " VAFMD_VERSION ": the virtual AFM instrument daemon (ZeroMQ commands and sample stream)\n"
+    "\nUSAGE\n  vafmd [OPTIONS]\n"
+    "\nOPTIONS (applied in this order: defaults, config file, flags)\n"
+    "  --rep ENDPOINT     command socket, REP (default " VAFMD_DEFAULT_REP ")\n"
+    "  --pub ENDPOINT     stream socket, XPUB (default " VAFMD_DEFAULT_PUB ")\n"
+    "                     tcp:// on a loopback address (127.x.x.x, localhost, [::1]) or ipc://PATH;\n"
+    "                     other addresses are refused: CURVE security is not yet implemented\n"
+    "  --config FILE      JSON object: {\"rep\": EP, \"pub\": EP, \"hwm\": N, \"preset\": NAME,\n"
+    "                     \"values\": {PARAMETER-OR-SETTING: value, ...}} (all keys optional)\n"
+    "  --preset NAME      scene preset (replaces the config file's; default paper-fig1)\n"
+    "  --speed F          pacing speed factor in [0.01, 1000] (1: real time)\n"
+    "  --free-run         no pacing: release blocks as fast as they are computed\n"
+    "  --sensitivity S    detector sensitivity (InvOLS), m/V (default 50e-9)\n"
+    "  --hwm N            stream send high-water mark per subscriber, messages (default 1000)\n"
+    "  -h, --help         this text\n"
+    "\nSETTINGS (get/set like scene parameters): speed, free_run, sensitivity_m_per_V, block_s, hwm\n"
+    "\nCOMMANDS (JSON on the REP socket, protocol/wire.md): hello get set presets curve tune abort status\n"
+    "  shutdown; campaign and log reply \"not_implemented\" in this version\n"
+    "\nSTREAM topics: data, run.start, run.end, event, heartbeat (1 Hz)\n"
+    "\nSIGNALS: SIGINT/SIGTERM end the run in progress (run.end \"aborted\") and exit 0\n"
+    "\nEXIT STATUS: 0 clean shutdown, 1 runtime error (cannot bind), 2 usage or configuration error\n";
+
+/* Loopback or local transports only until CURVE exists: an open port would be an unauthenticated
+ * instrument on the network. */
+static int s_endpoint_allowed(const char *ep)
+{
+    if (!strncmp(ep, "ipc://", 6) || !strncmp(ep, "inproc://", 9))
+        return 1;
+    if (strncmp(ep, "tcp://", 6))
+        return 0;
+    const char *h = ep + 6;
+    return !strncmp(h, "127.", 4) || !strncmp(h, "localhost:", 10) || !strncmp(h, "[::1]:", 6);
+}
+
+static int s_usage_error(const char *fmt, const char *a)
+{
+    fprintf(stderr, "vafmd: ");
+    fprintf(stderr, fmt, a);
+    fprintf(stderr, "\n(vafmd --help for usage)\n");
+    return 2;
+}
+
+static int s_apply_set_json(vafmd *d, json_t *obj, const char *origin)
+{
+    vafmd_cmd c;
+    vafmd_err e = { 0 };
+    json_object_set_new(obj, "cmd", json_string("set"));
+    if (vafmd_cmd_decode_json(obj, &c, &e) || vafmd_apply_set(&d->scene, &d->set, &c, &e)) {
+        fprintf(stderr, "vafmd: %s: %s: %s%s%s\n", origin, e.code, e.message, e.field[0] ? " (field " : "",
+                e.field[0] ? e.field : "");
+        if (e.field[0])
+            fprintf(stderr, ")\n");
+        if (c.root)
+            vafmd_cmd_free(&c);
+        return -1;
+    }
+    vafmd_cmd_free(&c);
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    static vafmd d;
+    const char *rep_ep = VAFMD_DEFAULT_REP, *pub_ep = VAFMD_DEFAULT_PUB, *config = NULL, *preset = NULL;
+    const char *speed = NULL, *sens = NULL, *hwm = NULL;
+    int free_run = 0;
+    char rep_buf[512], pub_buf[512];
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char **dst = NULL;
+        if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+            fputs(s_usage, stdout);
+            return 0;
+        } else if (!strcmp(a, "--free-run"))
+            free_run = 1;
+        else if (!strcmp(a, "--rep"))
+            dst = &rep_ep;
+        else if (!strcmp(a, "--pub"))
+            dst = &pub_ep;
+        else if (!strcmp(a, "--config"))
+            dst = &config;
+        else if (!strcmp(a, "--preset"))
+            dst = &preset;
+        else if (!strcmp(a, "--speed"))
+            dst = &speed;
+        else if (!strcmp(a, "--sensitivity"))
+            dst = &sens;
+        else if (!strcmp(a, "--hwm"))
+            dst = &hwm;
+        else
+            return s_usage_error("unknown option '%s'", a);
+        if (dst) {
+            if (i + 1 >= argc)
+                return s_usage_error("option '%s' needs a value", a);
+            *dst = argv[++i];
+        }
+    }
+    vafm_params_default(&d.scene);
+    vafmd_settings_default(&d.set);
+    if (config) {
+        json_error_t jerr;
+        json_t *cfg = json_load_file(config, JSON_REJECT_DUPLICATES, &jerr);
+        if (!cfg || !json_is_object(cfg)) {
+            fprintf(stderr, "vafmd: config '%s': %s (line %d, column %d)\n", config,
+                    cfg ? "not a JSON object" : jerr.text, jerr.line, jerr.column);
+            json_decref(cfg);
+            return 2;
+        }
+        json_t *v;
+        if ((v = json_object_get(cfg, "rep")) && json_is_string(v)) {
+            snprintf(rep_buf, sizeof rep_buf, "%s", json_string_value(v));
+            rep_ep = rep_buf;
+        }
+        if ((v = json_object_get(cfg, "pub")) && json_is_string(v)) {
+            snprintf(pub_buf, sizeof pub_buf, "%s", json_string_value(v));
+            pub_ep = pub_buf;
+        }
+        if ((v = json_object_get(cfg, "hwm")) && json_is_integer(v) && json_integer_value(v) >= 1 &&
+            json_integer_value(v) <= 10000000)
+            d.set.hwm = (int)json_integer_value(v);
+        else if (v) {
+            fprintf(stderr, "vafmd: config '%s': \"hwm\" must be an integer in [1, 1e7]\n", config);
+            json_decref(cfg);
+            return 2;
+        }
+        json_t *set = json_object();
+        const char *key;
+        json_object_foreach(cfg, key, v) {
+            if (!strcmp(key, "rep") || !strcmp(key, "pub") || !strcmp(key, "hwm"))
+                continue;
+            json_object_set(set, key, v);
+        }
+        if (preset)
+            json_object_set_new(set, "preset", json_string(preset));
+        int bad = json_object_size(set) && s_apply_set_json(&d, set, config);
+        json_decref(set);
+        json_decref(cfg);
+        if (bad)
+            return 2;
+    } else if (preset) {
+        json_t *set = json_pack("{s:s}", "preset", preset);
+        int bad = s_apply_set_json(&d, set, "--preset");
+        json_decref(set);
+        if (bad)
+            return 2;
+    }
+    json_t *vals = json_object();
+    if (speed) {
+        char *end;
+        double x = strtod(speed, &end);
+        if (*end || end == speed)
+            return s_usage_error("--speed '%s' is not a number", speed);
+        json_object_set_new(vals, "speed", json_real(x));
+    }
+    if (sens) {
+        char *end;
+        double x = strtod(sens, &end);
+        if (*end || end == sens)
+            return s_usage_error("--sensitivity '%s' is not a number", sens);
+        json_object_set_new(vals, "sensitivity_m_per_V", json_real(x));
+    }
+    if (free_run)
+        json_object_set_new(vals, "free_run", json_true());
+    if (json_object_size(vals)) {
+        json_t *set = json_pack("{s:O}", "values", vals);
+        int bad = s_apply_set_json(&d, set, "command line");
+        json_decref(set);
+        if (bad) {
+            json_decref(vals);
+            return 2;
+        }
+    }
+    json_decref(vals);
+    if (hwm) {
+        char *end;
+        long x = strtol(hwm, &end, 10);
+        if (*end || end == hwm || x < 1 || x > 10000000)
+            return s_usage_error("--hwm '%s' must be an integer in [1, 1e7]", hwm);
+        d.set.hwm = (int)x;
+    }
+    if (!s_endpoint_allowed(rep_ep) || !s_endpoint_allowed(pub_ep)) {
+        fprintf(stderr, "vafmd: refusing to bind '%s': only loopback tcp:// and ipc:// endpoints are allowed, "
+                        "because CURVE security (needed for other addresses) is not yet implemented\n",
+                s_endpoint_allowed(rep_ep) ? pub_ep : rep_ep);
+        return 2;
+    }
+
+    d.zctx = zmq_ctx_new();
+    d.rep = zmq_socket(d.zctx, ZMQ_REP);
+    d.pub = zmq_socket(d.zctx, ZMQ_XPUB);
+    int64_t maxmsg = 1 << 20; /* beyond 1 MiB the connection is dropped; 64 KiB..1 MiB get "too_large" */
+    int linger = 1000, zero = 0;
+    zmq_setsockopt(d.rep, ZMQ_MAXMSGSIZE, &maxmsg, sizeof maxmsg);
+    zmq_setsockopt(d.rep, ZMQ_LINGER, &linger, sizeof linger);
+    zmq_setsockopt(d.pub, ZMQ_SNDHWM, &d.set.hwm, sizeof d.set.hwm);
+    zmq_setsockopt(d.pub, ZMQ_LINGER, &zero, sizeof zero);
+    zmq_setsockopt(d.pub, ZMQ_RCVHWM, &zero, sizeof zero);
+    /* every subscription, also a repeated topic, reaches the simulation thread: each new subscriber gets
+     * its greeting heartbeat and the current run.start */
+    int one = 1;
+    zmq_setsockopt(d.pub, ZMQ_XPUB_VERBOSE, &one, sizeof one);
+    if (zmq_bind(d.rep, rep_ep) || zmq_bind(d.pub, pub_ep)) {
+        fprintf(stderr, "vafmd: cannot bind: %s\n", zmq_strerror(errno));
+        zmq_close(d.rep);
+        zmq_close(d.pub);
+        zmq_ctx_term(d.zctx);
+        return 1;
+    }
+    vafmd_ring_init(&d.ring, d.ring_store, sizeof(vafmd_sim_cmd));
+    d.next_run_id = 1;
+    d.stop = &s_stop;
+
+    /* Only the control thread takes SIGINT/SIGTERM: the simulation thread inherits them blocked. */
+    sigset_t block, old;
+    sigemptyset(&block);
+    sigaddset(&block, SIGINT);
+    sigaddset(&block, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &block, &old);
+    pthread_t th;
+    int trc = pthread_create(&th, NULL, vafmd_sim_main, &d);
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = s_on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
+    if (trc) {
+        fprintf(stderr, "vafmd: cannot start the simulation thread\n");
+        return 1;
+    }
+    fprintf(stderr, "vafmd %s: commands on %s, stream on %s\n", VAFMD_VERSION, rep_ep, pub_ep);
+    int rc = vafmd_control_loop(&d);
+
+    vafmd_sim_cmd q;
+    memset(&q, 0, sizeof q);
+    q.type = VAFMD_SIM_QUIT;
+    while (!vafmd_ring_push(&d.ring, &q))
+        nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
+    pthread_join(th, NULL);
+    /* Commands still in the ring after QUIT cannot exist (QUIT is pushed last), so nothing leaks.
+     * The last run.end is still queued: give it a bounded time to leave (a stalled subscriber must
+     * not hold up the exit). pthread_join is the barrier that lets this thread use the socket. */
+    int flush_ms = 500;
+    zmq_setsockopt(d.pub, ZMQ_LINGER, &flush_ms, sizeof flush_ms);
+    zmq_close(d.pub);
+    zmq_close(d.rep);
+    zmq_ctx_term(d.zctx);
+    fprintf(stderr, "vafmd: stopped\n");
+    return rc ? 1 : 0;
+}

@@ -1,0 +1,229 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Fuzz driver for the vafmd command decoder (src/daemon/cmd_json.c).
+ *
+ * Built with -DVAFMD_LIBFUZZER it is a libFuzzer target (LLVMFuzzerTestOneInput). Otherwise main() runs
+ * a corpus of valid and invalid requests, then a bounded number of random mutations of them (byte
+ * flips, insertions, deletions, truncations, splices; fixed seed so a failure reproduces). Each input
+ * must decode or yield an error with a known code and a message, and whatever decodes is executed
+ * against a scratch scene (set/get) without crashing. ASan/UBSan do the rest.
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include "daemon/cmd_json.h"
+#include "vafm/wire.h"
+#include "harness.h"
+
+static const char *const s_codes[] = { VAFMD_E_MALFORMED, VAFMD_E_TOO_LARGE, VAFMD_E_UNKNOWN_COMMAND,
+                                       VAFMD_E_UNKNOWN_FIELD, VAFMD_E_MISSING_FIELD, VAFMD_E_WRONG_TYPE,
+                                       VAFMD_E_OUT_OF_RANGE, VAFMD_E_NOT_FOUND, VAFMD_E_INVALID_SCENE,
+                                       VAFMD_E_READ_ONLY };
+
+static int s_known_code(const char *c)
+{
+    for (size_t i = 0; i < sizeof s_codes / sizeof *s_codes; i++)
+        if (c && !strcmp(c, s_codes[i]))
+            return 1;
+    return 0;
+}
+
+/* @return 1 if the input decoded, 0 if it was rejected; -1 on a broken invariant. */
+static int s_one(const uint8_t *data, size_t len)
+{
+    vafmd_cmd c;
+    vafmd_err e = { 0 };
+    int ok = vafmd_cmd_decode(data, len, &c, &e) == 0;
+    if (ok) {
+        vafm_params p;
+        vafmd_settings s;
+        vafm_params_default(&p);
+        vafmd_settings_default(&s);
+        if (c.kind == VAFMD_CMD_SET) {
+            vafm_params p0 = p;
+            if (vafmd_apply_set(&p, &s, &c, &e)) {
+                if (!s_known_code(e.code) || memcmp(&p, &p0, sizeof p))
+                    ok = -1; /* a failed set must change nothing */
+            }
+        } else if (c.kind == VAFMD_CMD_GET) {
+            json_t *v = vafmd_get_values(&p, &s, &c, &e);
+            if (!v && !s_known_code(e.code))
+                ok = -1;
+            json_decref(v);
+        }
+        vafmd_cmd_free(&c);
+    } else if (!s_known_code(e.code) || !e.message[0]) {
+        ok = -1;
+    }
+    if (!ok) {
+        json_t *r = vafmd_error_reply(&e, NULL);
+        char *t = json_dumps(r, JSON_COMPACT);
+        if (!t || !strstr(t, "\"status\":\"error\""))
+            ok = -1;
+        free(t);
+        json_decref(r);
+    }
+    return ok;
+}
+
+#ifdef VAFMD_LIBFUZZER
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    if (s_one(data, size) < 0)
+        abort();
+    return 0;
+}
+#else
+static const char *const s_corpus[] = {
+    "{\"cmd\":\"hello\"}",
+    "{\"cmd\":\"hello\",\"id\":42}",
+    "{\"cmd\":\"get\"}",
+    "{\"cmd\":\"get\",\"names\":[\"k_N_per_m\",\"speed\"],\"info\":true}",
+    "{\"cmd\":\"get\",\"names\":[\"nope\"]}",
+    "{\"cmd\":\"set\",\"values\":{\"k_N_per_m\":0.1,\"T_K\":300}}",
+    "{\"cmd\":\"set\",\"values\":{\"k_N_per_m\":1e99}}",
+    "{\"cmd\":\"set\",\"values\":{\"k_N_per_m\":\"0.1\"}}",
+    "{\"cmd\":\"set\",\"values\":{\"integrator\":\"baoab\",\"seed\":\"18446744073709551615\"}}",
+    "{\"cmd\":\"set\",\"values\":{\"seed\":-1,\"free_exact\":true}}",
+    "{\"cmd\":\"set\",\"preset\":\"paper-fig4\",\"values\":{\"speed\":2,\"free_run\":true,\"block_s\":0.002}}",
+    "{\"cmd\":\"set\",\"preset\":\"nope\"}",
+    "{\"cmd\":\"set\",\"values\":{\"hwm\":5}}",
+    "{\"cmd\":\"set\",\"values\":{\"dt_s\":1}}",
+    "{\"cmd\":\"presets\"}",
+    "{\"cmd\":\"curve\",\"index\":3,\"client_run_id\":\"abc\"}",
+    "{\"cmd\":\"curve\",\"index\":-3}",
+    "{\"cmd\":\"tune\",\"duration_s\":0.5}",
+    "{\"cmd\":\"tune\",\"duration_s\":\"x\"}",
+    "{\"cmd\":\"abort\"}",
+    "{\"cmd\":\"status\"}",
+    "{\"cmd\":\"shutdown\"}",
+    "{\"cmd\":\"campaign\",\"anything\":[1,2]}",
+    "{\"cmd\":\"log\",\"path\":\"/tmp/x.h5\"}",
+    "{\"cmd\":\"bogus\"}",
+    "{\"cmd\":7}",
+    "{\"cmd\":\"hello\",\"cmd\":\"hello\"}",
+    "{\"cmd\":\"hello\",\"extra\":1}",
+    "[1,2,3]",
+    "\"hello\"",
+    "{\"cmd\":\"he\\u0000llo\"}",
+    "{\"cmd\":\"set\",\"values\":{\"contact\":\"jkr\\u0000x\"}}",
+    "{\"cmd\":\"set\",\"preset\":\"paper-fig4\\u0000x\"}",
+    "{",
+    "",
+    "{\"cmd\":\"curve\",\"client_run_id\":\"\"}",
+    "{\"cmd\":\"get\",\"names\":[1]}",
+    "{\"cmd\":\"set\",\"values\":[]}",
+    "{\"cmd\":\"set\",\"values\":{\"\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9"
+    "\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9"
+    "\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\":1}}",
+};
+#define S_N_CORPUS (sizeof s_corpus / sizeof *s_corpus)
+
+static uint64_t s_rng = 0x9E3779B97F4A7C15u;
+static uint64_t s_next(void) /* xorshift64*: a fixed, portable sequence */
+{
+    s_rng ^= s_rng >> 12;
+    s_rng ^= s_rng << 25;
+    s_rng ^= s_rng >> 27;
+    return s_rng * 2685821657736338717u;
+}
+
+static const char *const s_tokens[] = { "{", "}", "[", "]", ",", ":", "\"", "\\", "1e308", "-0", "null", "true",
+                                        "\"k_N_per_m\"", "\"values\"", "\"cmd\"", "\"set\"", "\xff", "\xc3",
+                                        "\\u0000", "\\ud800", "18446744073709551616", "NaN" };
+
+/* The data header: byte positions of protocol/wire.md §4, independent of the host's byte order. */
+static void s_wire_header(void)
+{
+    vafm_wire_header h = { VAFM_WIRE_MAGIC, VAFM_WIRE_PROTOCOL_VERSION, VAFM_WIRE_HEADER_SIZE, 0x0102030405060708u,
+                           9, 10, 0x1112131415161718u, 1000, 5, 2, 200000.0, -5, 6, 0 }, g;
+    unsigned char b[VAFM_WIRE_HEADER_SIZE];
+    vafm_wire_header_encode(&h, b);
+    ENSURE(b[0] == 'V' && b[1] == 'A' && b[2] == 'F' && b[3] == 'M');
+    ENSURE(b[4] == 1 && b[5] == 0 && b[6] == 72 && b[7] == 0);
+    ENSURE(b[8] == 0x08 && b[15] == 0x01);   /* seq, little-endian */
+    ENSURE(b[16] == 9 && b[24] == 10 && b[32] == 0x18 && b[39] == 0x11);
+    ENSURE(b[40] == 0xe8 && b[41] == 0x03 && b[44] == 5 && b[46] == 2);
+    ENSURE(b[55] == 0x41 && b[56] == 0xfb && b[63] == 0xff && b[64] == 6); /* 2e5 = 0x41086A0000000000 */
+    ENSURE(vafm_wire_header_decode(b, sizeof b, &g) == 0 && !memcmp(&g, &h, sizeof h));
+    ENSURE(vafm_wire_header_decode(b, sizeof b - 1, &g) == -1);
+    b[0] = 'X';
+    ENSURE(vafm_wire_header_decode(b, sizeof b, &g) == -1);
+}
+
+int main(void)
+{
+    enum { CAP = 4096 };
+    s_wire_header();
+    static uint8_t buf[CAP];
+    int decoded = 0, rejected = 0;
+    for (size_t i = 0; i < S_N_CORPUS; i++) {
+        int r = s_one((const uint8_t *)s_corpus[i], strlen(s_corpus[i]));
+        ENSURE_MSG(r >= 0, "corpus %zu: %s", i, s_corpus[i]);
+        r > 0 ? decoded++ : rejected++;
+    }
+    /* the first corpus entries are valid; an oversized request is rejected by size before parsing */
+    ENSURE(s_one((const uint8_t *)s_corpus[0], strlen(s_corpus[0])) == 1);
+    {
+        size_t big = VAFMD_MAX_CMD_BYTES + 1;
+        char *b = malloc(big);
+        ENSURE(b != NULL);
+        if (b) {
+            memset(b, ' ', big);
+            memcpy(b, s_corpus[0], strlen(s_corpus[0]));
+            vafmd_cmd c;
+            vafmd_err e = { 0 };
+            ENSURE(vafmd_cmd_decode(b, big, &c, &e) == -1 && !strcmp(e.code, VAFMD_E_TOO_LARGE));
+            free(b);
+        }
+    }
+    const long iters = LONG_OR(200000, 30000);
+    for (long it = 0; it < iters; it++) {
+        const char *seed = s_corpus[s_next() % S_N_CORPUS];
+        size_t n = strlen(seed);
+        memcpy(buf, seed, n);
+        int muts = 1 + (int)(s_next() % 4);
+        for (int m = 0; m < muts; m++) {
+            uint64_t op = s_next() % 5, pos = n ? s_next() % (n + 1) : 0;
+            if (op == 0 && n) { /* flip a byte */
+                buf[pos % n] ^= (uint8_t)(1u << (s_next() % 8));
+            } else if (op == 1 && n) { /* delete a run */
+                size_t k = 1 + s_next() % 8;
+                if (pos + k > n)
+                    k = n - pos;
+                memmove(buf + pos, buf + pos + k, n - pos - k);
+                n -= k;
+            } else if (op == 2) { /* insert a token */
+                const char *t = s_tokens[s_next() % (sizeof s_tokens / sizeof *s_tokens)];
+                size_t k = strlen(t);
+                if (n + k < CAP) {
+                    memmove(buf + pos + k, buf + pos, n - pos);
+                    memcpy(buf + pos, t, k);
+                    n += k;
+                }
+            } else if (op == 3) { /* truncate */
+                n = pos;
+            } else { /* splice in the tail of another corpus entry */
+                const char *o = s_corpus[s_next() % S_N_CORPUS];
+                size_t on = strlen(o), from = on ? s_next() % on : 0;
+                if (pos + (on - from) < CAP) {
+                    memcpy(buf + pos, o + from, on - from);
+                    n = pos + (on - from);
+                }
+            }
+        }
+        int r = s_one(buf, n);
+        if (r < 0) {
+            ENSURE_MSG(0, "iteration %ld: input of %zu bytes broke an invariant: %.*s", it, n, (int)n, (char *)buf);
+            break;
+        }
+        r > 0 ? decoded++ : rejected++;
+    }
+    printf("fuzz_cmd: %ld mutations + %zu corpus entries: %d decoded, %d rejected\n", iters, S_N_CORPUS, decoded,
+           rejected);
+    ENSURE(decoded > 0 && rejected > 0);
+    return harness_done();
+}
+#endif
