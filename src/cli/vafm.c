@@ -835,15 +835,21 @@ static const char s_csv_header[] =
     "detach_height_m,detach_eq_force_N,detach_time_s,touch_time_s,touch_height_m,retract_start_s,samples,"
     "steps,steps_contact,steps_free,duration_s\n";
 
+/* "done/total curves, rate, ETA" on the progress line, when one is due (vafm curves and campaign). */
+static void s_progress_curves(s_progress *pg, uint64_t done, uint64_t total)
+{
+    if (!s_progress_due(pg))
+        return;
+    double wall = s_now() - pg->t0, rate = (double)done / wall;
+    char line[160];
+    snprintf(line, sizeof line, "%" PRIu64 "/%" PRIu64 " curves, %.3g curves/s, ETA %.0f s", done, total, rate,
+             rate > 0 ? (double)(total - done) / rate : 0.0);
+    s_progress_line(pg, line);
+}
+
 static void s_curves_progress(s_curves *cv)
 {
-    if (!s_progress_due(&cv->pg))
-        return;
-    double wall = s_now() - cv->pg.t0, rate = (double)cv->done / wall;
-    char line[160];
-    snprintf(line, sizeof line, "%" PRIu64 "/%" PRIu64 " curves, %.3g curves/s, ETA %.0f s", cv->done, cv->total,
-             rate, rate > 0 ? (double)(cv->total - cv->done) / rate : 0.0);
-    s_progress_line(&cv->pg, line);
+    s_progress_curves(&cv->pg, cv->done, cv->total);
 }
 
 /* Called in index order, one at a time. A failed curve stops the campaign: it is a runtime error. */
@@ -1121,16 +1127,6 @@ static void *s_camp_flusher(void *arg)
     return NULL;
 }
 
-static void s_camp_progress(s_camp *cp)
-{
-    if (!s_progress_due(&cp->pg))
-        return;
-    double wall = s_now() - cp->pg.t0, rate = (double)cp->done / wall;
-    char line[160];
-    snprintf(line, sizeof line, "%" PRIu64 "/%" PRIu64 " curves, %.3g curves/s, ETA %.0f s", cp->done, cp->total,
-             rate, rate > 0 ? (double)(cp->total - cp->done) / rate : 0.0);
-    s_progress_line(&cp->pg, line);
-}
 
 /* Called in index order, one at a time. A failed curve stops the campaign, as in vafm curves. */
 static int s_camp_curve(void *user, const vafm_campaign_curve *c)
@@ -1169,7 +1165,7 @@ static int s_camp_curve(void *user, const vafm_campaign_curve *c)
     if (stop)
         return 1;
     cp->done++;
-    s_camp_progress(cp);
+    s_progress_curves(&cp->pg, cp->done, cp->total);
     return 0;
 }
 
