@@ -40,52 +40,6 @@ typedef struct s_ctx {
         return VAFM_EFORMAT;                                                                    \
     } while (0)
 
-typedef struct s_list {
-    char **v;
-    size_t n, cap;
-    int bad;
-    char bad_name[64];
-} s_list;
-
-static void s_list_free(s_list *l)
-{
-    for (size_t i = 0; i < l->n; i++)
-        free(l->v[i]);
-    free(l->v);
-    memset(l, 0, sizeof *l);
-}
-
-static int s_list_push(s_list *l, const char *name)
-{
-    if (l->n == l->cap) {
-        size_t cap = l->cap ? 2 * l->cap : 16;
-        char **v = realloc(l->v, cap * sizeof *v);
-        if (!v)
-            return -1;
-        l->v = v;
-        l->cap = cap;
-    }
-    if (!(l->v[l->n] = strdup(name)))
-        return -1;
-    l->n++;
-    return 0;
-}
-
-static herr_t s_link_cb(hid_t g, const char *name, const H5L_info_t *info, void *data)
-{
-    s_list *l = data;
-    if (info->type != H5L_TYPE_HARD && !l->bad) {
-        l->bad = 1;
-        snprintf(l->bad_name, sizeof l->bad_name, "%s", name);
-    }
-    return s_list_push(l, name) ? -1 : 0;
-}
-
-static herr_t s_attr_cb(hid_t loc, const char *name, const H5A_info_t *info, void *data)
-{
-    return s_list_push(data, name) ? -1 : 0;
-}
-
 /* A scalar variable-length string attribute; *out (malloc'd) receives its value. */
 static int s_vlen_str(s_ctx *x, const char *rule, hid_t loc, const char *obj, const char *name, char **out)
 {
@@ -186,9 +140,9 @@ static int s_group_attrs(s_ctx *x, hid_t g, const char *gname, size_t n, vafm_h5
 {
     char obj[32];
     snprintf(obj, sizeof obj, "/%s", gname);
-    s_list l = { 0 };
-    if (H5Aiterate2(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_attr_cb, &l) < 0) {
-        s_list_free(&l);
+    vafm_h5i_names l = { 0 };
+    if (H5Aiterate2(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, vafm_h5i_attr_cb, &l) < 0) {
+        vafm_h5i_names_free(&l);
         FAIL_H5("L2", obj, "attributes cannot be listed");
     }
     int rc = 0;
@@ -234,7 +188,7 @@ static int s_group_attrs(s_ctx *x, hid_t g, const char *gname, size_t n, vafm_h5
             *(int64_t *)f = v.i;
         }
     }
-    s_list_free(&l);
+    vafm_h5i_names_free(&l);
     if (rc)
         return rc;
     if (!m->imaging_mode || strcmp(m->imaging_mode, "force-distance"))
@@ -262,13 +216,13 @@ static int s_group(s_ctx *x, uint64_t num)
     if (g < 0)
         FAIL_H5("L4", obj, "curve group cannot be opened");
     int rc = 0;
-    s_list l = { 0 };
+    vafm_h5i_names l = { 0 };
     void *data[VAFM_H5I_NCHAN] = { 0 };
     char *strs[16];
     int nstr = 0;
     vafm_h5_meta m;
     vafm_h5_meta_default(&m);
-    if (H5Literate(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_link_cb, &l) < 0) {
+    if (H5Literate(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, vafm_h5i_link_cb, &l) < 0) {
         vafm_h5i_err_hdf5(x->err, rc = VAFM_EFORMAT, obj, "[L2] %s: %s: objects cannot be listed", x->path, obj);
         goto done;
     }
@@ -357,7 +311,7 @@ done:
         free(data[i]);
     for (int i = 0; i < nstr; i++)
         free(strs[i]);
-    s_list_free(&l);
+    vafm_h5i_names_free(&l);
     H5Gclose(g);
     return rc;
 }
@@ -503,9 +457,9 @@ static int s_check(s_ctx *x)
                 FAIL("V3", "/", "'" VAFM_H5I_A_SEED "' is not a scalar uint64");
         }
     }
-    s_list l = { 0 };
-    if (H5Literate(x->file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_link_cb, &l) < 0) {
-        s_list_free(&l);
+    vafm_h5i_names l = { 0 };
+    if (H5Literate(x->file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, vafm_h5i_link_cb, &l) < 0) {
+        vafm_h5i_names_free(&l);
         FAIL_H5("L2", "/", "the root group cannot be listed");
     }
     uint64_t *num = malloc((l.n ? l.n : 1) * sizeof *num);
@@ -558,7 +512,7 @@ static int s_check(s_ctx *x)
         rc = s_truth(x);
 done:
     free(num);
-    s_list_free(&l);
+    vafm_h5i_names_free(&l);
     return rc;
 }
 

@@ -798,3 +798,45 @@ int vafm_h5i_storage_complete(hid_t d, hsize_t n)
     H5Pclose(dcpl);
     return rc;
 }
+
+void vafm_h5i_names_free(vafm_h5i_names *l)
+{
+    for (size_t i = 0; i < l->n; i++)
+        free(l->v[i]);
+    free(l->v);
+    memset(l, 0, sizeof *l);
+}
+
+int vafm_h5i_names_push(vafm_h5i_names *l, const char *name)
+{
+    if (l->n == l->cap) {
+        size_t cap = l->cap ? 2 * l->cap : 16;
+        char **v = realloc(l->v, cap * sizeof *v);
+        if (!v)
+            return -1;
+        l->v = v;
+        l->cap = cap;
+    }
+    if (!(l->v[l->n] = strdup(name)))
+        return -1;
+    l->n++;
+    return 0;
+}
+
+herr_t vafm_h5i_link_cb(hid_t g, const char *name, const H5L_info_t *info, void *data)
+{
+    (void)g;
+    vafm_h5i_names *l = data;
+    if (info->type != H5L_TYPE_HARD && !l->bad) {
+        l->bad = 1;
+        snprintf(l->bad_name, sizeof l->bad_name, "%s", name);
+    }
+    return vafm_h5i_names_push(l, name) ? -1 : 0;
+}
+
+herr_t vafm_h5i_attr_cb(hid_t loc, const char *name, const H5A_info_t *info, void *data)
+{
+    (void)loc;
+    (void)info;
+    return vafm_h5i_names_push(data, name) ? -1 : 0;
+}

@@ -237,4 +237,18 @@ int vafm_h5i_rows_read(hid_t file, const char *path, int skip_damaged, vafm_h5i_
  *  the array. @return 0 or −1. */
 int vafm_h5i_truth_attr_names(hid_t file, char ***names, size_t *n);
 
+/** A growing list of names (links or attributes of an object), filled by H5Literate/H5Aiterate2
+ *  through vafm_h5i_link_cb / vafm_h5i_attr_cb. A soft or external link is remembered in bad/bad_name. */
+typedef struct vafm_h5i_names {
+    char **v;
+    size_t n, cap;
+    int bad;           /* a soft or external link was seen */
+    char bad_name[64]; /* the first such link */
+} vafm_h5i_names;
+
+void vafm_h5i_names_free(vafm_h5i_names *l);
+int vafm_h5i_names_push(vafm_h5i_names *l, const char *name);
+herr_t vafm_h5i_link_cb(hid_t g, const char *name, const H5L_info_t *info, void *data);
+herr_t vafm_h5i_attr_cb(hid_t loc, const char *name, const H5A_info_t *info, void *data);
+
 #endif

@@ -52,70 +52,25 @@ void vafm_h5_meta_default(vafm_h5_meta *m)
 
 /* ---- name lists ----------------------------------------------------------------------------------- */
 
-typedef struct s_names {
-    char **v;
-    size_t n, cap;
-    int bad_link; /* a soft or external link was seen */
-    char bad_name[64];
-} s_names;
-
-static void s_names_free(s_names *l)
-{
-    for (size_t i = 0; i < l->n; i++)
-        free(l->v[i]);
-    free(l->v);
-    memset(l, 0, sizeof *l);
-}
-
-static int s_names_push(s_names *l, const char *name)
-{
-    if (l->n == l->cap) {
-        size_t cap = l->cap ? 2 * l->cap : 16;
-        char **v = realloc(l->v, cap * sizeof *v);
-        if (!v)
-            return -1;
-        l->v = v;
-        l->cap = cap;
-    }
-    if (!(l->v[l->n] = strdup(name)))
-        return -1;
-    l->n++;
-    return 0;
-}
-
-static herr_t s_link_cb(hid_t g, const char *name, const H5L_info_t *info, void *data)
-{
-    s_names *l = data;
-    if (info->type != H5L_TYPE_HARD && !l->bad_link) {
-        l->bad_link = 1;
-        snprintf(l->bad_name, sizeof l->bad_name, "%s", name);
-    }
-    return s_names_push(l, name) ? -1 : 0;
-}
-
-static herr_t s_attr_cb(hid_t loc, const char *name, const H5A_info_t *info, void *data)
-{
-    return s_names_push(data, name) ? -1 : 0;
-}
 
 int vafm_h5i_truth_attr_names(hid_t file, char ***names, size_t *n)
 {
-    s_names all = { 0 }, keep = { 0 };
+    vafm_h5i_names all = { 0 }, keep = { 0 };
     *names = NULL;
     *n = 0;
-    if (H5Aiterate2(file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_attr_cb, &all) < 0) {
-        s_names_free(&all);
+    if (H5Aiterate2(file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, vafm_h5i_attr_cb, &all) < 0) {
+        vafm_h5i_names_free(&all);
         return -1;
     }
     size_t plen = strlen(VAFM_H5I_A_TRUTH_PART);
     for (size_t i = 0; i < all.n; i++)
         if (!strcmp(all.v[i], VAFM_H5I_A_TRUTH) || !strncmp(all.v[i], VAFM_H5I_A_TRUTH_PART, plen))
-            if (s_names_push(&keep, all.v[i])) {
-                s_names_free(&all);
-                s_names_free(&keep);
+            if (vafm_h5i_names_push(&keep, all.v[i])) {
+                vafm_h5i_names_free(&all);
+                vafm_h5i_names_free(&keep);
                 return -1;
             }
-    s_names_free(&all);
+    vafm_h5i_names_free(&all);
     *names = keep.v;
     *n = keep.n;
     return 0;
@@ -459,13 +414,13 @@ int vafm_h5i_curve_read(hid_t file, const char *path, uint64_t group, int read_d
         return VAFM_EFORMAT;
     }
     int rc = 0;
-    s_names links = { 0 }, attrs = { 0 };
-    if (H5Literate(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_link_cb, &links) < 0) {
+    vafm_h5i_names links = { 0 }, attrs = { 0 };
+    if (H5Literate(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, vafm_h5i_link_cb, &links) < 0) {
         vafm_h5i_err_hdf5(err, rc = VAFM_EFORMAT, obj, "%s: curve group '%s': its objects cannot be listed (damaged file)",
                           path, gname);
         goto done;
     }
-    if (links.bad_link) {
+    if (links.bad) {
         vafm_h5i_err(err, rc = VAFM_EFORMAT, obj, "%s: curve group '%s': '%s' is a soft or external link (channels are datasets)",
                      path, gname, links.bad_name);
         goto done;
@@ -493,7 +448,7 @@ int vafm_h5i_curve_read(hid_t file, const char *path, uint64_t group, int read_d
         goto done;
     }
     out->n = n;
-    if (H5Aiterate2(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_attr_cb, &attrs) < 0) {
+    if (H5Aiterate2(g, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, vafm_h5i_attr_cb, &attrs) < 0) {
         vafm_h5i_err_hdf5(err, rc = VAFM_EFORMAT, obj, "%s: curve group '%s': its attributes cannot be listed (damaged file)",
                           path, gname);
         goto done;
@@ -528,8 +483,8 @@ int vafm_h5i_curve_read(hid_t file, const char *path, uint64_t group, int read_d
         }
     }
 done:
-    s_names_free(&links);
-    s_names_free(&attrs);
+    vafm_h5i_names_free(&links);
+    vafm_h5i_names_free(&attrs);
     H5Gclose(g);
     return rc;
 }
@@ -677,14 +632,14 @@ static int s_reader_open(vafm_h5_reader *r, const char *path, vafm_error *err)
     }
 
     /* the curve groups */
-    s_names links = { 0 };
-    if (H5Literate(r->file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_link_cb, &links) < 0) {
-        s_names_free(&links);
+    vafm_h5i_names links = { 0 };
+    if (H5Literate(r->file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, vafm_h5i_link_cb, &links) < 0) {
+        vafm_h5i_names_free(&links);
         vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: the root group cannot be listed (damaged file)", path);
         return VAFM_EFORMAT;
     }
     rc = 0;
-    if (links.bad_link) {
+    if (links.bad) {
         vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: root object '%s' is a soft or external link (curves are groups)",
                      path, links.bad_name);
         goto done;
@@ -722,7 +677,7 @@ static int s_reader_open(vafm_h5_reader *r, const char *path, vafm_error *err)
     r->n = links.n;
     qsort(r->groups, r->n, sizeof *r->groups, s_u64_cmp);
 done:
-    s_names_free(&links);
+    vafm_h5i_names_free(&links);
     return rc;
 }
 
