@@ -51,6 +51,12 @@ static int s_one(const uint8_t *data, size_t len)
             if (!v && !s_known_code(e.code))
                 ok = -1;
             json_decref(v);
+        } else if (c.kind == VAFMD_CMD_LOG) {
+            /* a decoded log is a stop alone, or a start with a path of a bounded length and not both flags */
+            if (c.log_stop ? (c.log_path || c.log_overwrite || c.log_resume)
+                           : (!c.log_path || !c.log_path[0] || strlen(c.log_path) > VAFMD_LOG_PATH_MAX ||
+                              (c.log_overwrite && c.log_resume)))
+                ok = -1;
         }
         vafmd_cmd_free(&c);
     } else if (!s_known_code(e.code) || !e.message[0]) {
@@ -101,6 +107,11 @@ static const char *const s_corpus[] = {
     "{\"cmd\":\"shutdown\"}",
     "{\"cmd\":\"campaign\",\"anything\":[1,2]}",
     "{\"cmd\":\"log\",\"path\":\"/tmp/x.h5\"}",
+    "{\"cmd\":\"log\",\"path\":\"a.h5\",\"overwrite\":true}",
+    "{\"cmd\":\"log\",\"path\":\"a.h5\",\"resume\":true,\"overwrite\":true}",
+    "{\"cmd\":\"log\",\"stop\":true}",
+    "{\"cmd\":\"log\",\"stop\":1,\"path\":\"\"}",
+    "{\"cmd\":\"log\",\"path\":\"x\\u0000y.h5\"}",
     "{\"cmd\":\"bogus\"}",
     "{\"cmd\":7}",
     "{\"cmd\":\"hello\",\"cmd\":\"hello\"}",

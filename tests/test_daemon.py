@@ -29,7 +29,8 @@ pytestmark = pytest.mark.skipif(not VAFMD, reason="set VAFMD to the vafmd execut
 
 
 class Daemon:
-    def __init__(self, *args, tcp=False):
+    def __init__(self, *args, tcp=False, curve=None):
+        self.curve = curve  # (server public key, client public key, client secret key), Z85 bytes
         self.dir = tempfile.mkdtemp(prefix="vafmd-")
         if tcp:
             self.rep, self.pub = (f"tcp://127.0.0.1:{free_port()}", f"tcp://127.0.0.1:{free_port()}")
@@ -55,7 +56,13 @@ class Daemon:
             self.req.close(0)
         self.req = self.ctx.socket(zmq.REQ)
         self.req.setsockopt(zmq.LINGER, 0)
+        self.secure(self.req)
         self.req.connect(self.rep)
+
+    def secure(self, sock, curve=None):
+        curve = curve or self.curve
+        if curve:
+            sock.curve_serverkey, sock.curve_publickey, sock.curve_secretkey = curve
 
     def send_raw(self, data, timeout=TIMEOUT_MS):
         if isinstance(data, list):
@@ -69,9 +76,10 @@ class Daemon:
     def cmd(self, obj, timeout=TIMEOUT_MS):
         return self.send_raw(json.dumps(obj).encode(), timeout)
 
-    def sub(self, rcvhwm=None, topics=(b"",)):
+    def sub(self, rcvhwm=None, topics=(b"",), curve=None):
         s = self.ctx.socket(zmq.SUB)
         s.setsockopt(zmq.LINGER, 0)
+        self.secure(s, curve)
         if rcvhwm is not None:
             s.setsockopt(zmq.RCVHWM, rcvhwm)
         for t in topics:
@@ -210,7 +218,7 @@ def test_bad_inputs_get_errors_and_daemon_survives(fig4):
     error_ok(fig4.send_raw(b'{"cmd":"hello","pad":"' + b"x" * 100000 + b'"}'), "too_large")
     error_ok(fig4.cmd({"cmd": "abort"}), "state")
     error_ok(fig4.cmd({"cmd": "campaign"}), "not_implemented")
-    error_ok(fig4.cmd({"cmd": "log", "path": "/tmp/x.h5"}), "not_implemented")
+    error_ok(fig4.cmd({"cmd": "log", "path": 5}), "wrong_type", "path")
     r = fig4.cmd({"cmd": "hello", "id": 7})
     assert r["status"] == "ok" and r["id"] == 7
     assert fig4.proc.poll() is None
@@ -379,6 +387,8 @@ def test_signal_mid_run_exits_zero(sig):
 def test_refuses_non_loopback_and_bad_usage():
     p = subprocess.run([VAFMD, "--rep", "tcp://0.0.0.0:5555"], capture_output=True, text=True, timeout=10)
     assert p.returncode == 2 and "CURVE" in p.stderr
+    p = subprocess.run([VAFMD, "--curve-required"], capture_output=True, text=True, timeout=10)
+    assert p.returncode == 2 and "CURVE" in p.stderr
     p = subprocess.run([VAFMD, "--speed", "1e9"], capture_output=True, text=True, timeout=10)
     assert p.returncode == 2 and "speed" in p.stderr
     p = subprocess.run([VAFMD, "--bogus"], capture_output=True, text=True, timeout=10)
@@ -425,3 +435,167 @@ def test_heartbeat_is_periodic():
             beats += 1
     assert 2 <= beats <= 4, beats
     assert d.stop() == 0
+
+
+# ---- HDF5 logging ------------------------------------------------------------------------------------
+
+def h5_curve(f, i):
+    g = f[str(i)]
+    return {k: g[k][:] for k in ("force", "height (piezo)", "height (measured)", "tip position", "segment", "time")}
+
+
+def vafm_info_ok(path):
+    """The CLI's reader and conformance check accept the file (when the CLI is built)."""
+    if not VAFM_CLI:
+        return
+    p = subprocess.run([VAFM_CLI, "info", str(path)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stdout + p.stderr
+
+
+def test_log_file_equals_stream(fig4, tmp_path):
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "log.h5"
+    r = fig4.cmd({"cmd": "log", "path": str(path)})
+    assert r["status"] == "ok" and r["curves_in_file"] == 0, r
+    assert fig4.cmd({"cmd": "status"})["log"]["state"] == "on"
+    s = fig4.sub()
+    settle(fig4, s)
+    runs = []
+    for index in (0, 5):
+        rr = fig4.cmd({"cmd": "curve", "index": index, "client_run_id": f"c{index}"})
+        runs.append(collect_run(s, rr["run_id"]))
+        fig4.wait_idle()
+    # a tune is streamed but not logged (the afmformats layout holds force curves only)
+    rt = fig4.cmd({"cmd": "tune", "duration_s": 0.01})
+    collect_run(s, rt["run_id"])
+    fig4.wait_idle()
+    error_ok(fig4.cmd({"cmd": "log", "path": str(path)}), "state", "path")  # already on
+    st = fig4.cmd({"cmd": "log", "stop": True})
+    assert st["status"] == "ok", st
+    log = st["log"]
+    assert (log["state"], log["curves"], log["overflows"], log["curves_dropped"], log["error"]) == ("off", 2, 0, 0, None)
+    with h5py.File(path, "r") as f:
+        assert sorted(f.keys()) == ["0", "1"]
+        for i, (start, blocks, _, end) in enumerate(runs):
+            got = {name: np.concatenate([np.frombuffer(c[k], "<f8") for _, c in blocks])
+                   for k, name in enumerate(CHANNELS)}
+            c = h5_curve(f, i)
+            assert len(c["force"]) == end["samples"] == f[str(i)].attrs["point count"]
+            # bit for bit: compare the 64-bit patterns, not the values
+            assert np.array_equal(c["force"].view(np.uint64), got["force_N"].view(np.uint64))
+            assert np.array_equal(c["height (piezo)"].view(np.uint64), got["height_m"].view(np.uint64))
+            assert np.array_equal(c["height (measured)"].view(np.uint64), got["height_m"].view(np.uint64))
+            assert np.array_equal(c["tip position"].view(np.uint64), got["tip_m"].view(np.uint64))
+            # the block headers' segments are the segments of the blocks' first samples
+            assert all(c["segment"][h[6]] == h[9] for h, _ in blocks)
+            assert c["time"][0] >= 0 and np.all(np.diff(c["time"]) > 0)
+            assert f[str(i)].attrs["curve id"] == f"run {start['run_id']} index {start['index']} client c{start['index']}"
+            assert f[str(i)].attrs["spring constant"] == start["scene"]["k_N_per_m"]
+    vafm_info_ok(path)
+    # stop when off, resume appends to the same file, overwrite and resume exclude each other
+    error_ok(fig4.cmd({"cmd": "log", "stop": True}), "state", "stop")
+    error_ok(fig4.cmd({"cmd": "log", "path": str(path)}), "io_error", "path")  # exists, no overwrite
+    error_ok(fig4.cmd({"cmd": "log", "path": str(path), "overwrite": True, "resume": True}), "out_of_range", "resume")
+    r = fig4.cmd({"cmd": "log", "path": str(path), "resume": True})
+    assert r["status"] == "ok" and r["curves_in_file"] == 2, r
+    rr = fig4.cmd({"cmd": "curve", "index": 9})
+    collect_run(s, rr["run_id"])
+    fig4.wait_idle()
+    assert fig4.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 1
+    with h5py.File(path, "r") as f:
+        assert sorted(f.keys()) == ["0", "1", "2"]
+    vafm_info_ok(path)
+
+
+def test_log_bad_path_names_path(fig4, tmp_path):
+    error_ok(fig4.cmd({"cmd": "log", "path": str(tmp_path / "no" / "such" / "dir.h5")}), "io_error", "path")
+    error_ok(fig4.cmd({"cmd": "log", "path": str(tmp_path / "x.txt")}), "out_of_range", "path")  # not .h5
+    error_ok(fig4.cmd({"cmd": "log", "path": ""}), "out_of_range", "path")
+    error_ok(fig4.cmd({"cmd": "log"}), "missing_field", "path")
+    error_ok(fig4.cmd({"cmd": "log", "path": str(tmp_path / "a.h5"), "overwrite": 1}), "wrong_type", "overwrite")
+    error_ok(fig4.cmd({"cmd": "log", "stop": True, "path": "a.h5"}), "unknown_field", "path")
+    assert fig4.cmd({"cmd": "status"})["log"]["state"] == "off"
+    assert fig4.proc.poll() is None
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_log_signal_mid_run_leaves_valid_file(tmp_path, sig):
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "sig.h5"
+    d = Daemon("--preset", "paper-fig4", "--free-run")
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    ends = []
+    for index in (0, 1):
+        rr = d.cmd({"cmd": "curve", "index": index})
+        ends.append(collect_run(s, rr["run_id"])[3])
+        d.wait_idle()
+    # the third curve paced at 0.05x (~0.06 s of curve → ~1.2 s of wall time): interrupted mid-run
+    assert d.cmd({"cmd": "set", "values": {"free_run": False, "speed": 0.05}})["status"] == "ok"
+    rr = d.cmd({"cmd": "curve", "index": 2})
+    time.sleep(0.3)
+    assert d.cmd({"cmd": "status"})["state"] == "running"
+    d.proc.send_signal(sig)
+    assert d.proc.wait(timeout=20) == 0
+    assert collect_run(s, rr["run_id"], timeout_ms=5000)[3]["status"] == "aborted"
+    d.ctx.destroy(0)
+    with h5py.File(path, "r") as f:  # the completed curves, not the interrupted one
+        assert sorted(f.keys()) == ["0", "1"]
+        assert [len(f[str(i)]["force"]) for i in range(2)] == [e["samples"] for e in ends]
+        assert "vafm ground truth" in f.attrs
+    vafm_info_ok(path)
+
+
+# ---- CURVE security (loopback only: --curve-required forces it on 127.0.0.1) -------------------------
+
+def curve_config(tmp_path, server_secret, clients, **extra):
+    cfg = tmp_path / "curve.json"
+    cfg.write_text(json.dumps({"preset": "paper-fig4", "curve_secret_key": server_secret.decode(),
+                               "curve_clients": [c.decode() for c in clients], **extra}))
+    return str(cfg)
+
+
+def test_curve_listed_client_served_unlisted_refused(tmp_path):
+    server_pub, server_sec = zmq.curve_keypair()
+    good_pub, good_sec = zmq.curve_keypair()
+    bad_pub, bad_sec = zmq.curve_keypair()
+    cfg = curve_config(tmp_path, server_sec, [good_pub], curve_public_key=server_pub.decode())
+    d = Daemon("--config", cfg, "--curve-required", "--free-run", tcp=True, curve=(server_pub, good_pub, good_sec))
+    h = d.cmd({"cmd": "hello"})
+    assert h["security"] == "curve" and "log" in h["capabilities"]
+    # the listed client's subscription is served
+    s = d.sub()
+    settle(d, s)
+    r = d.cmd({"cmd": "curve", "index": 1})
+    _, blocks, _, end = collect_run(s, r["run_id"])
+    assert end["status"] == "ok" and len(blocks) == end["blocks"]
+    # an unlisted key, and a client without CURVE, get no reply and no stream
+    for curve in ((server_pub, bad_pub, bad_sec), None):
+        req = d.ctx.socket(zmq.REQ)
+        req.setsockopt(zmq.LINGER, 0)
+        if curve:
+            d.secure(req, curve)
+        req.connect(d.rep)
+        req.send(json.dumps({"cmd": "hello"}).encode())
+        assert not req.poll(1500), "an unlisted client was answered"
+        req.close(0)
+    bad_sub = d.sub(curve=(server_pub, bad_pub, bad_sec))
+    assert not bad_sub.poll(1500), "an unlisted subscriber received a message"
+    st = d.cmd({"cmd": "status"})
+    assert st["auth"]["mechanism"] == "curve" and st["auth"]["clients"] == 1
+    assert st["auth"]["refused"] >= 2 and st["auth"]["accepted"] >= 2
+    assert d.stop() == 0
+
+
+def test_curve_config_errors(tmp_path):
+    server_pub, server_sec = zmq.curve_keypair()
+    other_pub, _ = zmq.curve_keypair()
+    bad = [
+        curve_config(tmp_path, server_sec, []),                                # empty allow-list
+        curve_config(tmp_path, b"short", [other_pub]),                         # not a Z85 key
+        curve_config(tmp_path, server_sec, [other_pub], curve_public_key=other_pub.decode()),  # wrong pair
+    ]
+    for cfg in bad:
+        p = subprocess.run([VAFMD, "--config", cfg], capture_output=True, text=True, timeout=10)
+        assert p.returncode == 2 and "curve_" in p.stderr, p.stderr

@@ -199,7 +199,7 @@ static const char *const s_cmd_keys[] = {
     [VAFMD_CMD_STATUS] = " ",
     [VAFMD_CMD_SHUTDOWN] = " ",
     [VAFMD_CMD_CAMPAIGN] = NULL, /* not implemented: any arguments */
-    [VAFMD_CMD_LOG] = NULL,
+    [VAFMD_CMD_LOG] = " path overwrite resume stop ",
 };
 
 static int s_key_allowed(int kind, const char *key)
@@ -347,6 +347,44 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         c->has_duration = 1;
         c->duration_s = x;
+    }
+    if (kind == VAFMD_CMD_LOG) {
+        static const char *const flags[] = { "overwrite", "resume", "stop" };
+        int *dst[] = { &c->log_overwrite, &c->log_resume, &c->log_stop };
+        for (int i = 0; i < 3; i++)
+            if ((v = json_object_get(root, flags[i])) != NULL) {
+                if (!json_is_boolean(v)) {
+                    vafmd_err_set(e, VAFMD_E_WRONG_TYPE, flags[i], "\"%s\" must be true or false", flags[i]);
+                    return -1;
+                }
+                *dst[i] = json_is_true(v);
+            }
+        if ((v = json_object_get(root, "path")) != NULL) {
+            if (!json_is_string(v)) {
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "path", "\"path\" must be a file name (string)");
+                return -1;
+            }
+            size_t n = json_string_length(v);
+            if (n < 1 || n > VAFMD_LOG_PATH_MAX || strlen(json_string_value(v)) != n) {
+                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "path", "\"path\" must have 1 to %d characters (no NUL)",
+                              VAFMD_LOG_PATH_MAX);
+                return -1;
+            }
+            c->log_path = json_string_value(v);
+        }
+        if (c->log_stop && (c->log_path || c->log_overwrite || c->log_resume)) {
+            vafmd_err_set(e, VAFMD_E_UNKNOWN_FIELD, c->log_path ? "path" : c->log_overwrite ? "overwrite" : "resume",
+                          "'log' with \"stop\": true takes no other argument");
+            return -1;
+        }
+        if (!c->log_stop && !c->log_path) {
+            vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "path", "'log' needs \"path\" (start) or \"stop\": true");
+            return -1;
+        }
+        if (c->log_overwrite && c->log_resume) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "resume", "\"overwrite\" and \"resume\" exclude each other");
+            return -1;
+        }
     }
     c->root = json_incref(root);
     return 0;

@@ -31,6 +31,9 @@ enum vafmd_cmd_kind {
 #define VAFMD_E_BUSY "busy"
 #define VAFMD_E_NOT_IMPLEMENTED "not_implemented"
 #define VAFMD_E_INTERNAL "internal"
+#define VAFMD_E_IO "io_error"
+
+#define VAFMD_LOG_PATH_MAX 4000
 
 typedef struct vafmd_err {
     const char *code;  /* one of VAFMD_E_* (static) */
@@ -53,6 +56,8 @@ typedef struct vafmd_cmd {
     char client_run_id[VAFMD_CLIENT_RUN_ID_MAX + 1]; /* "" if none */
     int has_duration;
     double duration_s;     /* tune: overrides tune_duration_s */
+    const char *log_path;  /* log: borrowed file name, or NULL */
+    int log_overwrite, log_resume, log_stop; /* log: flags */
 } vafmd_cmd;
 
 /** Decode one request. @return 0 (free c with vafmd_cmd_free) or -1 with e filled (c holds nothing). */

@@ -12,7 +12,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <zmq.h>
+#include "vafm/h5.h"
 #include "daemon/cmd_json.h"
 #include "daemon/daemon.h"
 #include "vafm/wire.h"
@@ -63,9 +65,10 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "daemon_version", json_string(VAFMD_VERSION));
     json_object_set_new(r, "library_version", json_string(vafm_version()));
     json_object_set_new(r, "capabilities",
-                        json_pack("[sssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
-                                  "status", "shutdown"));
-    json_object_set_new(r, "not_implemented", json_pack("[sss]", "campaign", "log", "curve_security"));
+                        json_pack("[ssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
+                                  "status", "log", "shutdown"));
+    json_object_set_new(r, "not_implemented", json_pack("[s]", "campaign"));
+    json_object_set_new(r, "security", json_string(d->auth.on ? "curve" : "none"));
     json_t *ch = json_array();
     for (int i = 0; i < VAFMD_N_CHANNELS; i++)
         json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_channels[i][0], "unit", s_channels[i][1],
@@ -85,7 +88,98 @@ static json_t *s_presets(const vafmd_cmd *c)
     return r;
 }
 
-static json_t *s_status(const vafmd *d, const vafmd_cmd *c)
+static const char *s_log_state_name(int st)
+{
+    return st == VAFMD_LOG_ON ? "on" : st == VAFMD_LOG_STOPPING ? "stopping" : "off";
+}
+
+/* Logging counters, in status and in the reply to `log`. */
+static json_t *s_log_report(vafmd *d)
+{
+    vafmd_log *L = &d->log;
+    int st = atomic_load_explicit(&L->state, memory_order_acquire);
+    json_t *o = json_object();
+    json_object_set_new(o, "state", json_string(s_log_state_name(st)));
+    json_object_set_new(o, "path", L->path[0] ? json_string(L->path) : json_null());
+    json_object_set_new(o, "curves", json_integer((json_int_t)atomic_load(&L->curves)));
+    json_object_set_new(o, "overflows", json_integer((json_int_t)atomic_load(&L->overflows)));
+    json_object_set_new(o, "curves_dropped", json_integer((json_int_t)atomic_load(&L->curves_dropped)));
+    json_object_set_new(o, "curves_skipped", json_integer((json_int_t)atomic_load(&L->curves_skipped)));
+    pthread_mutex_lock(&L->err_mu);
+    json_object_set_new(o, "error", L->err[0] ? json_string(L->err) : json_null());
+    pthread_mutex_unlock(&L->err_mu);
+    return o;
+}
+
+static json_t *s_log(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+{
+    vafmd_log *L = &d->log;
+    int st = atomic_load_explicit(&L->state, memory_order_acquire);
+    if (s_busy(d)) {
+        vafmd_err_set(e, VAFMD_E_STATE, "cmd", "logging starts and stops between runs: a run is in progress "
+                      "(run %" PRIu64 ")", d->next_run_id - 1);
+        return NULL;
+    }
+    if (c->log_stop) {
+        if (st == VAFMD_LOG_OFF) {
+            vafmd_err_set(e, VAFMD_E_STATE, "stop", "logging is off");
+            return NULL;
+        }
+        /* the run's items were pushed before runs_done counted it (s_busy above): the writer sees them
+         * before this request */
+        if (st == VAFMD_LOG_ON)
+            atomic_store_explicit(&L->state, VAFMD_LOG_STOPPING, memory_order_release);
+        /* the control thread may wait for the writer (only the simulation thread never waits) */
+        for (int i = 0; i < 600000 && atomic_load_explicit(&L->state, memory_order_acquire) != VAFMD_LOG_OFF; i++)
+            nanosleep(&(struct timespec){ 0, 100000 }, NULL);
+        json_t *r = s_ok(c);
+        json_object_set_new(r, "log", s_log_report(d));
+        return r;
+    }
+    if (st != VAFMD_LOG_OFF) {
+        vafmd_err_set(e, VAFMD_E_STATE, "path", "already logging to '%.300s'; stop it first", L->path);
+        return NULL;
+    }
+    vafm_h5_writer_opts o;
+    vafm_h5_writer_opts_default(&o);
+    o.overwrite = c->log_overwrite;
+    o.resume = c->log_resume;
+    vafm_error verr;
+    memset(&verr, 0, sizeof verr);
+    vafm_h5_writer *w = NULL;
+    int rc = vafm_h5_writer_open(&w, c->log_path, &o, &verr);
+    if (rc) {
+        vafmd_err_set(e, rc == VAFM_EINVAL ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_IO, "path", "cannot %s '%.300s': %s",
+                      c->log_resume ? "resume" : "create", c->log_path,
+                      verr.message[0] ? verr.message : vafm_strerror(rc));
+        return NULL;
+    }
+    if ((rc = vafm_h5_writer_set_provenance(w, &d->scene, NULL, &verr)) != 0) {
+        vafm_error ignored;
+        vafm_h5_writer_close(&w, &ignored);
+        vafmd_err_set(e, rc == VAFM_EINVAL ? VAFMD_E_INVALID_SCENE : VAFMD_E_IO, c->log_resume ? "resume" : "path",
+                      "cannot log to '%.300s': %s%s%s", c->log_path, verr.message[0] ? verr.message : vafm_strerror(rc),
+                      verr.field[0] ? "; scene field " : "", verr.field);
+        return NULL;
+    }
+    uint64_t kept = vafm_h5_writer_count(w);
+    L->w = w;
+    snprintf(L->path, sizeof L->path, "%s", c->log_path);
+    atomic_store(&L->curves, 0);
+    atomic_store(&L->overflows, 0);
+    atomic_store(&L->curves_dropped, 0);
+    atomic_store(&L->curves_skipped, 0);
+    pthread_mutex_lock(&L->err_mu);
+    L->err[0] = 0;
+    pthread_mutex_unlock(&L->err_mu);
+    atomic_store_explicit(&L->state, VAFMD_LOG_ON, memory_order_release); /* hands w to the writer thread */
+    json_t *r = s_ok(c);
+    json_object_set_new(r, "path", json_string(L->path));
+    json_object_set_new(r, "curves_in_file", json_integer((json_int_t)kept));
+    return r;
+}
+
+static json_t *s_status(vafmd *d, const vafmd_cmd *c)
 {
     const vafmd_shared *sh = &d->sh;
     json_t *r = s_ok(c);
@@ -109,6 +203,11 @@ static json_t *s_status(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "last_seq", seq ? json_integer((json_int_t)(seq - 1)) : json_null());
     json_object_set_new(r, "speed", json_real(d->set.speed));
     json_object_set_new(r, "free_run", json_boolean(d->set.free_run));
+    json_object_set_new(r, "log", s_log_report(d));
+    json_object_set_new(r, "auth", json_pack("{s:s,s:I,s:I,s:I}", "mechanism", d->auth.on ? "curve" : "null", "clients",
+                                             (json_int_t)d->auth.n_clients, "accepted",
+                                             (json_int_t)atomic_load(&d->auth.accepted), "refused",
+                                             (json_int_t)atomic_load(&d->auth.refused)));
     return r;
 }
 
@@ -189,6 +288,7 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     sc.sim = sim;
     sc.start_json = json_dumps(start, JSON_COMPACT);
     sc.set = d->set;
+    sc.log = kind == VAFMD_RUN_CURVE && atomic_load_explicit(&d->log.state, memory_order_acquire) == VAFMD_LOG_ON;
     snprintf(sc.client_run_id, sizeof sc.client_run_id, "%s", c->client_run_id);
     json_decref(start);
     if (!sc.start_json || !vafmd_ring_push(&d->ring, &sc)) {
@@ -258,9 +358,7 @@ static json_t *s_execute(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
     case VAFMD_CMD_CAMPAIGN:
         vafmd_err_set(e, VAFMD_E_NOT_IMPLEMENTED, "cmd", "'campaign' is not yet implemented in this vafmd");
         return NULL;
-    case VAFMD_CMD_LOG:
-        vafmd_err_set(e, VAFMD_E_NOT_IMPLEMENTED, "cmd", "'log' (HDF5 logging) is not yet implemented in this vafmd");
-        return NULL;
+    case VAFMD_CMD_LOG: return s_log(d, c, e);
     default: vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "command not handled"); return NULL;
     }
 }

@@ -8,6 +8,7 @@
  */
 #ifndef VAFMD_DAEMON_H
 #define VAFMD_DAEMON_H
+#include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -44,8 +45,60 @@ typedef struct vafmd_sim_cmd {
     vafm_sim *sim;       /* START: ownership passes to the simulation thread */
     char *start_json;    /* START: the "run.start" message (malloc'ed; ownership passes) */
     vafmd_settings set;  /* settings in force for this run */
+    int log;             /* START: 1 = push the run's samples to the HDF5 writer thread */
     char client_run_id[65];
 } vafmd_sim_cmd;
+
+/* ---- HDF5 logging (log.c) ------------------------------------------------------------------------
+ * The simulation thread copies each block of a logged curve into a heap block and pushes a pointer
+ * through the log ring (SPSC, never waits: a full ring drops the block, counts an overflow and marks
+ * the curve broken; a broken curve is not written). The writer thread assembles the curve and appends
+ * it, with a flush, when its LOG_END arrives. */
+enum vafmd_log_item_type { VAFMD_LOG_BEGIN = 1, VAFMD_LOG_BLOCK = 2, VAFMD_LOG_END = 3 };
+#define VAFMD_LOG_RING_CAP 4096u /* blocks in flight: 20 s of samples at the default 5 ms blocks */
+
+typedef struct vafmd_log_block {
+    size_t n;
+    double *time_s, *height_m, *force_N, *tip_m; /* point into data[] */
+    uint8_t *segment;
+    double data[]; /* 4 n doubles, then n bytes of segment */
+} vafmd_log_block;
+
+typedef struct vafmd_log_begin {
+    vafm_params p;
+    uint64_t run_id, index;
+    char client_run_id[65];
+} vafmd_log_begin;
+
+typedef struct vafmd_log_end {
+    int ok;                   /* 1: the curve ran to its end (aborted and failed curves are not logged) */
+    int broken;               /* 1: a block of it was lost to a full ring */
+    vafm_curve_result result;
+} vafmd_log_end;
+
+typedef struct vafmd_log_item {
+    int type;        /* enum vafmd_log_item_type */
+    uint64_t run_id;
+    void *ptr;       /* vafmd_log_begin / vafmd_log_block / vafmd_log_end, ownership passes */
+} vafmd_log_item;
+
+enum vafmd_log_state { VAFMD_LOG_OFF = 0, VAFMD_LOG_ON = 1, VAFMD_LOG_STOPPING = 2 };
+
+typedef struct vafmd_log {
+    vafmd_ring ring;               /* simulation thread → writer thread */
+    vafmd_log_item *ring_store;
+    atomic_int state;              /* enum vafmd_log_state; OFF→ON by control, ON→STOPPING by control,
+                                      STOPPING→OFF by the writer thread once the file is closed */
+    struct vafm_h5_writer *w;      /* owned by the writer thread while state != OFF */
+    char path[4096];
+    atomic_uint_least64_t overflows;      /* blocks that found the ring full (simulation thread) */
+    atomic_uint_least64_t curves;         /* curves written by this log */
+    atomic_uint_least64_t curves_dropped; /* logged curves not written: broken or a write error */
+    atomic_uint_least64_t curves_skipped; /* aborted/failed curves, not written */
+    atomic_int quit;                      /* writer thread: exit once OFF */
+    pthread_mutex_t err_mu;               /* guards err (writer thread ↔ control thread) */
+    char err[512];                        /* last write error, "" if none */
+} vafmd_log;
 
 #define VAFMD_MAX_BLOCK_SAMPLES 262144 /* bounds a block's memory at very high sample rates */
 /* Samples per data block: round(fs · block duration), at least 1, at most VAFMD_MAX_BLOCK_SAMPLES. */
@@ -75,6 +128,20 @@ typedef struct vafmd_shared {
     atomic_uint_least64_t run_samples; /* samples of the current run so far */
 } vafmd_shared;
 
+/* CURVE security (auth.c). Configured = a server secret key is given; then both sockets are CURVE
+ * servers and the ZAP thread admits only the listed client public keys. */
+#define VAFMD_MAX_CLIENT_KEYS 1024
+typedef struct vafmd_auth {
+    int on;                       /* 1: CURVE on both sockets */
+    char secret_z85[41];          /* server secret key, Z85 */
+    char public_z85[41];          /* server public key, Z85 (derived from the secret key) */
+    unsigned char (*clients)[32]; /* allow-list of client public keys (binary) */
+    size_t n_clients;
+    void *zap;                    /* REP on inproc://zeromq.zap.01, owned by the ZAP thread */
+    atomic_int quit;
+    atomic_uint_least64_t accepted, refused; /* handshakes admitted / refused */
+} vafmd_auth;
+
 typedef struct vafmd {
     void *zctx;
     void *rep, *pub;
@@ -86,10 +153,19 @@ typedef struct vafmd {
     uint64_t runs_started; /* control thread only */
     uint64_t next_run_id;  /* control thread only */
     volatile sig_atomic_t *stop; /* set by SIGINT/SIGTERM */
+    vafmd_log log;
+    vafmd_auth auth;
 } vafmd;
 
 /* sim_thread.c */
 void *vafmd_sim_main(void *arg);
+/* log.c: the HDF5 writer thread */
+void *vafmd_log_main(void *arg);
+/* auth.c: bind the ZAP socket (before any CURVE socket binds), make a socket a CURVE server, and the
+ * ZAP handler thread. @return 0 or -1 (errno from ZeroMQ). */
+int vafmd_auth_bind(vafmd *d);
+int vafmd_auth_secure(vafmd *d, void *sock);
+void *vafmd_auth_main(void *arg);
 /* control.c: serve until shutdown or a signal. @return 0 on a clean stop. */
 int vafmd_control_loop(vafmd *d);
 #endif

@@ -31,9 +31,14 @@ static const char s_usage[] =
     "  --rep ENDPOINT     command socket, REP (default " VAFMD_DEFAULT_REP ")\n"
     "  --pub ENDPOINT     stream socket, XPUB (default " VAFMD_DEFAULT_PUB ")\n"
     "                     tcp:// on a loopback address (127.x.x.x, localhost, [::1]) or ipc://PATH;\n"
-    "                     other addresses are refused: CURVE security is not yet implemented\n"
+    "                     any other address needs CURVE security (config keys below)\n"
     "  --config FILE      JSON object: {\"rep\": EP, \"pub\": EP, \"hwm\": N, \"preset\": NAME,\n"
-    "                     \"values\": {PARAMETER-OR-SETTING: value, ...}} (all keys optional)\n"
+    "                     \"values\": {PARAMETER-OR-SETTING: value, ...},\n"
+    "                     \"curve_secret_key\": Z85, \"curve_public_key\": Z85 (optional, checked),\n"
+    "                     \"curve_clients\": [Z85, ...], \"curve_required\": BOOL} (all keys optional)\n"
+    "                     With curve_secret_key, both sockets require CURVE (40-character Z85 keys as from\n"
+    "                     zmq_curve_keypair) and only clients whose public key is listed are served.\n"
+    "  --curve-required   refuse to start unless CURVE is configured (also on loopback)\n"
     "  --preset NAME      scene preset (replaces the config file's; default paper-fig1)\n"
     "  --speed F          pacing speed factor in [0.01, 1000] (1: real time)\n"
     "  --free-run         no pacing: release blocks as fast as they are computed\n"
@@ -42,12 +47,12 @@ static const char s_usage[] =
     "  -h, --help         this text\n"
     "\nSETTINGS (get/set like scene parameters): speed, free_run, sensitivity_m_per_V, block_s, hwm\n"
     "\nCOMMANDS (JSON on the REP socket, protocol/wire.md): hello get set presets curve tune abort status\n"
-    "  shutdown; campaign and log reply \"not_implemented\" in this version\n"
+    "  log shutdown; campaign replies \"not_implemented\" in this version\n"
     "\nSTREAM topics: data, run.start, run.end, event, heartbeat (1 Hz)\n"
     "\nSIGNALS: SIGINT/SIGTERM end the run in progress (run.end \"aborted\") and exit 0\n"
     "\nEXIT STATUS: 0 clean shutdown, 1 runtime error (cannot bind), 2 usage or configuration error\n";
 
-/* Loopback or local transports only until CURVE exists: an open port would be an unauthenticated
+/* Without CURVE, loopback or local transports only: an open port would be an unauthenticated
  * instrument on the network. */
 static int s_endpoint_allowed(const char *ep)
 {
@@ -85,12 +90,57 @@ static int s_apply_set_json(vafmd *d, json_t *obj, const char *origin)
     return 0;
 }
 
+/* A Z85 key: 40 characters that decode to 32 bytes. @return 0 or -1. */
+static int s_z85_key(const json_t *v, unsigned char out[32])
+{
+    if (!json_is_string(v) || json_string_length(v) != 40 || strlen(json_string_value(v)) != 40)
+        return -1;
+    return zmq_z85_decode(out, json_string_value(v)) ? 0 : -1;
+}
+
+/* CURVE keys from the config: all or nothing, every key checked. @return 0 or 2 (message printed). */
+static int s_curve_config(vafmd *d, const json_t *secret, const json_t *pub, const json_t *clients)
+{
+    if (!secret && !pub && !clients)
+        return 0;
+    unsigned char key[32];
+    if (!secret || s_z85_key(secret, key)) {
+        fprintf(stderr, "vafmd: config: \"curve_secret_key\" must be the server's secret key, 40 Z85 characters\n");
+        return 2;
+    }
+    snprintf(d->auth.secret_z85, sizeof d->auth.secret_z85, "%s", json_string_value(secret));
+    if (zmq_curve_public(d->auth.public_z85, d->auth.secret_z85)) {
+        fprintf(stderr, "vafmd: config: \"curve_secret_key\": this libzmq has no CURVE support\n");
+        return 2;
+    }
+    if (pub && (s_z85_key(pub, key) || strcmp(json_string_value(pub), d->auth.public_z85))) {
+        fprintf(stderr, "vafmd: config: \"curve_public_key\" is not the public key of \"curve_secret_key\"\n");
+        return 2;
+    }
+    size_t n = json_is_array(clients) ? json_array_size(clients) : 0;
+    if (n < 1 || n > VAFMD_MAX_CLIENT_KEYS) {
+        fprintf(stderr, "vafmd: config: \"curve_clients\" must list 1 to %d client public keys (Z85)\n",
+                VAFMD_MAX_CLIENT_KEYS);
+        return 2;
+    }
+    if (!(d->auth.clients = calloc(n, sizeof *d->auth.clients)))
+        return 2;
+    for (size_t i = 0; i < n; i++)
+        if (s_z85_key(json_array_get(clients, i), d->auth.clients[i])) {
+            fprintf(stderr, "vafmd: config: \"curve_clients\"[%zu] is not a 40-character Z85 key\n", i);
+            return 2;
+        }
+    d->auth.n_clients = n;
+    d->auth.on = 1;
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     static vafmd d;
     const char *rep_ep = VAFMD_DEFAULT_REP, *pub_ep = VAFMD_DEFAULT_PUB, *config = NULL, *preset = NULL;
     const char *speed = NULL, *sens = NULL, *hwm = NULL;
-    int free_run = 0;
+    int free_run = 0, curve_required = 0;
     char rep_buf[512], pub_buf[512];
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
@@ -100,6 +150,8 @@ int main(int argc, char **argv)
             return 0;
         } else if (!strcmp(a, "--free-run"))
             free_run = 1;
+        else if (!strcmp(a, "--curve-required"))
+            curve_required = 1;
         else if (!strcmp(a, "--rep"))
             dst = &rep_ep;
         else if (!strcmp(a, "--pub"))
@@ -150,10 +202,23 @@ int main(int argc, char **argv)
             json_decref(cfg);
             return 2;
         }
+        if ((v = json_object_get(cfg, "curve_required")) != NULL) {
+            if (!json_is_boolean(v)) {
+                fprintf(stderr, "vafmd: config '%s': \"curve_required\" must be true or false\n", config);
+                json_decref(cfg);
+                return 2;
+            }
+            curve_required |= json_is_true(v);
+        }
+        if (s_curve_config(&d, json_object_get(cfg, "curve_secret_key"), json_object_get(cfg, "curve_public_key"),
+                           json_object_get(cfg, "curve_clients"))) {
+            json_decref(cfg);
+            return 2;
+        }
         json_t *set = json_object();
         const char *key;
         json_object_foreach(cfg, key, v) {
-            if (!strcmp(key, "rep") || !strcmp(key, "pub") || !strcmp(key, "hwm"))
+            if (!strcmp(key, "rep") || !strcmp(key, "pub") || !strcmp(key, "hwm") || !strncmp(key, "curve_", 6))
                 continue;
             json_object_set(set, key, v);
         }
@@ -205,9 +270,14 @@ int main(int argc, char **argv)
             return s_usage_error("--hwm '%s' must be an integer in [1, 1e7]", hwm);
         d.set.hwm = (int)x;
     }
-    if (!s_endpoint_allowed(rep_ep) || !s_endpoint_allowed(pub_ep)) {
-        fprintf(stderr, "vafmd: refusing to bind '%s': only loopback tcp:// and ipc:// endpoints are allowed, "
-                        "because CURVE security (needed for other addresses) is not yet implemented\n",
+    if (curve_required && !d.auth.on) {
+        fprintf(stderr, "vafmd: CURVE is required (--curve-required) but not configured: give "
+                        "\"curve_secret_key\" and \"curve_clients\" in the --config file\n");
+        return 2;
+    }
+    if (!d.auth.on && (!s_endpoint_allowed(rep_ep) || !s_endpoint_allowed(pub_ep))) {
+        fprintf(stderr, "vafmd: refusing to bind '%s': without CURVE security only loopback tcp:// and ipc:// "
+                        "endpoints are allowed (configure curve_secret_key and curve_clients)\n",
                 s_endpoint_allowed(rep_ep) ? pub_ep : rep_ep);
         return 2;
     }
@@ -226,14 +296,34 @@ int main(int argc, char **argv)
      * its greeting heartbeat and the current run.start */
     int one = 1;
     zmq_setsockopt(d.pub, ZMQ_XPUB_VERBOSE, &one, sizeof one);
-    if (zmq_bind(d.rep, rep_ep) || zmq_bind(d.pub, pub_ep)) {
-        fprintf(stderr, "vafmd: cannot bind: %s\n", zmq_strerror(errno));
+    /* CURVE: the ZAP handler is bound before the sockets, so that no handshake finds it missing */
+    if (d.auth.on && (vafmd_auth_bind(&d) || vafmd_auth_secure(&d, d.rep) || vafmd_auth_secure(&d, d.pub))) {
+        fprintf(stderr, "vafmd: cannot set up CURVE security: %s\n", zmq_strerror(errno));
+        if (d.auth.zap)
+            zmq_close(d.auth.zap);
         zmq_close(d.rep);
         zmq_close(d.pub);
         zmq_ctx_term(d.zctx);
         return 1;
     }
-    vafmd_ring_init(&d.ring, d.ring_store, sizeof(vafmd_sim_cmd));
+    if (zmq_bind(d.rep, rep_ep) || zmq_bind(d.pub, pub_ep)) {
+        fprintf(stderr, "vafmd: cannot bind: %s\n", zmq_strerror(errno));
+        if (d.auth.zap)
+            zmq_close(d.auth.zap);
+        zmq_close(d.rep);
+        zmq_close(d.pub);
+        zmq_ctx_term(d.zctx);
+        return 1;
+    }
+    vafmd_ring_init(&d.ring, d.ring_store, sizeof(vafmd_sim_cmd), VAFMD_RING_CAP);
+    d.log.ring_store = calloc(VAFMD_LOG_RING_CAP, sizeof(vafmd_log_item));
+    if (!d.log.ring_store) {
+        fprintf(stderr, "vafmd: out of memory\n");
+        return 1;
+    }
+    vafmd_ring_init(&d.log.ring, d.log.ring_store, sizeof(vafmd_log_item), VAFMD_LOG_RING_CAP);
+    atomic_init(&d.log.state, VAFMD_LOG_OFF);
+    pthread_mutex_init(&d.log.err_mu, NULL);
     d.next_run_id = 1;
     d.stop = &s_stop;
 
@@ -243,8 +333,10 @@ int main(int argc, char **argv)
     sigaddset(&block, SIGINT);
     sigaddset(&block, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &block, &old);
-    pthread_t th;
+    pthread_t th, lth, ath;
     int trc = pthread_create(&th, NULL, vafmd_sim_main, &d);
+    int ltrc = trc ? -1 : pthread_create(&lth, NULL, vafmd_log_main, &d);
+    int atrc = ltrc || !d.auth.on ? 0 : pthread_create(&ath, NULL, vafmd_auth_main, &d);
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = s_on_signal;
@@ -252,8 +344,8 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     pthread_sigmask(SIG_SETMASK, &old, NULL);
-    if (trc) {
-        fprintf(stderr, "vafmd: cannot start the simulation thread\n");
+    if (trc || ltrc || atrc) {
+        fprintf(stderr, "vafmd: cannot start the simulation or the writer thread\n");
         return 1;
     }
     fprintf(stderr, "vafmd %s: commands on %s, stream on %s\n", VAFMD_VERSION, rep_ep, pub_ep);
@@ -265,6 +357,14 @@ int main(int argc, char **argv)
     while (!vafmd_ring_push(&d.ring, &q))
         nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
     pthread_join(th, NULL);
+    /* The simulation thread has pushed the end of the last run: the writer appends what is complete,
+     * flushes, closes the file and exits. */
+    int lon = VAFMD_LOG_ON;
+    atomic_compare_exchange_strong(&d.log.state, &lon, VAFMD_LOG_STOPPING);
+    atomic_store_explicit(&d.log.quit, 1, memory_order_release);
+    pthread_join(lth, NULL);
+    free(d.log.ring_store);
+    pthread_mutex_destroy(&d.log.err_mu);
     /* Commands still in the ring after QUIT cannot exist (QUIT is pushed last), so nothing leaks.
      * The last run.end is still queued: give it a bounded time to leave (a stalled subscriber must
      * not hold up the exit). pthread_join is the barrier that lets this thread use the socket. */
@@ -272,6 +372,11 @@ int main(int argc, char **argv)
     zmq_setsockopt(d.pub, ZMQ_LINGER, &flush_ms, sizeof flush_ms);
     zmq_close(d.pub);
     zmq_close(d.rep);
+    if (d.auth.on) { /* the ZAP thread closes its socket; zmq_ctx_term waits for every socket */
+        atomic_store_explicit(&d.auth.quit, 1, memory_order_release);
+        pthread_join(ath, NULL);
+    }
+    free(d.auth.clients);
     zmq_ctx_term(d.zctx);
     fprintf(stderr, "vafmd: stopped\n");
     return rc ? 1 : 0;

@@ -46,6 +46,9 @@ typedef struct s_run {
     uint64_t block_index, samples, first_seq, late_blocks, worst_late_ns, dropped_at_start;
     int64_t t_start;       /* CLOCK_MONOTONIC ns */
     int overrun_reported;
+    vafmd_log *log;        /* non-NULL: the run is logged (a curve with logging on) */
+    vafmd_log_block *lb;   /* the block being filled for the writer thread, or NULL */
+    int log_broken;        /* a log item was lost to a full ring: the writer drops the curve */
 } s_run;
 
 typedef struct s_ctx {
@@ -141,6 +144,13 @@ static int s_sink(void *user, const vafm_samples *b)
         /* a division, not a multiplication by the inverse: bit-exact with deflection / sensitivity */
         r->ch[3][k] = b->deflection_m[i] / r->cmd.set.sensitivity_m_per_V;
         r->ch[4][k] = b->tip_m[i];
+        if (r->lb) { /* the same doubles as the stream's: the file equals the stream bit for bit */
+            r->lb->time_s[k] = b->time_s[i];
+            r->lb->height_m[k] = b->height_m[i];
+            r->lb->force_N[k] = b->force_N[i];
+            r->lb->tip_m[k] = b->tip_m[i];
+            r->lb->segment[k] = b->segment[i];
+        }
         int seg = b->segment[i];
         if (k == 0)
             r->first_seg = (uint8_t)seg;
@@ -156,8 +166,35 @@ static int s_sink(void *user, const vafm_samples *b)
     return 0;
 }
 
+/* Hand one item to the writer thread without waiting: a full ring loses it (counted) and the curve. */
+static void s_log_push(s_run *r, int type, void *ptr)
+{
+    vafmd_log_item it = { type, r->cmd.run_id, ptr };
+    if (!ptr || !vafmd_ring_push(&r->log->ring, &it)) {
+        free(ptr);
+        r->log_broken = 1;
+        atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
+    }
+}
+
+static vafmd_log_block *s_log_block_new(size_t n)
+{
+    vafmd_log_block *b = malloc(sizeof *b + 4 * n * sizeof(double) + n);
+    if (!b)
+        return NULL;
+    b->n = 0;
+    b->time_s = b->data;
+    b->height_m = b->data + n;
+    b->force_N = b->data + 2 * n;
+    b->tip_m = b->data + 3 * n;
+    b->segment = (uint8_t *)(b->data + 4 * n);
+    return b;
+}
+
 static void s_run_free(s_run *r)
 {
+    free(r->lb);
+    r->lb = NULL;
     vafm_sim_destroy(&r->cmd.sim);
     free(r->cmd.start_json);
     r->cmd.start_json = NULL;
@@ -221,6 +258,16 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
                                                    s_num_or_null(res.detach_force_N)));
         }
     }
+    if (r->log) {
+        vafmd_log_end *le = calloc(1, sizeof *le);
+        if (le) {
+            le->ok = !strcmp(status, "ok") && !err_code;
+            le->broken = r->log_broken;
+            if (vafm_sim_result(r->cmd.sim, &le->result))
+                le->ok = 0;
+        }
+        s_log_push(r, VAFMD_LOG_END, le);
+    }
     s_send_json(x, "run.end", j);
     s_run_free(r);
     atomic_store_explicit(&sh->state, VAFMD_IDLE, memory_order_relaxed);
@@ -240,6 +287,17 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     r->first_seq = atomic_load_explicit(&sh->seq, memory_order_relaxed);
     r->dropped_at_start = atomic_load(&sh->dropped);
     r->active = 1;
+    if (c->log && c->kind == VAFMD_RUN_CURVE) {
+        r->log = &x->d->log;
+        vafmd_log_begin *lb = calloc(1, sizeof *lb);
+        if (lb) {
+            lb->p = *p;
+            lb->run_id = c->run_id;
+            lb->index = c->index;
+            memcpy(lb->client_run_id, c->client_run_id, sizeof lb->client_run_id);
+        }
+        s_log_push(r, VAFMD_LOG_BEGIN, lb);
+    }
     atomic_store_explicit(&sh->run_id, c->run_id, memory_order_relaxed);
     atomic_store_explicit(&sh->run_samples, 0, memory_order_relaxed);
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
@@ -265,6 +323,10 @@ static void s_run_block(s_ctx *x)
     r->fill = 0;
     r->seg_change = 0;
     r->n_ev = 0;
+    if (r->log && !r->log_broken && !r->lb && !(r->lb = s_log_block_new(r->block_n))) {
+        r->log_broken = 1;
+        atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
+    }
     int rc = 1;
     while (r->fill < r->block_n && rc == 1)
         rc = vafm_sim_advance(r->cmd.sim, r->block_n - r->fill, s_sink, r);
@@ -324,6 +386,12 @@ static void s_run_block(s_ctx *x)
             len[2 + i] = r->fill * sizeof(double);
         }
         s_send(x, part, len, 2 + VAFMD_N_CHANNELS);
+        if (r->lb) {
+            r->lb->n = r->fill;
+            vafmd_log_block *lb = r->lb;
+            r->lb = NULL;
+            s_log_push(r, VAFMD_LOG_BLOCK, lb);
+        }
         for (int i = 0; i < r->n_ev; i++)
             s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:s,s:s}", "run_id", (json_int_t)r->cmd.run_id, "kind",
                                               "segment", "sample", (json_int_t)r->ev[i].sample, "from",

@@ -12,20 +12,22 @@
 #include <stddef.h>
 #include <string.h>
 
-#define VAFMD_RING_CAP 64u /* power of two */
+#define VAFMD_RING_CAP 64u /* the command ring's capacity (power of two) */
 
 typedef struct vafmd_ring {
     _Alignas(64) atomic_size_t head; /* next slot to write; written by the producer only */
     _Alignas(64) atomic_size_t tail; /* next slot to read; written by the consumer only */
     size_t item_size;
-    unsigned char *items; /* VAFMD_RING_CAP * item_size bytes, owned by the caller */
+    size_t cap;           /* slots, a power of two */
+    unsigned char *items; /* cap * item_size bytes, owned by the caller */
 } vafmd_ring;
 
-static inline void vafmd_ring_init(vafmd_ring *r, void *storage, size_t item_size)
+static inline void vafmd_ring_init(vafmd_ring *r, void *storage, size_t item_size, size_t cap)
 {
     atomic_init(&r->head, 0);
     atomic_init(&r->tail, 0);
     r->item_size = item_size;
+    r->cap = cap;
     r->items = storage;
 }
 
@@ -34,9 +36,9 @@ static inline int vafmd_ring_push(vafmd_ring *r, const void *item)
 {
     size_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
     size_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
-    if (h - t >= VAFMD_RING_CAP)
+    if (h - t >= r->cap)
         return 0;
-    memcpy(r->items + (h % VAFMD_RING_CAP) * r->item_size, item, r->item_size);
+    memcpy(r->items + (h & (r->cap - 1)) * r->item_size, item, r->item_size);
     atomic_store_explicit(&r->head, h + 1, memory_order_release);
     return 1;
 }
@@ -48,7 +50,7 @@ static inline int vafmd_ring_pop(vafmd_ring *r, void *out)
     size_t h = atomic_load_explicit(&r->head, memory_order_acquire);
     if (t == h)
         return 0;
-    memcpy(out, r->items + (t % VAFMD_RING_CAP) * r->item_size, r->item_size);
+    memcpy(out, r->items + (t & (r->cap - 1)) * r->item_size, r->item_size);
     atomic_store_explicit(&r->tail, t + 1, memory_order_release);
     return 1;
 }

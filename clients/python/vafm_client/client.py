@@ -1,0 +1,328 @@
+# SPDX-License-Identifier: MIT
+"""Client (commands) and Stream (sample stream) of vafmd; see the package docstring and protocol/wire.md."""
+import json
+import struct
+import time
+from collections import namedtuple
+
+import numpy as np
+import zmq
+
+DEFAULT_REP = "tcp://127.0.0.1:5555"
+DEFAULT_PUB = "tcp://127.0.0.1:5556"
+PROTOCOL_VERSION = 1
+MAGIC = 0x4D464156  # the bytes V A F M
+HEADER = struct.Struct("<IHHQQQQIHHdqII")  # wire.md §4: 72 bytes, little-endian, no padding
+CHANNELS = ("height_m", "deflection_m", "force_N", "vDeflection_V", "tip_m")
+SEGMENTS = {"approach": 0, "retract": 1, "dwell": 2, "tune": 3}
+FLAG_LATE, FLAG_SEG_CHANGE, FLAG_LAST, FLAG_FREE_RUN, FLAG_CLIPPED = 1, 2, 4, 8, 16
+
+Header = namedtuple("Header", "magic version header_size seq run_id block_index first_sample n_samples "
+                              "n_channels segment sample_rate_Hz t0_ns flags reserved")
+
+
+class DaemonError(Exception):
+    """An error reply: `code` is the daemon's stable code (wire.md §2.2), `field` the offending key or None."""
+
+    def __init__(self, reply):
+        self.reply = reply
+        self.code = reply.get("code", "internal")
+        self.field = reply.get("field")
+        self.message = reply.get("message", "")
+        super().__init__(f"{self.code}: {self.message}" + (f" (field {self.field})" if self.field else ""))
+
+
+class TransportError(Exception):
+    """No reply within the timeout (after the retries), or a message that does not follow the protocol."""
+
+
+class GapError(Exception):
+    """Data blocks were lost (a jump in the header's seq): the run is incomplete."""
+
+
+def decode_header(buf):
+    """Decode a data header (bytes of at least 72). Raises TransportError on a bad magic or version."""
+    if len(buf) < HEADER.size:
+        raise TransportError(f"data header of {len(buf)} bytes, expected at least {HEADER.size}")
+    h = Header(*HEADER.unpack_from(buf))
+    if h.magic != MAGIC or h.version != PROTOCOL_VERSION or not HEADER.size <= h.header_size <= len(buf):
+        raise TransportError(f"bad data header (magic {h.magic:#x}, version {h.version}, size {h.header_size})")
+    return h
+
+
+def _apply_curve(sock, curve):
+    """curve = (server_public, client_public, client_secret), Z85 str/bytes (protocol/wire.md §1.1)."""
+    if curve is None:
+        return
+    server_public, client_public, client_secret = (k.encode() if isinstance(k, str) else k for k in curve)
+    sock.curve_serverkey = server_public
+    sock.curve_publickey = client_public
+    sock.curve_secretkey = client_secret
+
+
+class Client:
+    """Commands over a REQ socket. Every method returns the reply dict or raises DaemonError/TransportError.
+
+    A lost reply (timeout) closes and reopens the REQ socket (lazy pirate); `retries` resends then, which
+    is only safe for idempotent commands: `curve`/`tune` are made so with a client_run_id."""
+
+    def __init__(self, endpoint=DEFAULT_REP, timeout=10.0, retries=0, context=None, curve=None):
+        """curve: (server_public, client_public, client_secret) Z85 keys for a daemon with CURVE; a daemon
+        that refuses them sends nothing, so requests time out (TransportError)."""
+        self.endpoint, self.timeout, self.retries, self._curve_keys = endpoint, timeout, retries, curve
+        self._own_ctx = context is None
+        self.ctx = context or zmq.Context()
+        self.sock = None
+        self._open()
+
+    def _open(self):
+        if self.sock is not None:
+            self.sock.close(0)
+        self.sock = self.ctx.socket(zmq.REQ)
+        self.sock.setsockopt(zmq.LINGER, 0)
+        _apply_curve(self.sock, self._curve_keys)
+        self.sock.connect(self.endpoint)
+
+    def close(self):
+        if self.sock is not None:
+            self.sock.close(0)
+            self.sock = None
+        if self._own_ctx:
+            self.ctx.term()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def request(self, obj, timeout=None, retries=None):
+        """Send one command (a dict with "cmd") and return its ok reply; raise DaemonError on an error reply."""
+        timeout = self.timeout if timeout is None else timeout
+        retries = self.retries if retries is None else retries
+        data = json.dumps(obj).encode()
+        for _ in range(retries + 1):
+            self.sock.send(data)
+            if self.sock.poll(int(timeout * 1000)):
+                reply = json.loads(self.sock.recv())
+                if not isinstance(reply, dict):
+                    raise TransportError("reply is not a JSON object")
+                if reply.get("status") != "ok":
+                    raise DaemonError(reply)
+                return reply
+            self._open()  # a REQ socket still waiting for its reply cannot send again
+        raise TransportError(f"no reply from {self.endpoint} within {timeout} s ({retries + 1} attempts)")
+
+    def hello(self):
+        return self.request({"cmd": "hello"})
+
+    def status(self):
+        return self.request({"cmd": "status"})
+
+    def presets(self):
+        return self.request({"cmd": "presets"})["presets"]
+
+    def get(self, *names, info=False):
+        """Values of the named parameters/settings (all without names) as a dict; with info, (values, info)."""
+        req = {"cmd": "get"}
+        if names:
+            req["names"] = list(names)
+        if info:
+            req["info"] = True
+        r = self.request(req)
+        return (r["values"], r["info"]) if info else r["values"]
+
+    def set(self, values=None, preset=None, **kw):
+        """set(preset="paper-fig4", k_N_per_m=0.1) or set({"k_N_per_m": 0.1}); returns "now"/"next_run"."""
+        vals = dict(values or {}, **kw)
+        req = {"cmd": "set"}
+        if preset is not None:
+            req["preset"] = preset
+        if vals:
+            req["values"] = vals
+        return self.request(req)["applies_to"]
+
+    def curve(self, index=0, client_run_id=None):
+        req = {"cmd": "curve", "index": index}
+        if client_run_id is not None:
+            req["client_run_id"] = client_run_id
+        return self.request(req)
+
+    def tune(self, duration_s=None, index=0, client_run_id=None):
+        req = {"cmd": "tune", "index": index}
+        if duration_s is not None:
+            req["duration_s"] = duration_s
+        if client_run_id is not None:
+            req["client_run_id"] = client_run_id
+        return self.request(req)
+
+    def wait_idle(self, timeout=30.0, poll=0.005):
+        """Wait until the daemon is idle and return its status. Needed between runs: run.end is published
+        before the daemon's state returns to idle, so a start right after it may get a `state` error."""
+        deadline = time.monotonic() + timeout
+        while True:
+            st = self.status()
+            if st["state"] == "idle":
+                return st
+            if time.monotonic() > deadline:
+                raise TransportError(f"daemon still {st['state']} after {timeout} s")
+            time.sleep(poll)
+
+    def abort(self):
+        return self.request({"cmd": "abort"})
+
+    def shutdown(self):
+        return self.request({"cmd": "shutdown"})
+
+
+class Run:
+    """One run as received: `start`/`end` (the JSON messages), `events`, `headers`, the channels as numpy
+    arrays (`run["force_N"]`, `run.channels`), `segment` (per sample), `time_s` and `gaps` (blocks lost)."""
+
+    def __init__(self, run_id):
+        self.run_id = run_id
+        self.start = self.end = None
+        self.events, self.headers, self._blocks = [], [], []
+        self.gaps = 0
+        self.channels = {}
+        self.segment = self.time_s = None
+
+    @property
+    def complete(self):
+        return self.start is not None and self.end is not None and self.gaps == 0 and \
+            sum(h.n_samples for h in self.headers) == self.end["samples"]
+
+    def __getitem__(self, name):
+        return self.channels[name]
+
+    def _finish(self):
+        names = [c["name"] for c in self.start["channels"]] if self.start else list(CHANNELS)
+        for k, name in enumerate(names):
+            parts = [b[k] for b in self._blocks if k < len(b)]
+            self.channels[name] = np.concatenate(parts) if parts else np.empty(0)
+        self._blocks = []
+        n = sum(h.n_samples for h in self.headers)
+        seg = np.empty(n, dtype=np.int64)
+        pos = 0
+        for h in self.headers:  # the header gives a block's first segment; events the changes inside it
+            seg[pos:pos + h.n_samples] = h.segment
+            pos += h.n_samples
+        for e in self.events:
+            if e.get("kind") == "segment" and e.get("sample") is not None and e["to"] in SEGMENTS:
+                lim = next((h.first_sample + h.n_samples for h in self.headers
+                            if h.first_sample <= e["sample"] < h.first_sample + h.n_samples), n)
+                seg[e["sample"]:lim] = SEGMENTS[e["to"]]
+        self.segment = seg
+        if self.start:
+            fs = self.start["sample_rate_Hz"]
+            # the time `vafm samples` prints: interval centre with antialias=mean, end with point (csv.md)
+            off = 1.0 if self.start.get("scene", {}).get("antialias") == "point" else 0.5
+            self.time_s = (np.arange(n) + off) / fs
+
+
+class Stream:
+    """The sample stream over a SUB socket. Subscribes at construction and waits for the daemon's greeting
+    heartbeat, so a run started afterwards is seen from its first message. Counts lost data blocks (gaps in
+    seq) in `gaps`."""
+
+    def __init__(self, endpoint=DEFAULT_PUB, timeout=20.0, rcvhwm=None, context=None, curve=None):
+        self.endpoint, self.timeout = endpoint, timeout
+        self._own_ctx = context is None
+        self.ctx = context or zmq.Context()
+        self.sock = self.ctx.socket(zmq.SUB)
+        self.sock.setsockopt(zmq.LINGER, 0)
+        if rcvhwm is not None:
+            self.sock.setsockopt(zmq.RCVHWM, rcvhwm)
+        self.sock.setsockopt(zmq.SUBSCRIBE, b"")
+        _apply_curve(self.sock, curve)
+        self.sock.connect(endpoint)
+        self.last_seq, self.gaps = None, 0
+        self._pending = {}
+        try:  # the daemon greets each new subscription with a heartbeat: then it is in place
+            for topic, _ in self.messages(timeout):
+                if topic == "heartbeat":
+                    break
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self):
+        self.sock.close(0)
+        if self._own_ctx:
+            self.ctx.term()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def messages(self, timeout=None, deadline=None):
+        """Yield (topic, payload): for "data" (Header, [numpy arrays], gap), else the decoded JSON.
+        Raises TransportError when nothing arrives within `timeout` seconds, or at the time.monotonic()
+        `deadline` (heartbeats never let the stream fall silent, so a lost run.end needs a deadline)."""
+        timeout = self.timeout if timeout is None else timeout
+        while True:
+            wait = timeout if deadline is None else min(timeout, deadline - time.monotonic())
+            if wait <= 0 or not self.sock.poll(int(wait * 1000)):
+                raise TransportError(f"stream {self.endpoint}: nothing expected within {timeout} s")
+            parts = self.sock.recv_multipart()
+            topic = parts[0].decode("ascii", "replace")
+            if topic == "data":
+                h = decode_header(parts[1])
+                chans = [np.frombuffer(p, "<f8") for p in parts[2:2 + h.n_channels]]
+                if len(chans) != h.n_channels or any(len(c) != h.n_samples for c in chans):
+                    raise TransportError(f"data block {h.seq}: frames do not match the header")
+                gap = 0
+                if self.last_seq is not None and h.seq > self.last_seq + 1:
+                    gap = h.seq - self.last_seq - 1
+                    self.gaps += gap
+                if self.last_seq is None or h.seq > self.last_seq:
+                    self.last_seq = h.seq
+                yield topic, (h, chans, gap)
+            elif topic in ("run.start", "run.end", "event", "heartbeat"):
+                yield topic, json.loads(parts[1])
+            # other topics: ignored (wire.md §6)
+
+    def runs(self, timeout=None, include_partial=False, deadline=None):
+        """Yield each Run at its run.end. Runs joined mid-way (no run.start seen) are skipped unless
+        include_partial. `timeout`, `deadline` as for messages()."""
+        for topic, p in self.messages(timeout, deadline):
+            if topic == "data":
+                h, chans, gap = p
+                run = self._pending.setdefault(h.run_id, Run(h.run_id))
+                run.gaps += gap
+                run.headers.append(h)
+                run._blocks.append(chans)
+            elif topic in ("run.start", "event", "run.end"):
+                run = self._pending.setdefault(p["run_id"], Run(p["run_id"]))
+                if topic == "run.start":
+                    run.start = run.start or p
+                elif topic == "event":
+                    run.events.append(p)
+                else:
+                    run.end = p
+                    del self._pending[p["run_id"]]
+                    # blocks lost at the end of the run show only in run.end's last_seq
+                    if p.get("last_seq") is not None and self.last_seq is not None and p["last_seq"] > self.last_seq:
+                        lost = p["last_seq"] - self.last_seq
+                        run.gaps += lost
+                        self.gaps += lost
+                        self.last_seq = p["last_seq"]
+                    # run.end is authoritative: this also counts blocks lost before the first one seen
+                    run.gaps = max(run.gaps, p.get("blocks", 0) - len(run.headers))
+                    if run.start is None and not include_partial:
+                        continue
+                    run._finish()
+                    yield run
+
+    def run(self, run_id, timeout=None, strict=True):
+        """Collect run `run_id` up to its run.end, waiting at most `timeout` seconds (default the stream's)
+        in all (TransportError then, e.g. when its run.end was lost); with strict, raise GapError if any
+        block was lost."""
+        timeout = self.timeout if timeout is None else timeout
+        for run in self.runs(timeout, deadline=time.monotonic() + timeout):
+            if run.run_id == run_id:
+                if strict and not run.complete:
+                    raise GapError(f"run {run_id}: {run.gaps} data block(s) lost")
+                return run

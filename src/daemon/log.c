@@ -1,0 +1,196 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The HDF5 writer thread (protocol/wire.md, "log"): it assembles each logged force curve from the blocks
+ * the simulation thread pushes through the log ring, appends it to the file in the layout of
+ * protocol/hdf5.md and flushes after every curve, so a killed daemon loses at most the curve in
+ * progress. The arrays in the file are copies of the very doubles that were streamed (bit for bit).
+ *
+ * The simulation thread never waits for this thread: the ring is bounded and a full ring costs the
+ * curve (counted), not time. This thread polls the ring (1 ms naps when it is empty); the writer object
+ * is handed over by the control thread through the atomic log state (OFF → ON) and handed back, closed,
+ * by this thread (STOPPING → OFF).
+ */
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include "daemon/daemon.h"
+#include "vafm/h5.h"
+
+typedef struct s_curve {
+    vafmd_log_begin *begin; /* NULL: no curve in progress */
+    int broken;
+    size_t n, cap;
+    double *time_s, *height_m, *force_N, *tip_m;
+    uint8_t *segment;
+} s_curve;
+
+static void s_curve_reset(s_curve *c)
+{
+    free(c->begin);
+    c->begin = NULL;
+    c->broken = 0;
+    c->n = 0;
+}
+
+static void s_curve_free(s_curve *c)
+{
+    s_curve_reset(c);
+    free(c->time_s);
+    free(c->height_m);
+    free(c->force_N);
+    free(c->tip_m);
+    free(c->segment);
+    memset(c, 0, sizeof *c);
+}
+
+static int s_curve_grow(s_curve *c, size_t need)
+{
+    if (need <= c->cap)
+        return 0;
+    size_t cap = c->cap ? c->cap : 65536;
+    while (cap < need)
+        cap *= 2;
+    double **d[4] = { &c->time_s, &c->height_m, &c->force_N, &c->tip_m };
+    for (int i = 0; i < 4; i++) {
+        double *p = realloc(*d[i], cap * sizeof(double));
+        if (!p)
+            return -1;
+        *d[i] = p;
+    }
+    uint8_t *s = realloc(c->segment, cap);
+    if (!s)
+        return -1;
+    c->segment = s;
+    c->cap = cap;
+    return 0;
+}
+
+static void s_set_err(vafmd_log *L, const char *fmt, const char *a, const char *b)
+{
+    pthread_mutex_lock(&L->err_mu);
+    snprintf(L->err, sizeof L->err, fmt, a, b);
+    pthread_mutex_unlock(&L->err_mu);
+}
+
+/* Append the finished curve and flush. */
+static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
+{
+    vafm_samples s = { .n = c->n, .first = 0, .time_s = c->time_s, .height_m = c->height_m,
+                       .deflection_m = NULL, .force_N = c->force_N, .tip_m = c->tip_m, .segment = c->segment };
+    const vafm_params *p = &c->begin->p;
+    vafm_h5_curve hc;
+    vafm_h5_curve_from_sim(&hc, &s, p, &end->result);
+    /* the group number is the file's curve count; the random stream index and the run are kept in the
+     * free-text ids (the curve-group attribute list is closed) */
+    char sid[48], cid[160];
+    snprintf(sid, sizeof sid, "vafmd seed %" PRIu64, p->seed);
+    snprintf(cid, sizeof cid, "run %" PRIu64 " index %" PRIu64 "%s%s", c->begin->run_id, c->begin->index,
+             c->begin->client_run_id[0] ? " client " : "", c->begin->client_run_id);
+    hc.meta.session_id = sid;
+    hc.meta.curve_id = cid;
+    vafm_h5_truth t;
+    memset(&t, 0, sizeof t);
+    t.point = 0;
+    t.T_K = p->T_K;
+    t.v_m_per_s = p->v_retract_m_per_s;
+    t.k_N_per_m = p->k_N_per_m;
+    t.result = end->result;
+    t.result.index = vafm_h5_writer_count(L->w);
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    int rc = vafm_h5_writer_append(L->w, &hc, &t, &e);
+    if (!rc)
+        rc = vafm_h5_writer_flush(L->w, &e);
+    if (rc) {
+        atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
+        s_set_err(L, "%s (%s)", e.message[0] ? e.message : vafm_strerror(rc), e.field);
+    } else
+        atomic_fetch_add_explicit(&L->curves, 1, memory_order_relaxed);
+}
+
+static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
+{
+    switch (it->type) {
+    case VAFMD_LOG_BEGIN:
+        if (c->begin) /* the previous curve's end was lost to a full ring */
+            atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
+        s_curve_reset(c);
+        c->begin = it->ptr;
+        it->ptr = NULL;
+        break;
+    case VAFMD_LOG_BLOCK: {
+        const vafmd_log_block *b = it->ptr;
+        if (!c->begin || c->begin->run_id != it->run_id || c->broken)
+            break;
+        if (s_curve_grow(c, c->n + b->n)) {
+            c->broken = 1;
+            break;
+        }
+        memcpy(c->time_s + c->n, b->time_s, b->n * sizeof(double));
+        memcpy(c->height_m + c->n, b->height_m, b->n * sizeof(double));
+        memcpy(c->force_N + c->n, b->force_N, b->n * sizeof(double));
+        memcpy(c->tip_m + c->n, b->tip_m, b->n * sizeof(double));
+        memcpy(c->segment + c->n, b->segment, b->n);
+        c->n += b->n;
+        break;
+    }
+    case VAFMD_LOG_END: {
+        const vafmd_log_end *e = it->ptr;
+        if (!c->begin || c->begin->run_id != it->run_id) {
+            atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed); /* its begin was lost */
+            break;
+        }
+        if (!e->ok)
+            atomic_fetch_add_explicit(&L->curves_skipped, 1, memory_order_relaxed);
+        else if (c->broken || e->broken || c->n == 0 || !on)
+            atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
+        else
+            s_write(L, c, e);
+        s_curve_reset(c);
+        break;
+    }
+    default: break;
+    }
+    free(it->ptr);
+}
+
+void *vafmd_log_main(void *arg)
+{
+    vafmd *d = arg;
+    vafmd_log *L = &d->log;
+    s_curve c;
+    memset(&c, 0, sizeof c);
+    for (;;) {
+        vafmd_log_item it;
+        int got = 0;
+        int st = atomic_load_explicit(&L->state, memory_order_acquire);
+        while (vafmd_ring_pop(&L->ring, &it)) {
+            got = 1;
+            s_handle(L, &c, &it, st != VAFMD_LOG_OFF);
+        }
+        if (st == VAFMD_LOG_STOPPING) {
+            /* everything pushed before the stop request was popped above (the request is made only when
+             * no run is in progress, after its end was pushed) */
+            vafm_error e;
+            memset(&e, 0, sizeof e);
+            if (c.begin)
+                atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
+            s_curve_reset(&c);
+            if (vafm_h5_writer_close(&L->w, &e))
+                s_set_err(L, "closing the file: %s%s", e.message, "");
+            atomic_store_explicit(&L->state, VAFMD_LOG_OFF, memory_order_release);
+            continue;
+        }
+        if (st == VAFMD_LOG_OFF && atomic_load_explicit(&L->quit, memory_order_acquire)) {
+            while (vafmd_ring_pop(&L->ring, &it))
+                free(it.ptr);
+            break;
+        }
+        if (!got)
+            nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
+    }
+    s_curve_free(&c);
+    return NULL;
+}
