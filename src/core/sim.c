@@ -221,40 +221,33 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     K->in_contact = 0;
     K->s = 0.0;
     const int has_contact = K->contact.type != vafm_contact_none;
-    if (has_contact && (s->uspr_start >= K->contact.u_touch || s->p.start_in_contact)) {
+    /* Start in contact at equilibrium (pressed in, or start_in_contact), else free at the support; a
+     * thermal draw of position then velocity either way. */
+    const int start_pressed = has_contact && (s->uspr_start >= K->contact.u_touch || s->p.start_in_contact);
+    double sigma_u = s->sigma_free;
+    if (start_pressed) {
         double K_loc;
         K->u = s_contact_equilibrium(s, s->uspr_start, &K_loc);
         K->w = 0.0;
-        if (K->thermal && K_loc > 0) {
-            K->u += sqrt(K->kT / K_loc) * vafm_rng_normal_inline(&K->rng);
-            if (!s->it->overdamped)
-                K->w = sqrt(K->kT / K->m) * vafm_rng_normal_inline(&K->rng);
-        }
-        K->in_contact = K->u >= K->contact.u_detach;
-        if (K->in_contact) {
-            K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
-            s->touched = 1;
-            s->touch_t = 0.0;
-            s->touch_uspr = K->u_spr;
-        } else {
-            K->Fc = 0.0;
-        }
+        sigma_u = K_loc > 0 ? sqrt(K->kT / K_loc) : 0.0;
     } else {
         K->u = s->uspr_start;
         K->w = v0;
-        if (K->thermal) {
-            K->u += s->sigma_free * vafm_rng_normal_inline(&K->rng);
-            if (!s->it->overdamped)
-                K->w += sqrt(K->kT / K->m) * vafm_rng_normal_inline(&K->rng);
-        }
-        K->Fc = 0.0;
-        if (has_contact && K->u >= K->contact.u_touch) {
-            K->in_contact = 1;
-            K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
-            s->touched = 1;
-            s->touch_t = 0.0;
-            s->touch_uspr = K->u_spr;
-        }
+    }
+    if (K->thermal && sigma_u > 0) {
+        K->u += sigma_u * vafm_rng_normal_inline(&K->rng);
+        if (!s->it->overdamped)
+            K->w += sqrt(K->kT / K->m) * vafm_rng_normal_inline(&K->rng);
+    }
+    /* pressed in, the body stays on the branch unless the draw took it below u_detach; free, it is in
+     * contact only if the draw reached the surface */
+    K->in_contact = has_contact && (start_pressed ? K->u >= K->contact.u_detach : K->u >= K->contact.u_touch);
+    K->Fc = 0.0;
+    if (K->in_contact) {
+        K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
+        s->touched = 1;
+        s->touch_t = 0.0;
+        s->touch_uspr = K->u_spr;
     }
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
     s->phase = scene == S_SCENE_CURVE ? S_PH_APPROACH : S_PH_TUNE;
