@@ -616,15 +616,22 @@ static int s_index_arg(const s_args *a, uint64_t *index)
     return a->val[O_INDEX] ? s_parse_u64("--index", a->val[O_INDEX], 0, UINT64_MAX, index) : 0;
 }
 
+/* The scene, the --index and a simulation for it: the common start of vafm run and vafm samples. */
+static int s_open_sim(const s_args *a, s_scene *sc, uint64_t *index, vafm_sim **sim)
+{
+    int rc = s_resolve_scene(a, sc, 1);
+    if (rc || (rc = s_index_arg(a, index)) != 0)
+        return rc;
+    return s_new_sim(&sc->p, sim);
+}
+
 static int s_cmd_run(const s_args *a)
 {
     s_scene sc;
     uint64_t index;
-    int rc = s_resolve_scene(a, &sc, 1);
-    if (rc || (rc = s_index_arg(a, &index)) != 0)
-        return rc;
     vafm_sim *sim = NULL;
-    if ((rc = s_new_sim(&sc.p, &sim)) != 0)
+    int rc = s_open_sim(a, &sc, &index, &sim);
+    if (rc)
         return rc;
     s_print_provenance(stdout, &sc);
     s_print_scene_si(stdout, &sc.p);
@@ -693,11 +700,9 @@ static int s_cmd_samples(const s_args *a)
 {
     s_scene sc;
     uint64_t index;
-    int rc = s_resolve_scene(a, &sc, 1);
-    if (rc || (rc = s_index_arg(a, &index)) != 0)
-        return rc;
     vafm_sim *sim = NULL;
-    if ((rc = s_new_sim(&sc.p, &sim)) != 0)
+    int rc = s_open_sim(a, &sc, &index, &sim);
+    if (rc)
         return rc;
     FILE *f = s_open_out(a->val[O_CSV]);
     if (!f) {
