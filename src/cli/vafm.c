@@ -30,6 +30,7 @@
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "vafm/theory.h"
+#include "cli/cli_ext.h"
 #include "vafm/units.h"
 #include "vafm/version.h"
 #include "cli/scene_json.h"
@@ -1735,6 +1736,8 @@ static void s_print_usage(FILE *o)
             vafm_version());
     for (int i = 0; s_command_at(i); i++)
         fprintf(o, "  %-12s %s\n", s_command_at(i)->name, s_command_at(i)->summary);
+    for (const vafm_cli_ext *e = vafm_cli_ext_commands; e->name; e++)
+        fprintf(o, "  %-12s %s  (vafm %s --help)\n", e->name, e->summary, e->name);
     for (int i = 0; s_command_at(i); i++)
         if (s_command_at(i)->usage)
             fprintf(o, "\n%s", s_command_at(i)->usage);
@@ -1762,6 +1765,11 @@ static int s_cmd_help(const s_args *a)
         return S_EXIT_OK;
     }
     const s_command *c = s_command_find(a->topic);
+    const vafm_cli_ext *e = c ? NULL : vafm_cli_ext_find(a->topic);
+    if (e) {
+        char *argv[] = { (char *)e->name, (char *)"--help", NULL };
+        return e->fn(2, argv);
+    }
     if (!c) {
         s_error("help: unknown command '%s'", a->topic);
         return S_EXIT_USAGE;
@@ -1878,6 +1886,15 @@ static int s_dispatch(const s_args *a)
 
 int main(int argc, char **argv)
 {
+    const vafm_cli_ext *ext = argc > 1 ? vafm_cli_ext_find(argv[1]) : NULL;
+    if (ext) {
+        int erc = ext->fn(argc - 1, argv + 1);
+        if (fflush(stdout) != 0 && !erc) {
+            s_error("writing to stdout failed");
+            erc = S_EXIT_RUNTIME;
+        }
+        return erc;
+    }
     s_args a;
     int rc = s_parse_args(&a, argc, argv);
     if (!rc)
