@@ -20,9 +20,11 @@ $(ASAN)/build.ninja: | deps
 	$(MESON) setup $(ASAN) -Dbuildtype=debugoptimized -Dwerror=true -Dlong_tests=false \
 	    -Db_sanitize=address,undefined -Db_lundef=false
 
-# The main job on the built-in default scene (paper-fig1): one force curve and its pull-off summary.
+# The main job: vafmd on the default scene (paper-fig1, paced at 1x real time) on private ipc:// endpoints,
+# one live force curve logged to HDF5 by the daemon, its pull-off observables, a PNG; the daemon is stopped.
+DEMO ?= $(BUILD)/demo
 demo: all
-	./$(BUILD)/src/cli/vafm run
+	MPLBACKEND=Agg $(PY) clients/python/examples/force_curve.py --spawn $(BUILD)/src/daemon/vafmd --out-dir $(DEMO)
 
 # Every test: the optimised build at full statistics, then the sanitizer build (ASan + UBSan).
 test: deps

@@ -1,13 +1,16 @@
 # SPDX-License-Identifier: MIT
-"""End-to-end tests of the clients (issue #5): the Python package clients/python/vafm_client, vafm-ctl and
-the C client example, each against a vafmd started here on ipc:// endpoints in a private temporary directory
-(tests can run in parallel). The reference for the streamed samples is the vafm CLI (`vafm samples`).
-Paths come from the environment (clients/c/meson.build): VAFMD, VAFM_CLI, VAFM_CTL, VAFM_EXAMPLE_SUBSCRIBE.
+"""End-to-end tests of the clients (issue #5): the Python package clients/python/vafm_client (Client, Stream,
+the HDF5 loader), `vafm ctl`/`vafm status`/`vafm listen`, the C client example and the Python examples, each
+against a vafmd started here on ipc:// endpoints in a private temporary directory (tests can run in parallel).
+The reference for the streamed samples is the vafm CLI (`vafm samples`), for the files `vafm info` (the C
+conformance checker). Paths come from the environment (clients/c/meson.build): VAFMD, VAFM_CLI,
+VAFM_EXAMPLE_SUBSCRIBE; VAFM_LONG_TESTS=0 (sanitizer build) cuts the examples' statistics.
 Runs: paper-fig4 in free_run (~0.1 s per curve).
 """
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -20,11 +23,12 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 PYCLIENT = os.path.join(HERE, "..", "clients", "python")
 sys.path.insert(0, PYCLIENT)
 from vafm_client import (CHANNELS, Client, DaemonError, GapError, Stream,  # noqa: E402
-                         TransportError)
+                         TransportError, load_h5)
 
 VAFMD = os.environ.get("VAFMD")
 VAFM_CLI = os.environ.get("VAFM_CLI")
-VAFM_CTL = os.environ.get("VAFM_CTL")
+LONG = os.environ.get("VAFM_LONG_TESTS", "1") != "0"
+EXAMPLES = os.path.join(PYCLIENT, "examples")
 EXAMPLE = os.environ.get("VAFM_EXAMPLE_SUBSCRIBE")
 CSV_HEADER = "time_s,height_m,deflection_m,force_N,tip_m,segment"
 
@@ -50,7 +54,13 @@ class Daemon:
         self.client.timeout = 20.0
 
     def ctl(self, *args, timeout=60, pre=()):
-        return subprocess.run([VAFM_CTL, "--endpoint", self.rep, "--pub", self.pub, *pre, *args],
+        return self.cli("ctl", *pre, *args, timeout=timeout)
+
+    def cli(self, sub, *args, timeout=60):
+        """vafm SUB --endpoint REP --pub PUB ARGS (SUB: ctl, status, listen)."""
+        if not VAFM_CLI:
+            pytest.skip("VAFM_CLI not set")
+        return subprocess.run([VAFM_CLI, sub, "--endpoint", self.rep, "--pub", self.pub, *args],
                               capture_output=True, text=True, timeout=timeout)
 
     def stop(self):
@@ -210,26 +220,151 @@ def test_ctl_commands(fig4, tmp_path):
     fig4.client.wait_idle()
     p = fig4.ctl("abort")
     assert p.returncode == 1 and "state" in p.stderr, p
-    for bad in (["bogus"], ["curve", "--x"], ["tune"], ["record"], ["set", "novalue"], []):
+    # any command: KEY=VALUE arguments (JSON values) or a whole JSON request
+    p = fig4.ctl("get", "names=[\"T_K\",\"speed\"]")
+    assert p.returncode == 0 and '"T_K"' in p.stdout and '"speed"' in p.stdout, p
+    p = fig4.ctl('{"cmd": "get", "names": ["m_kg"], "id": 42}')
+    assert p.returncode == 0 and json.loads(p.stdout)["values"] == {"m_kg": 1e-12} and '"id": 42' in p.stdout, p
+    h5 = tmp_path / "log.h5"
+    p = fig4.ctl("log", f"path={h5}")
+    assert p.returncode == 0 and '"curves_in_file": 0' in p.stdout, p
+    p = fig4.ctl("log", "stop=true")
+    assert p.returncode == 0 and '"curves": 0' in p.stdout, p
+    p = fig4.ctl("bogus")
+    assert p.returncode == 1 and "unknown_command" in p.stderr, p
+    for bad in (["curve", "--x"], ["tune", "x"], ["set", "novalue"], ["set"], ["{not json"], []):
         p = fig4.ctl(*bad)
         assert p.returncode == 2 and "usage" in p.stderr, (bad, p)
-    p = subprocess.run([VAFM_CTL, "--endpoint", f"ipc://{tmp_path}/nobody", "--timeout", "200", "status"],
+    p = subprocess.run([VAFM_CLI, "ctl", "--endpoint", f"ipc://{tmp_path}/nobody", "--timeout", "200", "status"],
                        capture_output=True, text=True, timeout=10)
     assert p.returncode == 1 and "no reply" in p.stderr, p
 
 
-@pytest.mark.parametrize("index", [0, 3])
-def test_ctl_record_equals_cli(fig4, tmp_path, index):
-    out = tmp_path / "run.csv"
-    p = fig4.ctl("record", "--out", str(out), "--index", str(index))
+def test_status(fig4, tmp_path):
+    fig4.client.curve(index=0)
+    fig4.client.wait_idle()
+    p = fig4.cli("status")
     assert p.returncode == 0, p
-    got = read_csv(out.read_text(), CSV_HEADER + ",vDeflection_V")
+    assert "state        idle, last run 1" in p.stdout and "runs         1 started, 1 done" in p.stdout, p.stdout
+    assert "pacing       free run" in p.stdout and "log          off" in p.stdout, p.stdout
+    assert "campaign" not in p.stdout, p.stdout
+    p = fig4.cli("status", "--json")
+    assert p.returncode == 0 and json.loads(p.stdout)["runs_done"] == 1, p
+    fig4.client.request({"cmd": "campaign", "n": 2})
+    deadline = time.time() + 20
+    while fig4.client.status()["campaign"]["running"]:
+        assert time.time() < deadline
+        time.sleep(0.02)
+    p = fig4.cli("status")
+    assert p.returncode == 0 and "campaign     1: ended, 2 of 2 curves done" in p.stdout, p.stdout
+    p = subprocess.run([VAFM_CLI, "status", "--endpoint", f"ipc://{tmp_path}/nobody", "--timeout", "200"],
+                       capture_output=True, text=True, timeout=10)
+    assert p.returncode == 1 and "no reply" in p.stderr, p
+    p = fig4.cli("status", "--bogus")
+    assert p.returncode == 2 and "usage" in p.stderr, p
+
+
+@pytest.mark.parametrize("index", [0, 3])
+def test_listen_csv_equals_cli(fig4, tmp_path, index):
+    out = tmp_path / "run.csv"
+    p = fig4.cli("listen", "--start", "curve", "--out", str(out), "--index", str(index))
+    assert p.returncode == 0, p
+    got = read_csv(out.read_text(), CSV_HEADER + ",vDeflection_V,run_id")
     ref = cli_samples(index)
-    assert got.shape == (ref.shape[0], 7)
+    assert got.shape == (ref.shape[0], 8)
     assert np.array_equal(got[:, 1:6], ref[:, 1:6])  # height, deflection, force, tip, segment: bit for bit
     np.testing.assert_allclose(got[:, 0], ref[:, 0], rtol=1e-14, atol=0)  # see test_python_stream_equals_cli
     sens = fig4.client.get("sensitivity_m_per_V")["sensitivity_m_per_V"]
     assert np.array_equal(got[:, 6], ref[:, 2] / sens)
+    assert np.all(got[:, 7] == 1)  # run_id
+
+
+def test_listen_h5_equals_cli(fig4, tmp_path):
+    """A curve streamed by vafmd and recorded by `vafm listen --out x.h5` equals `vafm samples` of the same
+    scene and index bit for bit, passes `vafm info` (the conformance check of protocol/hdf5.md), and its
+    ground truth is the run.end result."""
+    out = tmp_path / "x.h5"
+    p = fig4.cli("listen", "--start", "curve", "--index", "3", "--out", str(out))
+    assert p.returncode == 0, p
+    assert "1 written to" in p.stderr, p.stderr
+    f = load_h5(str(out))
+    assert f.is_vafm and len(f) == 1 and f.scene["k_N_per_m"] == fig4.client.get("k_N_per_m")["k_N_per_m"]
+    c, ref = f[0], cli_samples(3)
+    assert len(c) == ref.shape[0]
+    for name, col in (("height (piezo)", 1), ("height (measured)", 1), ("force", 3), ("tip position", 4),
+                      ("segment", 5)):
+        assert np.array_equal(c[name], ref[:, col]), name  # bit for bit
+    np.testing.assert_allclose(c.time, ref[:, 0], rtol=1e-14, atol=0)
+    assert c.meta["curve id"] == "run 1 index 3" and c.meta["spring constant"] == f.scene["k_N_per_m"]
+    assert c.truth["pulloff_sampled_N"] == -c.force[c.retract].min() and c.truth["samples"] == len(c)
+    p = subprocess.run([VAFM_CLI, "info", str(out)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0 and "conformance  ok" in p.stdout, p
+    p = fig4.cli("listen", "--start", "curve", "--out", str(out))  # no silent replacement
+    assert p.returncode == 1 and "exist" in p.stderr, p
+
+
+def test_listen_skips_run_in_progress(tmp_path):
+    """A run already going when listen subscribes (a paced 0.5 s tune) is skipped, not written with its
+    beginning missing; the next run is recorded whole."""
+    d = Daemon("--preset", "paper-fig4")
+    try:
+        d.client.tune(duration_s=0.5)
+        time.sleep(0.2)
+        out = tmp_path / "mid.csv"
+        lp = subprocess.Popen([VAFM_CLI, "listen", "--endpoint", d.rep, "--pub", d.pub, "--out", str(out)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert "subscribed" in lp.stderr.readline()
+        d.client.wait_idle()
+        d.client.set(free_run=True)
+        d.client.curve(index=0)
+        _, err = lp.communicate(timeout=60)
+        assert lp.returncode == 0 and "run 1 was in progress when listen subscribed: skipped" in err, err
+        got = read_csv(out.read_text(), CSV_HEADER + ",vDeflection_V,run_id")
+        assert np.all(got[:, 7] == 2) and np.array_equal(got[:, 3], cli_samples(0)[:, 3])
+    finally:
+        assert d.stop() == 0
+
+
+def test_listen_several_runs_and_gaps(tmp_path):
+    """listen without --start records the runs others start (a tune is not written to HDF5); a stalled
+    listener (SIGSTOP) loses blocks of a 0.5 s tune of 1 ms blocks (500 blocks of 8 kB against a queue of
+    50 messages and socket buffers of a few hundred kB) and must say so and exit 1."""
+    if not VAFM_CLI:
+        pytest.skip("VAFM_CLI not set")
+    d = Daemon("--preset", "paper-fig4", "--free-run", "--hwm", "50")
+    try:
+        out = tmp_path / "runs.h5"
+        lp = subprocess.Popen([VAFM_CLI, "listen", "--endpoint", d.rep, "--pub", d.pub, "--runs", "3", "--out",
+                               str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert "subscribed" in lp.stderr.readline()
+        for kind, arg in (("curve", 1), ("tune", 0.01), ("curve", 2)):
+            d.client.wait_idle()
+            d.client.curve(index=arg) if kind == "curve" else d.client.tune(duration_s=arg)
+        _, err = lp.communicate(timeout=60)
+        assert lp.returncode == 0, err
+        f = load_h5(str(out))
+        assert [c.meta["curve id"] for c in f] == ["run 1 index 1", "run 3 index 2"], err
+        assert "is a tune: not written" in err
+        d.client.wait_idle()
+        d.client.set(block_s=0.001)
+        lp = subprocess.Popen([VAFM_CLI, "listen", "--endpoint", d.rep, "--pub", d.pub, "--runs", "1", "--out",
+                               str(tmp_path / "gap.csv")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert "subscribed" in lp.stderr.readline()
+        lp.send_signal(signal.SIGSTOP)
+        d.client.tune(duration_s=0.5)
+        d.client.wait_idle()
+        lp.send_signal(signal.SIGCONT)
+        time.sleep(1.0)  # let it drain its queues before a complete run (in case the tune's run.start was lost)
+        d.client.curve(index=0)
+        try:
+            _, err = lp.communicate(timeout=30)
+        finally:
+            if lp.poll() is None:
+                lp.kill()
+                lp.communicate()
+        assert lp.returncode == 1 and "lost (sequence gap)" in err, err
+    finally:
+        assert d.stop() == 0
 
 
 def test_c_example_prints_one_run(fig4):
@@ -282,7 +417,7 @@ def test_curve_security(tmp_path):
         kf = tmp_path / "keys.json"
         kf.write_text(json.dumps({"server_public_key": server_pub.decode(), "public_key": client_pub.decode(),
                                   "secret_key": client_sec.decode()}))
-        p = d.ctl("record", "--out", str(tmp_path / "c.csv"), pre=("--curve", str(kf)))
+        p = d.cli("listen", "--curve", str(kf), "--start", "curve", "--out", str(tmp_path / "c.csv"))
         assert p.returncode == 0, p
         assert len((tmp_path / "c.csv").read_text().splitlines()) == run.end["samples"] + 1
         p = d.ctl("--timeout", "300", "status")  # without keys: no reply
@@ -292,3 +427,147 @@ def test_curve_security(tmp_path):
         assert p.returncode == 2 and "server_public_key" in p.stderr, p
     finally:
         assert d.stop() == 0
+
+
+# ---- the HDF5 loader ------------------------------------------------------------------------------------
+
+def test_loader_reads_foreign_file(tmp_path):
+    """A file of the layout written by another program (h5py here, as afmformats' exporter writes: no
+    `time`, no `tip position`, no vafm provenance) loads, and `vafm info` (the C reader and checker) agrees
+    it is of the layout; a file breaking the layout is refused naming the rule."""
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "foreign.h5"
+    n = 50
+    rng = np.random.default_rng(5)
+    force, height = rng.normal(size=n) * 1e-9, np.linspace(1e-7, 0, n)
+    seg = np.r_[np.zeros(n // 2, np.uint8), np.ones(n - n // 2, np.uint8)]
+    with h5py.File(path, "w") as f:
+        f.attrs["software"] = "afmformats"
+        f.attrs["software version"] = "0.18.0"
+        for g in ("0", "1"):
+            grp = f.create_group(g)
+            for name, data, unit in (("force", force, "N"), ("height (measured)", height, "m"),
+                                     ("height (piezo)", height, "m"), ("segment", seg, "")):
+                grp.create_dataset(name, data=data).attrs["unit"] = unit
+            grp.attrs["imaging mode"] = "force-distance"
+            grp.attrs["spring constant"] = 0.05
+            grp.attrs["point count"] = n
+    lf = load_h5(str(path))
+    assert not lf.is_vafm and lf.software == "afmformats" and lf.truth is None and lf.scene is None
+    assert len(lf) == 2 and [c.group for c in lf] == [0, 1]
+    c = lf[1]
+    assert np.array_equal(c.force, force) and np.array_equal(c.height, height) and np.array_equal(c.segment, seg)
+    assert c.time is None and "tip position" not in c and c.truth is None
+    assert c.meta["spring constant"] == 0.05 and c.units["force"] == "N" and c.approach.sum() == n // 2
+    if VAFM_CLI:
+        p = subprocess.run([VAFM_CLI, "info", str(path)], capture_output=True, text=True, timeout=60)
+        assert p.returncode == 0 and "2 curve(s)" in p.stdout, p
+    with h5py.File(path, "a") as f:
+        f.create_group("x")
+    with pytest.raises(ValueError, match=r"\[L4\]"):
+        load_h5(str(path))
+
+
+# ---- the examples (each writes a PNG without a display) ---------------------------------------------------
+
+def run_example(name, *args, timeout=180):
+    p = subprocess.run([sys.executable, os.path.join(EXAMPLES, name), *args], capture_output=True, text=True,
+                       timeout=timeout, env=dict(os.environ, MPLBACKEND="Agg", DISPLAY=""))
+    assert p.returncode == 0, p
+    return p
+
+
+def assert_png(path):
+    data = open(path, "rb").read()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10000, path  # a real figure, not an empty canvas
+
+
+def test_example_force_curve(fig4, tmp_path):
+    p = run_example("force_curve.py", "--rep", fig4.rep, "--pub", fig4.pub, "--out-dir", str(tmp_path),
+                    "--index", "2")
+    png, h5 = tmp_path / "force_curve.png", tmp_path / "force_curve.h5"
+    assert f"PNG: {png}" in p.stdout and f"HDF5: {h5}" in p.stdout, p.stdout
+    assert "equal to the streamed samples bit for bit" in p.stdout, p.stdout
+    assert_png(png)
+    f = load_h5(str(h5))
+    assert len(f) == 1 and f[0].meta["curve id"].startswith("run 1 index 2")
+    ref = cli_samples(2)
+    assert np.array_equal(f[0].force, ref[:, 3])  # the daemon's log equals `vafm samples` bit for bit
+    # the printed observables are the file's ground truth
+    line = next(ln for ln in p.stdout.splitlines() if ln.strip().startswith("pulloff_spring_N"))
+    assert float(line.split()[1]) == pytest.approx(f[0].truth["pulloff_spring_N"] * 1e9, rel=1e-5)
+
+
+def test_example_pulloff_hist_spawn(tmp_path):
+    """--spawn starts and stops its own daemon; the skew-normal fit is compared with scipy's own fit of the
+    same numbers (the example's bounded fit must agree where the shape is not at its bound)."""
+    png, js = tmp_path / "hist.png", tmp_path / "hist.json"
+    n = "8" if LONG else "5"
+    p = run_example("pulloff_hist.py", "--spawn", VAFMD, "--spawn-arg=--free-run", "--preset", "paper-fig4",
+                    "-n", n, "--bootstrap", "10", "--png", str(png), "--json", str(js))
+    assert_png(png)
+    (res,) = json.loads(js.read_text())
+    assert res["n"] == int(n) and 0.5 < res["mean"] < 1.0  # thermal pull-off below F_JKR (paper-fig4: ~0.91)
+    assert res["scale"] > 0 and res["loc_err"] > 0 and "skew-normal (bootstrap B = 10)" in p.stdout, p.stdout
+
+
+def test_example_pulloff_hist_campaign_equals_curves(fig4, tmp_path):
+    """The daemon's `campaign` and the fallback sequence of `curve` commands with explicit indices give the
+    same curves (the campaign's numbering: point p, curve j has index p·n + j), so the same fits."""
+    res = []
+    for extra in ((), ("--no-campaign",)):
+        js = tmp_path / f"h{len(res)}.json"
+        p = run_example("pulloff_hist.py", "--rep", fig4.rep, "--pub", fig4.pub, "-n", "3", "--T", "1e6,3e6",
+                        "--errors", "fisher", "--png", str(tmp_path / "h.png"), "--json", str(js), *extra)
+        assert ("campaign 1: 6 curves" in p.stdout) == (not extra), p.stdout
+        res.append(json.loads(js.read_text()))
+    assert [r["T_K"] for r in res[0]] == [1e6, 3e6]
+    for a, b in zip(*res):
+        assert (a["n"], a["mean"], a["sd"], a["loc"]) == (b["n"], b["mean"], b["sd"], b["loc"])
+
+
+def test_ctl_and_listen_campaign(fig4, tmp_path):
+    if not VAFM_CLI:
+        pytest.skip("VAFM_CLI not set")
+    out = tmp_path / "camp.h5"
+    lp = subprocess.Popen([VAFM_CLI, "listen", "--endpoint", fig4.rep, "--pub", fig4.pub, "--runs", "4", "--out",
+                           str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert "subscribed" in lp.stderr.readline()
+    p = fig4.ctl("campaign", "n=2", "k_N_per_m=[1.6,3.2]", "--wait")
+    assert p.returncode == 0 and '"campaign_id": 1' in p.stdout and '"curves_done": 4' in p.stdout, p
+    _, err = lp.communicate(timeout=60)
+    assert lp.returncode == 0, err
+    f = load_h5(str(out))
+    assert [c.meta["curve id"] for c in f] == [f"run {r} index {r - 1}" for r in (1, 2, 3, 4)]
+    assert [c.meta["spring constant"] for c in f] == [1.6, 1.6, 3.2, 3.2]
+    p = subprocess.run([VAFM_CLI, "info", str(out)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0 and "conformance  ok" in p.stdout, p
+    # the CLI's campaign file of the same grid: the same curves bit for bit, the same ground truth
+    ref = tmp_path / "ref.h5"
+    subprocess.run([VAFM_CLI, "campaign", "-n", "2", "--k", "1.6,3.2", "--preset", "paper-fig4", "--out", str(ref),
+                    "--threads", "1", "--quiet"], check=True, capture_output=True, timeout=60)
+    g = load_h5(str(ref))
+    assert g.is_vafm and g.grid["k_N_per_m"] == [1.6, 3.2] and len(g) == 4
+    for a, b in zip(f, g):
+        for name in ("force", "height (piezo)", "tip position", "segment"):
+            assert np.array_equal(a[name], b[name]), (a.group, name)
+        for key in ("pulloff_sampled_N", "pulloff_spring_N", "detach_force_N", "detach_height_m", "k_N_per_m", "point"):
+            assert a.truth[key] == b.truth[key], (a.group, key)
+
+
+def test_example_thermal_tune(fig4, tmp_path):
+    """The tune recovers the configured spring constant within 5% (the issue's requirement) and the
+    resonance within 5%. Statistical expectation (paper-fig4: η = 4e5/s, f0 = 201 kHz, Q = 3.2): the mean
+    square of T seconds of the oscillator has a relative standard error ≈ sqrt(2/(ηT)) = 0.5% at T = 0.2 s
+    (0.7% at 0.1 s), so 5% is ≥ 7σ; the example's fit error is printed and checked to be of that order."""
+    png, js = tmp_path / "tune.png", tmp_path / "tune.json"
+    dur = "0.2" if LONG else "0.1"
+    p = run_example("thermal_tune.py", "--rep", fig4.rep, "--pub", fig4.pub, "--duration", dur,
+                    "--png", str(png), "--json", str(js))
+    assert_png(png)
+    r = json.loads(js.read_text())
+    assert r["k_configured"] == 1.6
+    assert abs(r["k_N_per_m"] / r["k_configured"] - 1) < 0.05, p.stdout
+    assert abs(r["f0_Hz"] / r["f0_configured"] - 1) < 0.05, p.stdout
+    assert 0.2 * r["expected_rel_sd"] < r["k_err"] / r["k_configured"] < 5 * r["expected_rel_sd"], p.stdout
+    assert fig4.client.get("sample_rate_Hz")["sample_rate_Hz"] == pytest.approx(2e5)  # restored

@@ -28,8 +28,21 @@ TIMEOUT_MS = 20000
 pytestmark = pytest.mark.skipif(not VAFMD, reason="set VAFMD to the vafmd executable")
 
 
+_STARTED = []  # every daemon process a test started: reaped after the test, also when it failed
+
+
+@pytest.fixture(autouse=True)
+def _reap_daemons():
+    yield
+    while _STARTED:
+        p = _STARTED.pop()
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
 class Daemon:
-    def __init__(self, *args, tcp=False, curve=None):
+    def __init__(self, *args, tcp=False, curve=None, env=None):
         self.curve = curve  # (server public key, client public key, client secret key), Z85 bytes
         self.dir = tempfile.mkdtemp(prefix="vafmd-")
         if tcp:
@@ -37,7 +50,9 @@ class Daemon:
         else:
             self.rep, self.pub = f"ipc://{self.dir}/rep", f"ipc://{self.dir}/pub"
         self.proc = subprocess.Popen([VAFMD, "--rep", self.rep, "--pub", self.pub, *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     env={**os.environ, **env} if env else None)
+        _STARTED.append(self.proc)
         self.ctx = zmq.Context()
         self.req = None
         self._connect()
@@ -170,7 +185,7 @@ def test_hello(fig4):
     assert r["status"] == "ok" and r["id"] == "h1"
     assert r["protocol_version"] == 1
     assert r["daemon"] == "vafmd" and r["daemon_version"]
-    assert {"curve", "tune", "status", "get", "set"} <= set(r["capabilities"])
+    assert {"curve", "tune", "campaign", "status", "get", "set", "log"} <= set(r["capabilities"])
     assert [c["name"] for c in r["channels"]] == CHANNELS
 
 
@@ -217,7 +232,16 @@ def test_bad_inputs_get_errors_and_daemon_survives(fig4):
     error_ok(fig4.cmd({"cmd": "tune", "duration_s": -1}), "out_of_range", "duration_s")
     error_ok(fig4.send_raw(b'{"cmd":"hello","pad":"' + b"x" * 100000 + b'"}'), "too_large")
     error_ok(fig4.cmd({"cmd": "abort"}), "state")
-    error_ok(fig4.cmd({"cmd": "campaign"}), "not_implemented")
+    error_ok(fig4.cmd({"cmd": "campaign"}), "missing_field", "n")
+    error_ok(fig4.cmd({"cmd": "campaign", "n": 0}), "out_of_range", "n")
+    error_ok(fig4.cmd({"cmd": "campaign", "n": 1, "T_K": 300}), "wrong_type", "T_K")
+    error_ok(fig4.cmd({"cmd": "campaign", "n": 1, "k_N_per_m": []}), "out_of_range", "k_N_per_m")
+    error_ok(fig4.cmd({"cmd": "campaign", "n": 1, "v_m_per_s": [1e-6, -1.0]}), "out_of_range", "v_m_per_s")
+    error_ok(fig4.cmd({"cmd": "campaign", "n": 2, "first_index": 2}), "out_of_range", "first_index")
+    error_ok(fig4.cmd({"cmd": "campaign", "n": 2, "index": 2}), "unknown_field", "index")
+    error_ok(fig4.cmd({"cmd": "set", "values": {"adc_bits": 2}}), "out_of_range", "adc_bits")
+    error_ok(fig4.cmd({"cmd": "set", "values": {"adc_bits": 8.5}}), "wrong_type", "adc_bits")
+    error_ok(fig4.cmd({"cmd": "set", "values": {"noise_V_rms": -1}}), "out_of_range", "noise_V_rms")
     error_ok(fig4.cmd({"cmd": "log", "path": 5}), "wrong_type", "path")
     r = fig4.cmd({"cmd": "hello", "id": 7})
     assert r["status"] == "ok" and r["id"] == 7
@@ -599,3 +623,315 @@ def test_curve_config_errors(tmp_path):
     for cfg in bad:
         p = subprocess.run([VAFMD, "--config", cfg], capture_output=True, text=True, timeout=10)
         assert p.returncode == 2 and "curve_" in p.stderr, p.stderr
+
+
+# ---- campaigns -----------------------------------------------------------------------------------------
+
+def collect_campaign(s, campaign_id, timeout_ms=TIMEOUT_MS):
+    """Every run of a campaign up to campaign.end: ([(start, blocks, events, end)], campaign.end)."""
+    runs, cur = [], {}
+    while True:
+        if not s.poll(timeout_ms):
+            raise AssertionError("stream went silent")
+        parts = s.recv_multipart()
+        topic = parts[0]
+        if topic == b"data":
+            h = HEADER.unpack(parts[1])
+            if h[4] in cur:
+                cur[h[4]][1].append((h, parts[2:]))
+            continue
+        j = json.loads(parts[1])
+        if topic == b"campaign.end":
+            if j["campaign_id"] == campaign_id:
+                return runs, j
+        elif topic == b"run.start" and (j.get("campaign") or {}).get("campaign_id") == campaign_id:
+            cur.setdefault(j["run_id"], [j, [], [], None])
+        elif topic == b"event" and j["run_id"] in cur:
+            cur[j["run_id"]][2].append(j)
+        elif topic == b"run.end" and j["run_id"] in cur:
+            run = cur.pop(j["run_id"])
+            run[3] = j
+            runs.append(tuple(run))
+
+
+def stream_channel(blocks, name):
+    k = CHANNELS.index(name)
+    return np.concatenate([np.frombuffer(c[k], "<f8") for _, c in blocks])
+
+
+def test_campaign_equals_cli_campaign_and_is_logged(fig4, tmp_path):
+    """A 2 (T) x 2 (k) grid with 2 curves a point (T slowest): each streamed curve carries the index
+    `vafm campaign` gives it, and its force, height and tip samples equal that curve of the CLI's file bit
+    for bit; with logging on, the daemon's file holds the same curves in the same order."""
+    h5py = pytest.importorskip("h5py")
+    if not VAFM_CLI:
+        pytest.skip("VAFM_CLI not set")
+    grid = {"T_K": [300.0, 600.0], "k_N_per_m": [1.6, 3.2]}
+    ref = tmp_path / "cli.h5"
+    subprocess.run([VAFM_CLI, "campaign", "-n", "2", "--out", str(ref), "--preset", "paper-fig4", "--T", "300,600",
+                    "--k", "1.6,3.2", "--threads", "1", "--quiet"], check=True, capture_output=True, timeout=120)
+    log = tmp_path / "daemon.h5"
+    assert fig4.cmd({"cmd": "log", "path": str(log)})["status"] == "ok"
+    s = fig4.sub()
+    settle(fig4, s)
+    r = fig4.cmd({"cmd": "campaign", "n": 2, **grid, "client_run_id": "camp-1"})
+    assert r["status"] == "ok" and r["curves"] == 8 and r["duplicate"] is False, r
+    runs, cend = collect_campaign(s, r["campaign_id"])
+    assert cend == {"campaign_id": r["campaign_id"], "client_run_id": "camp-1", "status": "ok", "error": None,
+                    "curves_done": 8, "curves": 8, "first_index": 0}
+    assert [st["run_id"] for st, _, _, _ in runs] == list(range(r["run_id"], r["run_id"] + 8))
+    st = fig4.cmd({"cmd": "status"})
+    assert st["state"] == "idle" and st["campaign"]["curves_done"] == 8 and st["campaign"]["running"] is False
+    # a retried start with the same client_run_id is the same campaign, nothing new runs
+    dup = fig4.cmd({"cmd": "campaign", "n": 2, **grid, "client_run_id": "camp-1"})
+    assert dup["duplicate"] is True and dup["campaign_id"] == r["campaign_id"] and dup["run_id"] == r["run_id"]
+    error_ok(fig4.cmd({"cmd": "curve", "client_run_id": "camp-1"}), "state", "client_run_id")  # another kind
+    assert fig4.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 8
+    with h5py.File(ref, "r") as fr, h5py.File(log, "r") as fl:
+        assert sorted(fr.keys(), key=int) == [str(g) for g in range(8)]
+        for g, (start, blocks, _, end) in enumerate(runs):
+            c, point = start["campaign"], g // 2  # global index g = point * n + i
+            assert (c["curve"], c["curves"], c["point"]) == (g, 8, point)
+            assert c["T_K"] == grid["T_K"][point // 2] and c["k_N_per_m"] == grid["k_N_per_m"][point % 2]
+            assert start["index"] == g and start["scene"]["k_N_per_m"] == c["k_N_per_m"]
+            assert start["scene"]["T_K"] == c["T_K"] and end["status"] == "ok" and end["result"]["index"] == g
+            assert fr[str(g)].attrs["curve id"] == str(g)  # the CLI's curve id is its index
+            for chan, ds in (("force_N", "force"), ("height_m", "height (piezo)"), ("tip_m", "tip position")):
+                got = stream_channel(blocks, chan).view(np.uint64)
+                assert np.array_equal(fr[str(g)][ds][:].view(np.uint64), got), (g, chan)
+                assert np.array_equal(fl[str(g)][ds][:].view(np.uint64), got), (g, chan)
+            assert fl[str(g)].attrs["spring constant"] == c["k_N_per_m"]
+    vafm_info_ok(log)
+
+
+def test_campaign_abort_first_index_and_progress():
+    d = Daemon("--preset", "paper-fig4", "--speed", "0.5")  # ~0.1 s curves paced to ~0.2 s each
+    s = d.sub()
+    settle(d, s)
+    r = d.cmd({"cmd": "campaign", "n": 50, "first_index": 10})
+    assert r["status"] == "ok" and r["curves"] == 50 and r["first_index"] == 10, r
+    error_ok(d.cmd({"cmd": "curve"}), "state", "cmd")  # one job at a time
+    # the first curve is global index 10, run id r["run_id"]; progress shows in status
+    start, _, _, end = collect_run(s, r["run_id"])
+    assert start["index"] == 10 and start["campaign"]["curve"] == 10 and end["status"] == "ok"
+    while True:  # the campaign goes on by itself: the next curve's run.start
+        parts = s.recv_multipart() if s.poll(TIMEOUT_MS) else None
+        assert parts is not None, "no next curve"
+        if parts[0] == b"run.start" and json.loads(parts[1])["run_id"] == r["run_id"] + 1:
+            break
+    st = d.cmd({"cmd": "status"})
+    assert st["state"] != "idle" and st["campaign"]["running"] is True and st["campaign"]["curves_done"] >= 1
+    assert st["campaign"]["curve"] >= 11 and st["runs_started"] >= 2
+    assert d.cmd({"cmd": "abort"})["status"] == "ok"
+    while True:  # the aborted curve's run.end, then campaign.end
+        parts = s.recv_multipart() if s.poll(TIMEOUT_MS) else None
+        assert parts is not None, "no campaign.end"
+        if parts[0] == b"campaign.end":
+            cend = json.loads(parts[1])
+            break
+        if parts[0] == b"run.end":
+            last_end = json.loads(parts[1])
+    assert cend["status"] == "aborted" and last_end["status"] == "aborted"
+    assert 1 <= cend["curves_done"] < 40 and cend["first_index"] == 10
+    st = d.cmd({"cmd": "status"})
+    assert st["state"] == "idle" and st["campaign"]["curves_done"] == cend["curves_done"]
+    assert st["runs_done"] == cend["curves_done"] + 1  # the finished curves and the aborted one
+    assert d.cmd({"cmd": "tune", "duration_s": 0.01})["status"] == "ok"  # idle again: a new run is accepted
+    assert d.stop() == 0
+
+
+def test_next_run_accepted_on_run_end_and_last_flag_on_block_boundary(fig4):
+    """A client that receives run.end may start the next run at once (no polling): the daemon is idle
+    before run.end is published. And a run whose end falls exactly on a block boundary still flags its
+    last block LAST: tunes of exactly 10 blocks (block_s 1 ms, duration 10 ms)."""
+    assert fig4.cmd({"cmd": "set", "values": {"block_s": 0.001}})["status"] == "ok"
+    s = fig4.sub(topics=(b"data", b"run.", b"campaign.", b"heartbeat"))
+    settle(fig4, s)
+    r = fig4.cmd({"cmd": "tune", "duration_s": 0.01})
+    for i in range(8):
+        start, blocks, _, end = collect_run(s, r["run_id"])
+        assert end["status"] == "ok"
+        bn = start["block_samples"]
+        assert end["samples"] == 10 * bn, (end["samples"], bn)  # the precondition: a block boundary
+        flags = [h[12] for h, _ in blocks]
+        assert len(blocks) == 10 and [f & 4 for f in flags] == [0] * 9 + [4]
+        r = fig4.cmd({"cmd": "tune", "duration_s": 0.01})  # right on run.end: must be accepted
+        assert r["status"] == "ok", (i, r)
+    collect_run(s, r["run_id"])
+    # the same right after a campaign's end (its last run.end, then campaign.end)
+    r = fig4.cmd({"cmd": "campaign", "n": 1})
+    while True:
+        parts = s.recv_multipart()
+        if parts[0] == b"run.end":
+            assert fig4.cmd({"cmd": "tune", "duration_s": 0.01})["status"] == "ok"
+            break
+    fig4.wait_idle()
+
+
+# ---- detector signals (noise floor, ADC, baseline offset) ----------------------------------------------
+
+def run_once(d, s, cmd):
+    r = d.cmd(cmd)
+    assert r["status"] == "ok", r
+    out = collect_run(s, r["run_id"])
+    d.wait_idle()
+    return out
+
+
+def detector(d, **v):
+    vals = {"noise_V_rms": 0.0, "adc_bits": 0, "adc_range_V": 20.0, "baseline_offset_V": 0.0, **v}
+    assert d.cmd({"cmd": "set", "values": vals})["status"] == "ok"
+
+
+def test_detector_noise_floor(fig4):
+    """White Gaussian noise of sigma = 10 mV on vDeflection, from its own random stream: a tune of
+    N = 0.05 s * fs = 10 000 samples (paper-fig4: 200 kHz); noise = (detector on) - (detector off) of the
+    same (seed, index).
+    Tolerances are 4 standard errors: mean 4 sigma/sqrt(N), rms 4 sigma/sqrt(2N), lag-1 autocorrelation
+    4/sqrt(N). Height and tip (and the physics) do not change; deflection and force follow the volts."""
+    s = fig4.sub()
+    settle(fig4, s)
+    tune = {"cmd": "tune", "duration_s": 0.05, "index": 7}
+    _, off_blocks, _, _ = run_once(fig4, s, tune)
+    _, other_off, _, _ = run_once(fig4, s, {**tune, "index": 8})
+    sigma = 0.01
+    detector(fig4, noise_V_rms=sigma)
+    start, on_blocks, _, _ = run_once(fig4, s, tune)
+    assert start["detector"]["on"] is True and start["detector"]["noise_V_rms"] == sigma
+    _, again, _, _ = run_once(fig4, s, tune)
+    _, other, _, _ = run_once(fig4, s, {**tune, "index": 8})
+    sens, k = start["sensitivity_m_per_V"], start["scene"]["k_N_per_m"]
+    for name in ("height_m", "tip_m"):
+        assert np.array_equal(stream_channel(on_blocks, name), stream_channel(off_blocks, name)), name
+    v_on, v_off = stream_channel(on_blocks, "vDeflection_V"), stream_channel(off_blocks, "vDeflection_V")
+    noise = v_on - v_off
+    n = len(noise)
+    assert n >= 5000
+    assert abs(noise.mean()) < 4 * sigma / np.sqrt(n)
+    assert abs(noise.std() / sigma - 1) < 4 / np.sqrt(2 * n)
+    rho = np.corrcoef(noise[:-1], noise[1:])[0, 1]
+    assert abs(rho) < 4 / np.sqrt(n)
+    d_on = stream_channel(on_blocks, "deflection_m")
+    assert np.array_equal(d_on, v_on * sens) and np.array_equal(stream_channel(on_blocks, "force_N"), k * d_on)
+    # reproducible from (seed, index); another index draws other noise
+    assert np.array_equal(stream_channel(again, "vDeflection_V"), v_on)
+    noise8 = stream_channel(other, "vDeflection_V") - stream_channel(other_off, "vDeflection_V")
+    assert abs(noise8.std() / sigma - 1) < 4 / np.sqrt(2 * n)
+    assert abs(np.corrcoef(noise8, noise)[0, 1]) < 4 / np.sqrt(n)  # independent streams
+    # off again: the simulation's samples unchanged, bit for bit
+    detector(fig4)
+    _, off2, _, _ = run_once(fig4, s, tune)
+    for name in CHANNELS:
+        assert np.array_equal(stream_channel(off2, name), stream_channel(off_blocks, name)), name
+
+
+def test_detector_adc_offset_clipping_and_log(fig4, tmp_path):
+    """An 8-bit ADC over a range half the curve's vDeflection span plus a baseline offset: every sample is
+    round(v / q) * q with q = range / 2^8, saturated at the codes -128 and 127; a block is flagged CLIPPED
+    exactly when one of its samples saturated (computed here independently from the detector-off
+    volts). The logged force equals the streamed (measured) force bit for bit."""
+    h5py = pytest.importorskip("h5py")
+    s = fig4.sub()
+    settle(fig4, s)
+    curve = {"cmd": "curve", "index": 2}
+    _, off_blocks, _, _ = run_once(fig4, s, curve)
+    v0 = stream_channel(off_blocks, "vDeflection_V")
+    span = float(v0.max() - v0.min())
+    bits, rng, off = 8, span / 2, 0.1 * span
+    detector(fig4, adc_bits=bits, adc_range_V=rng, baseline_offset_V=off)
+    path = tmp_path / "adc.h5"
+    assert fig4.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    start, blocks, _, end = run_once(fig4, s, curve)
+    assert fig4.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 1
+    q = rng / 2 ** bits
+    code = np.floor((v0 + off) / q + 0.5)
+    clip = (code > 2 ** (bits - 1) - 1) | (code < -2 ** (bits - 1))
+    want = np.clip(code, -2 ** (bits - 1), 2 ** (bits - 1) - 1) * q
+    got = stream_channel(blocks, "vDeflection_V")
+    assert np.array_equal(got, want)
+    assert np.all(np.diff(np.unique(got)) >= q * (1 - 1e-12))  # quantisation step = range / 2^bits
+    flags = np.array([bool(h[12] & 16) for h, _ in blocks])
+    per_block = np.array([clip[h[6]:h[6] + h[7]].any() for h, _ in blocks])
+    assert np.array_equal(flags, per_block) and 0 < flags.sum() < len(flags)
+    force = stream_channel(blocks, "force_N")
+    assert np.array_equal(force, start["scene"]["k_N_per_m"] * (got * start["sensitivity_m_per_V"]))
+    assert np.array_equal(stream_channel(blocks, "height_m"), stream_channel(off_blocks, "height_m"))
+    with h5py.File(path, "r") as f:
+        assert np.array_equal(f["0"]["force"][:].view(np.uint64), force.view(np.uint64))
+        assert "tip position" not in f["0"]  # = height + force/k in the layout: not the true tip any more
+    vafm_info_ok(path)
+
+
+# ---- logging under stress: a full log ring, kill -9 ----------------------------------------------------
+
+def wait_log_curves(d, n, timeout=30):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        if d.cmd({"cmd": "status"})["log"]["curves"] >= n:
+            return
+        time.sleep(0.01)
+    raise AssertionError("the writer did not write the curve")
+
+
+def test_log_ring_overflow_drops_only_that_curve(tmp_path):
+    """Test hooks: a log ring of 8 items ($VAFMD_TEST_LOG_RING) and a writer that takes nothing while a
+    file exists ($VAFMD_TEST_LOG_STALL). A curve of >= 8 blocks run against the stalled writer fills the
+    ring with its begin and 7 blocks; its 8th block overflows (1) and marks the curve broken (no more of
+    its blocks are queued), its end overflows too (2). That curve is dropped; the curves before and after
+    it are written and equal their streams."""
+    h5py = pytest.importorskip("h5py")
+    stall = tmp_path / "stall"
+    d = Daemon("--preset", "paper-fig4", "--free-run",
+               env={"VAFMD_TEST_LOG_RING": "8", "VAFMD_TEST_LOG_STALL": str(stall)})
+    path = tmp_path / "ovf.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    runs = [run_once(d, s, {"cmd": "curve", "index": 0})]
+    wait_log_curves(d, 1)
+    stall.touch()
+    time.sleep(0.2)  # the writer has seen the file (it looks every millisecond)
+    lost = run_once(d, s, {"cmd": "curve", "index": 1})
+    assert lost[3]["blocks"] >= 8 and lost[3]["status"] == "ok"  # the stream itself lost nothing
+    st = d.cmd({"cmd": "status"})["log"]
+    assert st["overflows"] == 2 and st["curves"] == 1, st
+    assert st["queued"] == 8  # the ring is full: begin + 7 blocks
+    stall.unlink()
+    deadline = time.time() + 30
+    while d.cmd({"cmd": "status"})["log"]["queued"] and time.time() < deadline:  # the writer drains
+        time.sleep(0.01)
+    runs.append(run_once(d, s, {"cmd": "curve", "index": 2}))
+    log = d.cmd({"cmd": "log", "stop": True})["log"]
+    assert (log["curves"], log["overflows"], log["curves_dropped"], log["error"]) == (2, 2, 1, None), log
+    with h5py.File(path, "r") as f:
+        assert sorted(f.keys()) == ["0", "1"]
+        for i, (start, blocks, _, _) in enumerate(runs):
+            assert np.array_equal(f[str(i)]["force"][:].view(np.uint64),
+                                  stream_channel(blocks, "force_N").view(np.uint64))
+            assert f[str(i)].attrs["curve id"] == f"run {start['run_id']} index {start['index']}"
+    vafm_info_ok(path)
+    assert d.stop() == 0
+
+
+def test_log_kill9_loses_at_most_the_curve_in_progress(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    d = Daemon("--preset", "paper-fig4", "--free-run")
+    path = tmp_path / "k9.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    runs = [run_once(d, s, {"cmd": "curve", "index": i}) for i in (0, 1)]
+    wait_log_curves(d, 2)  # appended and flushed
+    assert d.cmd({"cmd": "set", "values": {"free_run": False, "speed": 0.05}})["status"] == "ok"
+    d.cmd({"cmd": "curve", "index": 2})
+    time.sleep(0.3)
+    assert d.cmd({"cmd": "status"})["state"] == "running"
+    d.proc.kill()  # SIGKILL: no clean-up at all
+    d.proc.wait(timeout=10)
+    d.ctx.destroy(0)
+    with h5py.File(path, "r") as f:
+        assert sorted(f.keys()) == ["0", "1"]
+        for i, (_, blocks, _, end) in enumerate(runs):
+            assert np.array_equal(f[str(i)]["force"][:].view(np.uint64),
+                                  stream_channel(blocks, "force_N").view(np.uint64))
+    vafm_info_ok(path)

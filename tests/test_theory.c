@@ -388,6 +388,120 @@ static void test_dhs(void)
     ENSURE(vafm_theory_dhs_mean_y(&q, k, kT / 10.0, v, zeta) < y);
 }
 
+/* Exact 1D MFPT rate against Kramers' high-barrier limit, r_K = √(V″_w|V″_b|)/(2πζ)·e^{−ΔV/kT}, with the
+ * well, the top, their curvatures (k + dF/du from the contact module) and ΔV (the test's own quadrature)
+ * found independently of theory.c. The corrections are a series in kT/ΔV: at a fixed spring position
+ * (γ̃ = 0.229, k̃ = 0.1, y = 1: ΔV ≈ 0.03) the ratio r/r_K − 1 must be ≤ 3·kT/ΔV at ΔV/kT = 10, 20, 40
+ * and shrink by ≥ 1.6× (2× expected) each time kT halves; ζ only scales the rate (1/ζ, to 1e-12); a mass
+ * multiplies it by Kramers' spatial-diffusion factor. */
+static void test_mfpt_kramers(void)
+{
+    const double g = 0.229, k = 0.1, y = 1.0;
+    vafm_quasistatic q;
+    vafm_contact c;
+    ENSURE(vafm_theory_quasistatic(g, k, &q) == VAFM_OK);
+    ENSURE(vafm_contact_init(&c, vafm_contact_jkr, g) == VAFM_OK);
+    t_br b;
+    b.c = sqrt(2.0 * T_PI * g);
+    b.s_m = cbrt(b.c / 4.0);
+    b.u_min = q.u_min;
+    b.k = k;
+    b.du_spr = (q.u_spr_star + y) - q.u_min;
+    double lo = 0.0, hi = 1.0 + b.s_m, du_star = q.u_star - q.u_min;
+    for (int it = 0; it < 3000; ++it) {
+        double mid = 0.5 * (lo + hi);
+        if (!(mid > lo && mid < hi))
+            break;
+        if (t_P(&b, mid) < du_star)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    const double ts = lo;
+    ENSURE(t_g(&b, 0.0) < 0.0 && t_g(&b, ts) > 0.0);
+    double t_top = t_root(&b, 0.0, ts), hi2 = 2.0 * ts + 1.0;
+    while (t_g(&b, hi2) > 0.0)
+        hi2 *= 2.0;
+    double t_well = t_root(&b, ts, hi2);
+    double dV = t_barrier_integral(&b, t_top, t_well);
+    vafm_contact_eval et, ew;
+    ENSURE(vafm_contact_eval_at(&c, q.u_min + t_P(&b, t_top), &et) == VAFM_OK);
+    ENSURE(vafm_contact_eval_at(&c, q.u_min + t_P(&b, t_well), &ew) == VAFM_OK);
+    double Vb = k + et.dFdu, Vw = k + ew.dFdu;
+    ENSURE(Vb < 0.0 && Vw > 0.0);
+    double prev = INFINITY;
+    for (int i = 0; i < 3; ++i) {
+        double beta_dV = 10.0 * pow(2.0, i), kT = dV / beta_dV, r, r2;
+        double rK = sqrt(Vw * -Vb) / (2.0 * T_PI) * exp(-beta_dV);
+        ENSURE(vafm_theory_mfpt_rate(g, k, kT, 1.0, 0.0, y, &r) == VAFM_OK);
+        double dev = fabs(r / rK - 1.0);
+        fprintf(stderr, "     dV/kT = %4.0f: MFPT rate / Kramers = %.6f\n", beta_dV, r / rK);
+        ENSURE_MSG(dev <= 3.0 / beta_dV, "dV/kT %g: |r/rK - 1| = %g", beta_dV, dev);
+        if (i > 0)
+            ENSURE_MSG(dev <= prev / 1.6, "dV/kT %g: %g after %g", beta_dV, dev, prev);
+        prev = dev;
+        ENSURE(vafm_theory_mfpt_rate(g, k, kT, 4.0, 0.0, y, &r2) == VAFM_OK);
+        ENSURE_REL(4.0 * r2, r, 1e-12);
+        /* with inertia (m = 0.01, η = 1, ω_b ≈ 10η): the Kramers factor η/(η/2 + √(η²/4 + ω_b²)) from
+         * the test's own top curvature (its root to adjacent doubles: 1e-6 covers dF/du's sensitivity) */
+        double m = 0.01, wb2 = -Vb / m, kap = 1.0 / (0.5 + sqrt(0.25 + wb2));
+        ENSURE(vafm_theory_mfpt_rate(g, k, kT, m, m, y, &r2) == VAFM_OK); /* ζ = mη = m */
+        ENSURE_REL(r2, kap * r / m, 1e-6);
+        ENSURE(kap < 0.2 && kap > 0.05);
+    }
+}
+
+/* The rate integrated along the pull against DHS where the notes say DHS holds (Λ ≳ 20, ky/F* ≲ 0.06:
+ * γ̃ = 0.229, k̃ = 0.1, k_BT̃ = 0.003, ζ = 1): ⟨y⟩ within 1.5% of DHS at ṽ = 1e-4 and 1e-5 (ln Λ = 6.6, 8.9;
+ * DHS's own error there ~1%), and within 2% of the simulated 0.641 of the notes at ṽ = 1e-4. The
+ * Gumbel width: DHS's barrier at rupture has sd π/√6 kT, i.e. sd_y = (π/√6)·kT/(dΔV/dy) at ⟨y⟩ (to 10%,
+ * the linearisation of ΔV(y) over ±sd). Every pull escapes (survival ≤ 1e-6), slower pulls escape
+ * earlier, mean_F = F_det − k·⟨y⟩, and ζ enters as the rate's 1/ζ plus the support-frame shift ζv/k. */
+static void test_mfpt_pull_dhs(void)
+{
+    const double g = 0.229, k = 0.1, kT = 0.003, v[3] = {1e-5, 1e-4, 1e-3};
+    vafm_quasistatic q;
+    vafm_theory_pull o[3];
+    ENSURE(vafm_theory_quasistatic(g, k, &q) == VAFM_OK);
+    ENSURE(vafm_theory_mfpt_pull(g, k, kT, 1.0, 0.0, 0.0, v, 3, o) == VAFM_OK);
+    for (int i = 0; i < 3; ++i) {
+        double dhs = vafm_theory_dhs_mean_y(&q, k, kT, v[i], 1.0);
+        fprintf(stderr, "     v %g: MFPT <y> = %.5f +- %.5f, DHS %.5f\n", v[i], o[i].mean_y, o[i].sd_y, dhs);
+        if (i < 2) {
+            /* DHS is a frozen-spring theory: compare without the support-frame shift ζv/k (≤ 1e-3) */
+            ENSURE_REL(o[i].mean_y - v[i] / k, dhs, 1.5e-2);
+            double h = 1e-4, slope = (vafm_theory_barrier(&q, k, o[i].mean_y + h) -
+                                      vafm_theory_barrier(&q, k, o[i].mean_y - h)) / (2.0 * h);
+            ENSURE_REL(o[i].sd_y, T_PI / sqrt(6.0) * kT / slope, 0.1);
+        }
+        ENSURE(o[i].p_unescaped <= 1e-6);
+        ENSURE_REL(o[i].mean_F, q.F_det - k * o[i].mean_y, 1e-14);
+        if (i > 0)
+            ENSURE(o[i].mean_y < o[i - 1].mean_y);
+    }
+    ENSURE_REL(o[1].mean_y, 0.641, 2e-2);
+    {
+        /* ζ = 2 at speed v equals ζ = 1 at 2v in the frozen-spring rate (rate ∝ 1/ζ), shifted by ζv/k */
+        vafm_theory_pull a, b;
+        double va = 0.5e-4, vb = 1e-4;
+        ENSURE(vafm_theory_mfpt_pull(g, k, kT, 2.0, 0.0, 0.0, &va, 1, &a) == VAFM_OK);
+        ENSURE(vafm_theory_mfpt_pull(g, k, kT, 1.0, 0.0, 0.0, &vb, 1, &b) == VAFM_OK);
+        ENSURE_REL(a.mean_y - 2.0 * va / k, b.mean_y - vb / k, 1e-4);
+    }
+    /* invalid input */
+    double r;
+    ENSURE(vafm_theory_mfpt_rate(g, k, 0.0, 1.0, 0.0, 0.1, &r) == VAFM_EINVAL);
+    ENSURE(vafm_theory_mfpt_rate(g, k, kT, -1.0, 0.0, 0.1, &r) == VAFM_EINVAL);
+    ENSURE(vafm_theory_mfpt_rate(g, 0.0, kT, 1.0, 0.0, 0.1, &r) == VAFM_EINVAL);
+    ENSURE(vafm_theory_mfpt_rate(g, k, kT, 1.0, 0.0, NAN, &r) == VAFM_EINVAL);
+    ENSURE(vafm_theory_mfpt_rate(g, k, kT, 1.0, -1.0, 0.1, &r) == VAFM_EINVAL);
+    double bad_v = 0.0;
+    ENSURE(vafm_theory_mfpt_pull(g, k, kT, 1.0, 0.0, 0.0, &bad_v, 1, o) == VAFM_EINVAL);
+    ENSURE(vafm_theory_mfpt_pull(g, k, kT, 1.0, 0.0, 0.0, NULL, 1, o) == VAFM_EINVAL);
+    /* a barrier far beyond 650 kT: rate 0, not an error */
+    ENSURE(vafm_theory_mfpt_rate(g, k, 1e-6, 1.0, 0.0, 5.0, &r) == VAFM_OK && r == 0.0);
+}
+
 int main(void)
 {
     RUN_TEST(test_table);
@@ -398,5 +512,7 @@ int main(void)
     RUN_TEST(test_equilibrium);
     RUN_TEST(test_barrier);
     RUN_TEST(test_dhs);
+    RUN_TEST(test_mfpt_kramers);
+    RUN_TEST(test_mfpt_pull_dhs);
     return harness_done();
 }

@@ -438,8 +438,13 @@ int vafm_client_receive(vafm_client *c, vafm_client_msg *msg, int timeout_ms, va
     for (size_t k = 0; k < sizeof kinds / sizeof kinds[0]; k++)
         if (tl == strlen(kinds[k].topic) && !memcmp(zmq_msg_data(&f[0]), kinds[k].topic, tl))
             msg->kind = kinds[k].kind;
-    if (msg->kind == VAFM_MSG_OTHER)
+    if (msg->kind == VAFM_MSG_OTHER) { /* a newer topic (campaign.end...): keep its body text, unparsed */
+        if (nf >= 2 && (msg->json = malloc(zmq_msg_size(&f[1]) + 1)) != NULL) {
+            memcpy(msg->json, zmq_msg_data(&f[1]), zmq_msg_size(&f[1]));
+            msg->json[zmq_msg_size(&f[1])] = '\0';
+        }
         goto done;
+    }
     if (nf < 2) {
         rc = VAFM_EFORMAT;
         s_err(err, rc, msg->topic, "%s message without a body", msg->topic);

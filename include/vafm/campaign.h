@@ -4,6 +4,7 @@
  * Many curves on all cores. A campaign is a grid of points (T × v × k over a base scene) with N curves
  * each. Curve i of point j has the global index j·N + i, which is its random stream: the results do not
  * depend on the thread count. Results reach the caller in index order, from one thread at a time.
+ * vafm_campaign_run_source runs the indices a source hands out instead (MPI ranks: `vafm campaign`).
  */
 #ifndef VAFM_CAMPAIGN_H
 #define VAFM_CAMPAIGN_H
@@ -56,6 +57,21 @@ VAFM_API int vafm_campaign_point_params(const vafm_params *base, const vafm_camp
  *  @return 0, VAFM_EABORT, or another negative VAFM_E* code. */
 VAFM_API int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec *spec,
                                vafm_campaign_fn fn, void *user, vafm_error *err);
+
+/** Supplies the global curve indices a campaign runs, in place of first_curve, first_curve + 1, ...
+ *  (an MPI rank asks rank 0 for its next curve). Called by one worker thread at a time, without the
+ *  campaign's lock held: it may block. @return 1 with *index set (< the campaign's curve count), 0 when
+ *  there are no more, or a negative VAFM_E* code to stop the campaign with that error (an index out of
+ *  range stops it with VAFM_EINVAL). */
+typedef int (*vafm_campaign_source_fn)(void *user, uint64_t *index);
+
+/** vafm_campaign_run over the indices `source` hands out (first_curve is then ignored). The curves
+ *  reach fn in the order the source handed out their indices, never concurrently; each is computed
+ *  exactly as vafm_campaign_run computes it. source NULL: vafm_campaign_run.
+ *  @return 0, VAFM_EABORT, the source's error, or another negative VAFM_E* code. */
+VAFM_API int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *spec,
+                                      vafm_campaign_source_fn source, void *source_user,
+                                      vafm_campaign_fn fn, void *user, vafm_error *err);
 
 #ifdef __cplusplus
 }

@@ -46,7 +46,8 @@ enum vafm_client_msg_kind {
 typedef struct vafm_client_msg {
     int kind;                 /**< enum vafm_client_msg_kind */
     char topic[32];           /**< the topic frame, NUL-terminated (truncated if longer) */
-    char *json;               /**< JSON text of a non-data message (NUL-terminated), else NULL */
+    char *json;               /**< JSON text of a non-data message (NUL-terminated; for VAFM_MSG_OTHER the
+                                   unparsed second frame, e.g. campaign.end), else NULL */
     int64_t run_id;           /**< run id (data, run.start, run.end, event); -1 if none */
     /* data */
     vafm_wire_header header;  /**< decoded header (data only) */

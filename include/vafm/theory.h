@@ -40,6 +40,43 @@ VAFM_API double vafm_theory_barrier(const vafm_quasistatic *q, double k, double 
 VAFM_API double vafm_theory_dhs_mean_y(const vafm_quasistatic *q, double k, double kT, double v,
                                        double zeta);
 
+/** Overdamped mean-first-passage rate out of the contact well (physics notes, "Thermal oracles": the
+ *  exact 1D reference beyond DHS). The spring is frozen at u_spr = u_spr* + y; the body diffuses on the
+ *  contact branch in V(u) = k/2 (u_spr − u)² + U(u) with friction ζ = mη (diffusion kT/ζ), reflecting
+ *  at u → ∞ and absorbed at u_min (contact lost). The start is the well's minimum for y > 0 and the
+ *  inflection u* for y ≤ 0 (no well left: the rate is then the inverse slide time). Computed by
+ *  quadrature of T(x₀) = (ζ/kT)∫_{u_min}^{x₀} du e^{βV(u)} ∫_u^∞ e^{−βV}, refined to ~1e-5 relative.
+ *  With a mass m > 0 (Langevin, η = ζ/m) the rate is multiplied by Kramers' spatial-diffusion factor
+ *  κ = η/(η/2 + √(η²/4 + ω_b²)), ω_b² = |V″|/m at the barrier top (1 for ω_b ≪ η, η/ω_b for ω_b ≫ η;
+ *  1 where there is no interior top: then the top is the branch end u_min, and for small m the rate is
+ *  overestimated). The energy-diffusion regime (very weak friction) is not covered either.
+ *  m = 0: overdamped (Brownian dynamics).
+ *  @param rate receives the rate (1/reduced time; 0 when the barrier exceeds ~650 kT).
+ *  @return 0 or VAFM_EINVAL (γ, k, kT, ζ ≤ 0 or not finite, m < 0, y NaN). */
+VAFM_API int vafm_theory_mfpt_rate(double gamma, double k, double kT, double zeta, double mass, double y,
+                                   double *rate);
+
+/** Escape statistics of a pull at constant speed, from the MFPT rate integrated along the pull (the
+ *  adiabatic approximation: the rate at each spring position as if frozen; the slide from the barrier
+ *  to u_min is taken as instantaneous). The friction acts relative to the spring support (physics
+ *  notes), so a pull at speed v adds a constant force ζv on the body: the escape happens with the spring
+ *  ζv/k closer to the sample than at a frozen spring, and mean_y includes that shift. */
+typedef struct vafm_theory_pull {
+    double v;           /**< pulling speed (reduced, as given) */
+    double mean_y;      /**< mean spring position at escape, y = u_spr − u_spr* (reduced length; > 0: early) */
+    double sd_y;        /**< its standard deviation */
+    double mean_F;      /**< mean spring force at detachment, F_det − k·y (tensile magnitude, reduced) */
+    double sd_F;        /**< its standard deviation (= k·sd_y) */
+    double p_unescaped; /**< survival left where the integration stopped (≈ 0; large: v too fast) */
+} vafm_theory_pull;
+
+/** Integrate the MFPT rate (mass as for vafm_theory_mfpt_rate) along pulls at speeds v[0..n_v) from y_start (> 0; ≤ 0: automatic, where the
+ *  fold barrier is 80 kT) down through the instability until every pull has escaped (survival < 1e-9)
+ *  or y reaches −y_start. One rate table serves every speed. Memory: allocates a table (freed).
+ *  @return 0, VAFM_EINVAL (bad argument or v ≤ 0) or VAFM_ENOMEM. */
+VAFM_API int vafm_theory_mfpt_pull(double gamma, double k, double kT, double zeta, double mass, double y_start,
+                                   const double *v, size_t n_v, vafm_theory_pull *out);
+
 #ifdef __cplusplus
 }
 #endif

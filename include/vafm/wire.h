@@ -28,7 +28,8 @@ enum vafm_wire_flag {
     VAFM_WIRE_FLAG_SEG_CHANGE = 2u,  /**< the segment changes inside this block (see "event" messages) */
     VAFM_WIRE_FLAG_LAST = 4u,        /**< last data block of the run */
     VAFM_WIRE_FLAG_FREE_RUN = 8u,    /**< produced in free-running mode (no pacing) */
-    VAFM_WIRE_FLAG_CLIPPED = 16u,    /**< reserved: an ADC channel clipped (not produced yet) */
+    VAFM_WIRE_FLAG_CLIPPED = 16u,    /**< a vDeflection sample of the block saturated the ADC range (only
+                                          with adc_bits > 0; deflection_m and force_N derive from it) */
 };
 
 /** Decoded data header; field order and sizes equal the wire layout. */

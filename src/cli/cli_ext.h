@@ -18,4 +18,5 @@ typedef struct vafm_cli_ext {
 /* NULL-name-terminated table (cli_ext.c). */
 extern const vafm_cli_ext vafm_cli_ext_commands[];
 const vafm_cli_ext *vafm_cli_ext_find(const char *name);
+int vafm_cli_replay(int argc, char **argv); /* cmd_replay.c */
 #endif

@@ -30,6 +30,7 @@
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "vafm/theory.h"
+#include "cli/campaign_mpi.h"
 #include "cli/cli_ext.h"
 #include "vafm/units.h"
 #include "vafm/version.h"
@@ -76,7 +77,7 @@ static double s_now(void)
 
 enum s_opt {
     O_HELP, O_VERSION, O_QUIET, O_PROGRESS, O_PRESET, O_SCENE, O_INDEX, O_N, O_THREADS, O_FIRST, O_CSV,
-    O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, S_NOPT
+    O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, O_MPI, S_NOPT
 };
 
 typedef struct s_option {
@@ -97,6 +98,7 @@ static const s_option s_options[S_NOPT] = {
     [O_OUT] = { "--out", "-o", 1 },         [O_RESUME] = { "--resume", NULL, 0 },
     [O_OVERWRITE] = { "--overwrite", NULL, 0 }, [O_FLUSH] = { "--flush-interval", NULL, 1 },
     [O_GZIP] = { "--gzip", NULL, 1 },       [O_CURVE] = { "--curve", NULL, 1 },
+    [O_MPI] = { "--mpi", NULL, 0 },
 };
 
 #define M(o) (1u << (o))
@@ -1286,14 +1288,28 @@ static void s_camp_summary(FILE *o, const s_scene *sc, const vafm_campaign_spec 
     free(stats);
 }
 
-static int s_cmd_campaign(const s_args *a)
+/* One campaign, single-process (mpi NULL) or as one MPI rank (campaign_mpi.h): the same checks, the
+ * same per-curve computation and the same writer callback; MPI only changes who computes which curve.
+ * Rank 0 alone touches the file; the other ranks check their scene against rank 0's, then compute. */
+static int s_campaign(const s_args *a, vafm_cli_mpi *mpi)
 {
     s_grid g;
     s_scene sc;
     s_camp_opts co;
+    int root = vafm_cli_mpi_rank(mpi) == 0;
     int rc = s_grid_parse(a, &g);
-    if (rc || (rc = s_curves_check(a, &sc, &g)) != 0 || (rc = s_camp_parse(a, &co)) != 0 ||
-        (rc = s_check_points(&sc.p, &g.spec)) != 0) {
+    if (!rc && !(rc = s_curves_check(a, &sc, &g)) && !(rc = root ? s_camp_parse(a, &co) : 0))
+        rc = s_check_points(&sc.p, &g.spec);
+    if ((rc = vafm_cli_mpi_agree(mpi, rc, &sc.p, &g.spec)) != 0) {
+        s_grid_free(&g);
+        return rc;
+    }
+    if (!root) {
+        vafm_error werr;
+        memset(&werr, 0, sizeof werr);
+        g.spec.keep_samples = 1;
+        if (!(rc = vafm_cli_mpi_agree(mpi, 0, NULL, NULL))) /* rank 0 opened the file */
+            rc = vafm_cli_mpi_run(mpi, &sc.p, &g.spec, NULL, NULL, &werr) ? S_EXIT_RUNTIME : S_EXIT_OK;
         s_grid_free(&g);
         return rc;
     }
@@ -1303,7 +1319,12 @@ static int s_cmd_campaign(const s_args *a)
     snprintf(cp.session_id, sizeof cp.session_id, "seed %" PRIu64, sc.p.seed);
     s_progress_init(&cp.pg, a);
     double t_start = cp.pg.t0;
-    if ((rc = s_camp_open(&cp, &co, &sc, &g.spec)) != 0) {
+    rc = s_camp_open(&cp, &co, &sc, &g.spec);
+    if (mpi && (rc = vafm_cli_mpi_agree(mpi, rc, NULL, NULL)) != 0 && cp.w) {
+        vafm_error ignored;
+        vafm_h5_writer_close(&cp.w, &ignored);
+    }
+    if (rc) {
         s_grid_free(&g);
         return rc;
     }
@@ -1327,7 +1348,9 @@ static int s_cmd_campaign(const s_args *a)
     int started = pthread_create(&flusher, NULL, s_camp_flusher, &cp) == 0;
     vafm_error err;
     memset(&err, 0, sizeof err);
-    int r = started ? vafm_campaign_run(&sc.p, &g.spec, s_camp_curve, &cp, &err) : VAFM_ENOMEM;
+    int r = !started ? VAFM_ENOMEM
+            : mpi    ? vafm_cli_mpi_run(mpi, &sc.p, &g.spec, s_camp_curve, &cp, &err)
+                     : vafm_campaign_run(&sc.p, &g.spec, s_camp_curve, &cp, &err);
     if (started) {
         pthread_mutex_lock(&cp.mu);
         cp.stop = 1;
@@ -1363,10 +1386,22 @@ static int s_cmd_campaign(const s_args *a)
         s_error("%s", cerr.message[0] ? cerr.message : vafm_strerror(cr));
         rc = S_EXIT_RUNTIME;
     }
-    if (!rc)
+    if (!rc) {
         s_camp_summary(stdout, &sc, &g.spec, &co, &cp, first, wall);
+        vafm_cli_mpi_describe(mpi, stdout);
+    }
     s_grid_free(&g);
     return rc;
+}
+
+/* MPI starts only under an MPI launcher or with --mpi: plain `vafm campaign` never touches it. */
+static int s_cmd_campaign(const s_args *a)
+{
+    vafm_cli_mpi *mpi = NULL;
+    int rc = vafm_cli_mpi_begin(a->on[O_MPI], &mpi);
+    if (!rc)
+        rc = s_campaign(a, mpi);
+    return vafm_cli_mpi_end(&mpi, rc);
 }
 
 /* ---- vafm info ------------------------------------------------------------------------------------ */
@@ -1817,10 +1852,10 @@ static const s_command s_commands[] = {
     { "help", s_cmd_help, S_GENERAL, 0, "this text, or one command's (vafm help COMMAND)", NULL, 0 },
     { "campaign", s_cmd_campaign,
       S_GENERAL | M(O_N) | M(O_OUT) | M(O_THREADS) | M(O_T) | M(O_V) | M(O_K) | M(O_RESUME) | M(O_OVERWRITE) |
-          M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET),
+          M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET) | M(O_MPI),
       1, "a grid of N curves per point on all cores into one HDF5 file (afmformats layout), resumable",
       "vafm campaign -n N --out FILE.h5 [SCENE] [--T LIST] [--v LIST] [--k LIST] [--threads T]\n"
-      "              [--resume | --overwrite] [--flush-interval S] [--gzip L] [--progress | --quiet]\n"
+      "              [--resume | --overwrite] [--flush-interval S] [--gzip L] [--progress | --quiet] [--mpi]\n"
       "  -n N                 curves per grid point (required)\n"
       "  -o, --out FILE.h5    the file: one group per curve with its channels, the scene, grid, seed and\n"
       "                       every curve's ground truth (protocol/hdf5.md; read by afmformats, nanite, PyJibe)\n"
@@ -1833,7 +1868,11 @@ static const s_command s_commands[] = {
       "                       a kill -9 loses at most the curves of the last S seconds\n"
       "  --gzip L             compress the channels: shuffle + deflate at level L (1-9; default 0: off)\n"
       "  --progress           report progress on stderr even when it is not a terminal\n"
-      "  -q, --quiet          no progress\n", 0 },
+      "  -q, --quiet          no progress\n"
+      "  --mpi                run on MPI even without an MPI launcher in the environment (under mpirun or\n"
+      "                       srun it is implied): `mpirun -np R vafm campaign ...` splits the curves over R\n"
+      "                       ranks (x --threads each, default: the rank's share of its node's cores); rank 0\n"
+      "                       writes FILE, identical to the single-process file (README: Campaigns on MPI)\n", 0 },
     { "info", s_cmd_info, S_GENERAL | M(O_JSON), 0,
       "summarise an HDF5 force-curve file (vafm's or another program's) and check its conformance",
       "vafm info FILE [--json]\n"

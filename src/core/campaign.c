@@ -1,11 +1,15 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Campaigns on all cores. Workers take global curve indices from a shared counter; each keeps one
- * vafm_sim per grid point it is working on. Finished curves land in a window of slots (index modulo
- * the window) and are handed to the caller strictly in index order by whichever worker completes the
- * next one, with the lock released during the callback. A worker never runs more than `window`
- * indices ahead of delivery, so memory stays bounded. The per-curve random stream is the global index:
- * results are identical for any thread count.
+ * Campaigns on all cores. Workers take tickets 0, 1, 2, ... from a shared counter; ticket t is the
+ * global curve index first_curve + t, or the t-th index an external source handed out (MPI ranks get
+ * their indices from rank 0: vafm_campaign_run_source). Each worker keeps one vafm_sim per grid point
+ * it is working on. Finished curves land in a window of slots (ticket modulo the window) and are handed
+ * to the caller strictly in ticket order by whichever worker completes the next one, with the lock
+ * released during the callback. A worker never runs more than `window` tickets ahead of delivery, so
+ * memory stays bounded. The source is called by one worker at a time with the lock released (it may
+ * block on the network); the ticket is taken before another worker may call it, so tickets follow the
+ * source's order. The per-curve random stream is the global index: results are identical for any
+ * thread count and any source.
  */
 #include <pthread.h>
 #include <stdio.h>
@@ -47,6 +51,7 @@ typedef struct s_buf {
 
 typedef struct s_slot {
     int done, status;
+    uint64_t index;
     size_t point;
     vafm_curve_result res;
     s_buf buf;
@@ -58,10 +63,12 @@ typedef struct s_shared {
     vafm_params *point_params; /* validated scene per point */
     vafm_campaign_fn fn;
     void *user;
-    uint64_t N, total, next, deliver_next;
+    vafm_campaign_source_fn source;
+    void *source_user;
+    uint64_t N, total, first, next, deliver_next; /* next, deliver_next: tickets */
     size_t window;
     s_slot *slots;
-    int delivering, stop, error;
+    int delivering, stop, error, in_source, exhausted;
     pthread_mutex_t mu;
     pthread_cond_t space;
 } s_shared;
@@ -113,11 +120,11 @@ static void s_deliver(s_shared *sh)
     sh->delivering = 1;
     for (;;) {
         s_slot *sl = &sh->slots[sh->deliver_next % sh->window];
-        if (!sl->done || sh->deliver_next >= sh->total)
+        if (!sl->done)
             break;
         vafm_campaign_curve c;
         memset(&c, 0, sizeof c);
-        c.index = sh->deliver_next;
+        c.index = sl->index;
         c.point = sl->point;
         c.params = &sh->point_params[sl->point];
         c.status = sl->status;
@@ -155,11 +162,30 @@ static void *s_worker(void *arg)
     s_buf local;
     memset(&local, 0, sizeof local);
     pthread_mutex_lock(&sh->mu);
-    while (!sh->stop && sh->next < sh->total) {
-        uint64_t idx = sh->next;
-        if (idx >= sh->deliver_next + sh->window) {
+    while (!sh->stop && !sh->exhausted) {
+        uint64_t ticket = sh->next, idx = sh->first + ticket;
+        if (ticket >= sh->deliver_next + sh->window || sh->in_source) {
             pthread_cond_wait(&sh->space, &sh->mu);
             continue;
+        }
+        if (sh->source) {
+            sh->in_source = 1;
+            pthread_mutex_unlock(&sh->mu);
+            int got = sh->source(sh->source_user, &idx);
+            pthread_mutex_lock(&sh->mu);
+            sh->in_source = 0;
+            pthread_cond_broadcast(&sh->space);
+            if (got < 0 && !sh->error)
+                sh->error = got;
+            if (got == 1 && idx >= sh->total && !sh->error)
+                sh->error = VAFM_EINVAL;
+            if (got != 1 || sh->error) {
+                sh->exhausted = 1;
+                break;
+            }
+        } else if (idx >= sh->total) {
+            sh->exhausted = 1;
+            break;
         }
         sh->next++;
         pthread_mutex_unlock(&sh->mu);
@@ -178,13 +204,14 @@ static void *s_worker(void *arg)
             status = vafm_sim_curve(sim, idx, sh->spec->keep_samples ? s_collect : NULL, &local, &res);
 
         pthread_mutex_lock(&sh->mu);
-        s_slot *sl = &sh->slots[idx % sh->window];
+        s_slot *sl = &sh->slots[ticket % sh->window];
         s_buf tmp = sl->buf;
         sl->buf = local;
         local = tmp;
         sl->res = res;
         sl->status = status;
         sl->point = point;
+        sl->index = idx;
         sl->done = 1;
         if (status == VAFM_ENOMEM)
             sh->error = status;
@@ -199,6 +226,13 @@ static void *s_worker(void *arg)
 
 int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec *spec, vafm_campaign_fn fn, void *user,
                       vafm_error *err)
+{
+    return vafm_campaign_run_source(base, spec, NULL, NULL, fn, user, err);
+}
+
+int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *spec,
+                             vafm_campaign_source_fn source, void *source_user, vafm_campaign_fn fn, void *user,
+                             vafm_error *err)
 {
     if (!base || !spec) {
         vafm_err_set(err, VAFM_EINVAL, "", "vafm_campaign_run: no scene or no spec");
@@ -216,14 +250,16 @@ int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec *spec, v
     sh.spec = spec;
     sh.fn = fn;
     sh.user = user;
+    sh.source = source;
+    sh.source_user = source_user;
     sh.N = spec->curves_per_point;
     sh.total = sh.N * (uint64_t)np;
-    if (spec->first_curve > sh.total) {
+    if (!source && spec->first_curve > sh.total) {
         vafm_err_set(err, VAFM_EINVAL, "first_curve", "first curve %llu is beyond the campaign's %llu curves",
                      (unsigned long long)spec->first_curve, (unsigned long long)sh.total);
         return VAFM_EINVAL;
     }
-    sh.next = sh.deliver_next = spec->first_curve;
+    sh.first = source ? 0 : spec->first_curve;
     sh.point_params = calloc(np, sizeof *sh.point_params);
     if (!sh.point_params)
         return VAFM_ENOMEM;

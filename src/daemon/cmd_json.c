@@ -18,6 +18,10 @@ void vafmd_settings_default(vafmd_settings *s)
     s->sensitivity_m_per_V = 50e-9;
     s->block_s = 5e-3;
     s->hwm = 1000;
+    s->noise_V_rms = 0;
+    s->adc_bits = 0;
+    s->adc_range_V = 20;
+    s->baseline_offset_V = 0;
 }
 
 void vafmd_err_set(vafmd_err *e, const char *code, const char *field, const char *fmt, ...)
@@ -49,6 +53,13 @@ static const s_setting s_settings[] = {
       "detector sensitivity (InvOLS): vDeflection_V = deflection_m / sensitivity" },
     { "block_s", S_SET_REAL, "s", 1e-3, 1e-2, 0, "duration of the samples of one data block" },
     { "hwm", S_SET_INT, "messages", 1, 1e7, 1, "stream send high-water mark per subscriber (--hwm; read-only)" },
+    { "noise_V_rms", S_SET_REAL, "V", 0, 10, 0,
+      "detector noise floor on vDeflection, V rms (0: off); white, Gaussian, its own random stream" },
+    { "adc_bits", S_SET_INT, "bits", 0, 24, 0,
+      "ADC resolution of vDeflection, bits: 0 (off) or 4 to 24; step = adc_range_V / 2^adc_bits" },
+    { "adc_range_V", S_SET_REAL, "V", 1e-3, 100, 0,
+      "ADC input range (full span), V: codes cover [-adc_range_V/2, adc_range_V/2); beyond it clips" },
+    { "baseline_offset_V", S_SET_REAL, "V", -100, 100, 0, "baseline offset added to vDeflection, V" },
 };
 #define S_N_SETTINGS (sizeof s_settings / sizeof s_settings[0])
 
@@ -70,6 +81,14 @@ static json_t *s_setting_value(const vafmd_settings *s, const s_setting *f)
         return json_real(s->sensitivity_m_per_V);
     if (!strcmp(f->name, "block_s"))
         return json_real(s->block_s);
+    if (!strcmp(f->name, "noise_V_rms"))
+        return json_real(s->noise_V_rms);
+    if (!strcmp(f->name, "adc_bits"))
+        return json_integer(s->adc_bits);
+    if (!strcmp(f->name, "adc_range_V"))
+        return json_real(s->adc_range_V);
+    if (!strcmp(f->name, "baseline_offset_V"))
+        return json_real(s->baseline_offset_V);
     return json_integer(s->hwm);
 }
 
@@ -91,12 +110,28 @@ static int s_setting_apply(vafmd_settings *s, const s_setting *f, json_t *v, vaf
         vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' must be a number (%s)", f->name, f->unit);
         return -1;
     }
+    if (f->kind == S_SET_INT && !json_is_integer(v)) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' must be an integer (%s)", f->name, f->unit);
+        return -1;
+    }
     double x = json_number_value(v);
     if (!(x >= f->min && x <= f->max)) {
         vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, f->name, "%s = %.17g is outside [%g, %g] %s", f->name, x, f->min,
                       f->max, f->unit);
         return -1;
     }
+    if (!strcmp(f->name, "adc_bits")) {
+        if (x != 0 && x < 4) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, f->name, "adc_bits = %.17g: 0 (off) or 4 to 24 bits", x);
+            return -1;
+        }
+        s->adc_bits = (int)x;
+    } else if (!strcmp(f->name, "noise_V_rms"))
+        s->noise_V_rms = x;
+    else if (!strcmp(f->name, "adc_range_V"))
+        s->adc_range_V = x;
+    else if (!strcmp(f->name, "baseline_offset_V"))
+        s->baseline_offset_V = x;
     if (!strcmp(f->name, "speed"))
         s->speed = x;
     else if (!strcmp(f->name, "sensitivity_m_per_V"))
@@ -180,7 +215,7 @@ static int s_param_apply(vafm_params *p, const vafm_param_info *f, json_t *v, va
 /* ---- decoding ------------------------------------------------------------------------------------ */
 
 static const char *const s_cmd_names[] = { "hello", "get", "set", "presets", "curve", "tune",
-                                           "abort", "status", "shutdown", "campaign", "log" };
+                                           "abort", "status", "shutdown", "campaign", "log", "replay" };
 
 const char *vafmd_cmd_name(int kind)
 {
@@ -198,8 +233,9 @@ static const char *const s_cmd_keys[] = {
     [VAFMD_CMD_ABORT] = " ",
     [VAFMD_CMD_STATUS] = " ",
     [VAFMD_CMD_SHUTDOWN] = " ",
-    [VAFMD_CMD_CAMPAIGN] = NULL, /* not implemented: any arguments */
+    [VAFMD_CMD_CAMPAIGN] = " n T_K v_m_per_s k_N_per_m first_index client_run_id ",
     [VAFMD_CMD_LOG] = " path overwrite resume stop ",
+    [VAFMD_CMD_REPLAY] = " path curves speed loop client_run_id ",
 };
 
 static int s_key_allowed(int kind, const char *key)
@@ -237,6 +273,71 @@ int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
     return rc;
 }
 
+/* replay: path (required), curves, speed, loop (protocol/wire.md, "replay"). */
+static int s_decode_replay(json_t *root, vafmd_cmd *c, vafmd_err *e)
+{
+    json_t *v = json_object_get(root, "path");
+    if (!v) {
+        vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "path", "'replay' needs \"path\": the HDF5 file to replay");
+        return -1;
+    }
+    size_t n = json_is_string(v) ? json_string_length(v) : 0;
+    if (!json_is_string(v)) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "path", "\"path\" must be a file name (string)");
+        return -1;
+    }
+    if (n < 1 || n > VAFMD_LOG_PATH_MAX || strlen(json_string_value(v)) != n) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "path", "\"path\" must have 1 to %d characters (no NUL)",
+                      VAFMD_LOG_PATH_MAX);
+        return -1;
+    }
+    c->replay_path = json_string_value(v);
+    if ((v = json_object_get(root, "curves")) != NULL) {
+        int ok = json_is_string(v) && json_string_length(v) >= 1 && json_string_length(v) <= 4096 &&
+                 strlen(json_string_value(v)) == json_string_length(v);
+        if (json_is_array(v)) {
+            size_t i;
+            json_t *x;
+            ok = 1;
+            json_array_foreach(v, i, x) if (!json_is_integer(x) || json_integer_value(x) < 0) ok = 0;
+        }
+        if (!ok) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "curves", "\"curves\" must be \"all\", a string like \"0,3,5-9\" "
+                          "(1 to 4096 characters) or an array of curve numbers (integers >= 0)");
+            return -1;
+        }
+        c->replay_curves = v;
+    }
+    if ((v = json_object_get(root, "speed")) != NULL) {
+        if (!json_is_number(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "speed", "\"speed\" must be a number");
+            return -1;
+        }
+        const s_setting *f = s_setting_find("speed");
+        double x = json_number_value(v);
+        if (!(x >= f->min && x <= f->max)) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "speed", "speed = %.17g is outside [%g, %g]", x, f->min, f->max);
+            return -1;
+        }
+        c->has_speed = 1;
+        c->speed = x;
+    }
+    if ((v = json_object_get(root, "loop")) != NULL) {
+        if (json_is_string(v) && !strcmp(json_string_value(v), "forever") && json_string_length(v) == 7)
+            c->replay_loop = 0;
+        else if (json_is_integer(v) && json_integer_value(v) >= 1 && json_integer_value(v) <= 1000000)
+            c->replay_loop = (int64_t)json_integer_value(v);
+        else {
+            vafmd_err_set(e, json_is_integer(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "loop",
+                          "\"loop\" must be the number of passes over the selection, 1 to 1000000, or \"forever\" "
+                          "(until abort)");
+            return -1;
+        }
+        c->replay_has_loop = 1;
+    }
+    return 0;
+}
+
 int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
 {
     memset(c, 0, sizeof *c);
@@ -259,7 +360,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
             kind = i;
     if (kind < 0) {
         vafmd_err_set(e, VAFMD_E_UNKNOWN_COMMAND, "cmd", "unknown command '%.64s' (known: hello get set presets "
-                      "curve tune abort status shutdown campaign log)", json_string_value(cmd));
+                      "curve tune abort status shutdown campaign log replay)", json_string_value(cmd));
         return -1;
     }
     const char *key;
@@ -348,6 +449,65 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         c->has_duration = 1;
         c->duration_s = x;
     }
+    if (kind == VAFMD_CMD_CAMPAIGN) {
+        static const char *const lists[3] = { "T_K", "v_m_per_s", "k_N_per_m" };
+        v = json_object_get(root, "n");
+        if (!v) {
+            vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "n", "'campaign' needs \"n\" (curves per grid point)");
+            return -1;
+        }
+        if (!json_is_integer(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "n", "\"n\" must be an integer (curves per grid point)");
+            return -1;
+        }
+        if (json_integer_value(v) < 1 || json_integer_value(v) > 1000000000) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "n", "n = %" JSON_INTEGER_FORMAT " is outside [1, 1e9]",
+                          json_integer_value(v));
+            return -1;
+        }
+        c->camp_n = (uint64_t)json_integer_value(v);
+        uint64_t points = 1;
+        for (int l = 0; l < 3; l++) {
+            if (!(v = json_object_get(root, lists[l])))
+                continue;
+            size_t i, n = json_is_array(v) ? json_array_size(v) : 0;
+            json_t *x;
+            if (!json_is_array(v)) {
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, lists[l], "\"%s\" must be an array of numbers", lists[l]);
+                return -1;
+            }
+            json_array_foreach(v, i, x) if (!json_is_number(x))
+            {
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, lists[l], "\"%s\" must be an array of numbers", lists[l]);
+                return -1;
+            }
+            if (n < 1 || n > VAFMD_CAMPAIGN_LIST_MAX) {
+                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, lists[l], "\"%s\" must have 1 to %d values (omit it for "
+                              "the scene's value)", lists[l], VAFMD_CAMPAIGN_LIST_MAX);
+                return -1;
+            }
+            c->camp_list[l] = v;
+            points *= n;
+        }
+        if (points > VAFMD_CAMPAIGN_POINTS_MAX) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "T_K", "the grid has %" PRIu64 " points, more than %d", points,
+                          VAFMD_CAMPAIGN_POINTS_MAX);
+            return -1;
+        }
+        if ((v = json_object_get(root, "first_index")) != NULL) {
+            if (!json_is_integer(v) || json_integer_value(v) < 0) {
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "first_index", "\"first_index\" must be an integer >= 0");
+                return -1;
+            }
+            c->camp_first = (uint64_t)json_integer_value(v);
+            if (c->camp_first >= points * c->camp_n) {
+                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "first_index", "first_index = %" PRIu64 " is beyond the "
+                              "campaign's %" PRIu64 " curves (0 to %" PRIu64 ")", c->camp_first, points * c->camp_n,
+                              points * c->camp_n - 1);
+                return -1;
+            }
+        }
+    }
     if (kind == VAFMD_CMD_LOG) {
         static const char *const flags[] = { "overwrite", "resume", "stop" };
         int *dst[] = { &c->log_overwrite, &c->log_resume, &c->log_stop };
@@ -386,6 +546,8 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
             return -1;
         }
     }
+    if (kind == VAFMD_CMD_REPLAY && s_decode_replay(root, c, e))
+        return -1;
     c->root = json_incref(root);
     return 0;
 }

@@ -14,6 +14,7 @@
 enum vafmd_cmd_kind {
     VAFMD_CMD_HELLO, VAFMD_CMD_GET, VAFMD_CMD_SET, VAFMD_CMD_PRESETS, VAFMD_CMD_CURVE, VAFMD_CMD_TUNE,
     VAFMD_CMD_ABORT, VAFMD_CMD_STATUS, VAFMD_CMD_SHUTDOWN, VAFMD_CMD_CAMPAIGN, VAFMD_CMD_LOG,
+    VAFMD_CMD_REPLAY,
 };
 
 /* Stable error codes (protocol/wire.md lists them). */
@@ -32,6 +33,7 @@ enum vafmd_cmd_kind {
 #define VAFMD_E_NOT_IMPLEMENTED "not_implemented"
 #define VAFMD_E_INTERNAL "internal"
 #define VAFMD_E_IO "io_error"
+#define VAFMD_E_BAD_FILE "bad_file" /* replay: a damaged or non-conforming file (message names the rule) */
 
 #define VAFMD_LOG_PATH_MAX 4000
 
@@ -58,7 +60,19 @@ typedef struct vafmd_cmd {
     double duration_s;     /* tune: overrides tune_duration_s */
     const char *log_path;  /* log: borrowed file name, or NULL */
     int log_overwrite, log_resume, log_stop; /* log: flags */
+    const char *replay_path; /* replay: borrowed file name */
+    json_t *replay_curves;   /* replay: borrowed selection (string or array of integers), or NULL (all) */
+    int has_speed;
+    double speed;            /* replay: pacing speed factor for this run */
+    int replay_has_loop;
+    int64_t replay_loop;     /* replay: passes over the selection, 0 = until abort */
+    uint64_t camp_n;       /* campaign: curves per grid point (≥ 1) */
+    json_t *camp_list[3];  /* campaign: borrowed T_K, v_m_per_s, k_N_per_m arrays of numbers, or NULL */
+    uint64_t camp_first;   /* campaign: first_index (0 if absent) */
 } vafmd_cmd;
+
+#define VAFMD_CAMPAIGN_LIST_MAX 1000      /* values per campaign list */
+#define VAFMD_CAMPAIGN_POINTS_MAX 100000  /* grid points of a campaign */
 
 /** Decode one request. @return 0 (free c with vafmd_cmd_free) or -1 with e filled (c holds nothing). */
 int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e);

@@ -17,6 +17,7 @@
 #include "vafm/h5.h"
 #include "daemon/cmd_json.h"
 #include "daemon/daemon.h"
+#include "daemon/replay.h"
 #include "vafm/wire.h"
 
 /* Client run ids seen lately: a retried start with the same id gets the same run back. */
@@ -24,8 +25,10 @@
 typedef struct s_hist {
     char client_run_id[VAFMD_CLIENT_RUN_ID_MAX + 1];
     uint64_t run_id;
-    int kind;
+    int kind;              /* enum vafmd_run_kind, or S_KIND_CAMPAIGN */
+    uint64_t campaign_id, curves; /* campaigns */
 } s_hist;
+#define S_KIND_CAMPAIGN 1000
 
 static s_hist s_history[S_HISTORY];
 static unsigned s_history_n;
@@ -52,9 +55,10 @@ static json_t *s_ok(const vafmd_cmd *c)
     return r;
 }
 
+/* A job (curve, tune, campaign) is in progress: the simulation thread has not reported it done. */
 static int s_busy(const vafmd *d)
 {
-    return d->runs_started != atomic_load_explicit(&d->sh.runs_done, memory_order_acquire);
+    return d->jobs_started != atomic_load_explicit(&d->sh.jobs_done, memory_order_acquire);
 }
 
 static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
@@ -65,9 +69,9 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "daemon_version", json_string(VAFMD_VERSION));
     json_object_set_new(r, "library_version", json_string(vafm_version()));
     json_object_set_new(r, "capabilities",
-                        json_pack("[ssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
-                                  "status", "log", "shutdown"));
-    json_object_set_new(r, "not_implemented", json_pack("[s]", "campaign"));
+                        json_pack("[ssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
+                                  "status", "log", "shutdown", "campaign", "replay"));
+    json_object_set_new(r, "not_implemented", json_array());
     json_object_set_new(r, "security", json_string(d->auth.on ? "curve" : "none"));
     json_t *ch = json_array();
     for (int i = 0; i < VAFMD_N_CHANNELS; i++)
@@ -105,6 +109,10 @@ static json_t *s_log_report(vafmd *d)
     json_object_set_new(o, "overflows", json_integer((json_int_t)atomic_load(&L->overflows)));
     json_object_set_new(o, "curves_dropped", json_integer((json_int_t)atomic_load(&L->curves_dropped)));
     json_object_set_new(o, "curves_skipped", json_integer((json_int_t)atomic_load(&L->curves_skipped)));
+    /* items (curve begin/block/end) waiting for the writer: a reading of the SPSC ring's two indices */
+    size_t tail = atomic_load_explicit(&L->ring.tail, memory_order_acquire);
+    size_t head = atomic_load_explicit(&L->ring.head, memory_order_acquire);
+    json_object_set_new(o, "queued", json_integer((json_int_t)(head >= tail ? head - tail : 0)));
     pthread_mutex_lock(&L->err_mu);
     json_object_set_new(o, "error", L->err[0] ? json_string(L->err) : json_null());
     pthread_mutex_unlock(&L->err_mu);
@@ -188,10 +196,13 @@ static json_t *s_status(vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "state", json_string(!busy ? "idle" : st == VAFMD_RUNNING ? "running" : "starting"));
     /* One run at a time: while busy, the run in progress is the last one started here (the simulation
      * thread may not have picked it up yet). */
-    json_object_set_new(r, "run_id", busy ? json_integer((json_int_t)(d->next_run_id - 1)) : json_null());
+    json_object_set_new(r, "run_id", !busy ? json_null() : st == VAFMD_RUNNING
+                                                     ? json_integer((json_int_t)atomic_load(&sh->run_id))
+                                                     : json_integer((json_int_t)d->pending_run_id));
     json_object_set_new(r, "last_run_id", d->next_run_id > 1 ? json_integer((json_int_t)(d->next_run_id - 1))
                                                              : json_null());
-    json_object_set_new(r, "runs_started", json_integer((json_int_t)d->runs_started));
+    json_object_set_new(r, "runs_started",
+                        json_integer((json_int_t)(d->runs_started + atomic_load(&sh->extra_runs))));
     json_object_set_new(r, "runs_done", json_integer((json_int_t)atomic_load(&sh->runs_done)));
     json_object_set_new(r, "run_samples", json_integer((json_int_t)atomic_load(&sh->run_samples)));
     json_object_set_new(r, "samples", json_integer((json_int_t)atomic_load(&sh->samples)));
@@ -204,6 +215,19 @@ static json_t *s_status(vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "speed", json_real(d->set.speed));
     json_object_set_new(r, "free_run", json_boolean(d->set.free_run));
     json_object_set_new(r, "log", s_log_report(d));
+    uint64_t cid = d->next_campaign_id;
+    if (cid) { /* the last campaign accepted; until the simulation thread takes it up, nothing is done */
+        int seen = atomic_load(&sh->camp_id) == cid;
+        int crun = busy && d->pending_run_id == d->camp_run_id;
+        json_object_set_new(r, "campaign", json_pack("{s:I,s:b,s:I,s:I,s:I,s:o}", "campaign_id", (json_int_t)cid,
+                                                     "running", crun, "curves", (json_int_t)d->camp_total,
+                                                     "first_index", (json_int_t)d->camp_first, "curves_done",
+                                                     (json_int_t)(seen ? atomic_load(&sh->camp_done) : 0), "curve",
+                                                     !crun ? json_null()
+                                                     : json_integer((json_int_t)(seen ? atomic_load(&sh->camp_next)
+                                                                                      : d->camp_first))));
+    } else
+        json_object_set_new(r, "campaign", json_null());
     json_object_set_new(r, "auth", json_pack("{s:s,s:I,s:I,s:I}", "mechanism", d->auth.on ? "curve" : "null", "clients",
                                              (json_int_t)d->auth.n_clients, "accepted",
                                              (json_int_t)atomic_load(&d->auth.accepted), "refused",
@@ -211,15 +235,99 @@ static json_t *s_status(vafmd *d, const vafmd_cmd *c)
     return r;
 }
 
+char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int kind, uint64_t run_id,
+                           uint64_t index, const char *client_run_id, double dt_s, json_t *camp)
+{
+    size_t block_n = vafmd_block_samples(p->sample_rate_Hz, set->block_s);
+    char *scene = malloc(65536);
+    json_t *scene_json = NULL;
+    if (scene && vafm_params_to_json(p, scene, 65536) > 0)
+        scene_json = json_loads(scene, 0, NULL);
+    free(scene);
+    json_t *ch = json_array();
+    for (int i = 0; i < VAFMD_N_CHANNELS; i++)
+        json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_channels[i][0], "unit", s_channels[i][1],
+                                            "dtype", "<f8"));
+    json_t *start = json_object();
+    json_object_set_new(start, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));
+    json_object_set_new(start, "run_id", json_integer((json_int_t)run_id));
+    json_object_set_new(start, "client_run_id", client_run_id && client_run_id[0] ? json_string(client_run_id)
+                                                                                : json_null());
+    json_object_set_new(start, "kind", json_string(kind == VAFMD_RUN_TUNE ? "tune" : "curve"));
+    json_object_set_new(start, "index", json_integer((json_int_t)index));
+    json_object_set_new(start, "sample_rate_Hz", json_real(p->sample_rate_Hz));
+    json_object_set_new(start, "block_samples", json_integer((json_int_t)block_n));
+    json_object_set_new(start, "dt_s", json_real(dt_s));
+    json_object_set_new(start, "sensitivity_m_per_V", json_real(set->sensitivity_m_per_V));
+    json_object_set_new(start, "detector", json_pack("{s:b,s:f,s:i,s:f,s:f}", "on", vafmd_detector_on(set),
+                                                     "noise_V_rms", set->noise_V_rms, "adc_bits", set->adc_bits,
+                                                     "adc_range_V", set->adc_range_V, "baseline_offset_V",
+                                                     set->baseline_offset_V));
+    json_object_set_new(start, "speed", json_real(set->speed));
+    json_object_set_new(start, "free_run", json_boolean(set->free_run));
+    json_object_set_new(start, "channels", ch);
+    json_object_set_new(start, "segments", json_pack("{s:i,s:i,s:i,s:i}", "approach", VAFM_SEG_APPROACH, "retract",
+                                                     VAFM_SEG_RETRACT, "dwell", VAFM_SEG_DWELL, "tune", VAFM_SEG_TUNE));
+    json_object_set_new(start, "scene", scene_json ? scene_json : json_null());
+    if (camp)
+        json_object_set_new(start, "campaign", camp);
+    char *text = json_dumps(start, JSON_COMPACT);
+    json_decref(start);
+    return text;
+}
+
+/* replay: the file is read and checked here (replay.c); the simulation thread streams it from memory. */
+static json_t *s_start_replay(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+{
+    vafmd_sim_cmd sc;
+    memset(&sc, 0, sizeof sc);
+    size_t block_n = 0;
+    uint64_t run_id = d->next_run_id;
+    if (vafmd_replay_prepare(c, &d->set, run_id, &sc.replay, &sc.start_json, &block_n, e))
+        return NULL;
+    sc.type = VAFMD_SIM_START;
+    sc.kind = VAFMD_RUN_REPLAY;
+    sc.run_id = run_id;
+    sc.set = d->set;
+    if (c->has_speed)
+        sc.set.speed = c->speed;
+    snprintf(sc.client_run_id, sizeof sc.client_run_id, "%s", c->client_run_id);
+    if (!vafmd_ring_push(&d->ring, &sc)) {
+        free(sc.start_json);
+        vafmd_replay_free(&sc.replay);
+        vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
+        return NULL;
+    }
+    d->pending_run_id = run_id;
+    d->next_run_id++;
+    d->runs_started++;
+    d->jobs_started++;
+    if (c->client_run_id[0]) {
+        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
+        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
+        h->run_id = run_id;
+        h->kind = VAFMD_RUN_REPLAY;
+    }
+    json_t *r = s_ok(c);
+    json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
+    json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
+    json_object_set_new(r, "duplicate", json_false());
+    json_object_set_new(r, "block_samples", json_integer((json_int_t)block_n));
+    return r;
+}
+
 static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
-    int kind = c->kind == VAFMD_CMD_TUNE ? VAFMD_RUN_TUNE : VAFMD_RUN_CURVE;
+    int kind = c->kind == VAFMD_CMD_TUNE     ? VAFMD_RUN_TUNE
+               : c->kind == VAFMD_CMD_REPLAY ? VAFMD_RUN_REPLAY
+                                             : VAFMD_RUN_CURVE;
     if (c->client_run_id[0]) {
         const s_hist *h = s_history_find(c->client_run_id);
         if (h) {
             if (h->kind != kind) {
                 vafmd_err_set(e, VAFMD_E_STATE, "client_run_id", "client_run_id '%s' was used for a %s", h->client_run_id,
-                              h->kind == VAFMD_RUN_TUNE ? "tune" : "curve");
+                              h->kind == VAFMD_RUN_TUNE ? "tune" : h->kind == VAFMD_RUN_REPLAY ? "replay"
+                              : h->kind == S_KIND_CAMPAIGN ? "campaign" : "curve");
                 return NULL;
             }
             json_t *r = s_ok(c);
@@ -234,6 +342,8 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
                       d->next_run_id - 1);
         return NULL;
     }
+    if (kind == VAFMD_RUN_REPLAY)
+        return s_start_replay(d, c, e);
     vafm_params p = d->scene;
     if (c->has_duration) {
         char buf[64];
@@ -254,31 +364,6 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     }
     uint64_t run_id = d->next_run_id;
     size_t block_n = vafmd_block_samples(p.sample_rate_Hz, d->set.block_s);
-    char *scene = malloc(65536);
-    json_t *scene_json = NULL;
-    if (scene && vafm_params_to_json(&p, scene, 65536) > 0)
-        scene_json = json_loads(scene, 0, NULL);
-    free(scene);
-    json_t *ch = json_array();
-    for (int i = 0; i < VAFMD_N_CHANNELS; i++)
-        json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_channels[i][0], "unit", s_channels[i][1],
-                                            "dtype", "<f8"));
-    json_t *start = json_object();
-    json_object_set_new(start, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));
-    json_object_set_new(start, "run_id", json_integer((json_int_t)run_id));
-    json_object_set_new(start, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
-    json_object_set_new(start, "kind", json_string(kind == VAFMD_RUN_TUNE ? "tune" : "curve"));
-    json_object_set_new(start, "index", json_integer((json_int_t)(c->has_index ? c->index : 0)));
-    json_object_set_new(start, "sample_rate_Hz", json_real(p.sample_rate_Hz));
-    json_object_set_new(start, "block_samples", json_integer((json_int_t)block_n));
-    json_object_set_new(start, "dt_s", json_real(vafm_sim_dt(sim)));
-    json_object_set_new(start, "sensitivity_m_per_V", json_real(d->set.sensitivity_m_per_V));
-    json_object_set_new(start, "speed", json_real(d->set.speed));
-    json_object_set_new(start, "free_run", json_boolean(d->set.free_run));
-    json_object_set_new(start, "channels", ch);
-    json_object_set_new(start, "segments", json_pack("{s:i,s:i,s:i,s:i}", "approach", VAFM_SEG_APPROACH, "retract",
-                                                     VAFM_SEG_RETRACT, "dwell", VAFM_SEG_DWELL, "tune", VAFM_SEG_TUNE));
-    json_object_set_new(start, "scene", scene_json ? scene_json : json_null());
     vafmd_sim_cmd sc;
     memset(&sc, 0, sizeof sc);
     sc.type = VAFMD_SIM_START;
@@ -286,19 +371,20 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     sc.run_id = run_id;
     sc.index = c->has_index ? c->index : 0;
     sc.sim = sim;
-    sc.start_json = json_dumps(start, JSON_COMPACT);
+    sc.start_json = vafmd_run_start_json(&p, &d->set, kind, run_id, sc.index, c->client_run_id, vafm_sim_dt(sim), NULL);
     sc.set = d->set;
     sc.log = kind == VAFMD_RUN_CURVE && atomic_load_explicit(&d->log.state, memory_order_acquire) == VAFMD_LOG_ON;
     snprintf(sc.client_run_id, sizeof sc.client_run_id, "%s", c->client_run_id);
-    json_decref(start);
     if (!sc.start_json || !vafmd_ring_push(&d->ring, &sc)) {
         free(sc.start_json);
         vafm_sim_destroy(&sim);
         vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
         return NULL;
     }
+    d->pending_run_id = run_id;
     d->next_run_id++;
     d->runs_started++;
+    d->jobs_started++;
     if (c->client_run_id[0]) {
         s_hist *h = &s_history[s_history_n++ % S_HISTORY];
         snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
@@ -310,6 +396,140 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
     json_object_set_new(r, "duplicate", json_false());
     json_object_set_new(r, "block_samples", json_integer((json_int_t)block_n));
+    return r;
+}
+
+/* `campaign`: check the whole grid here (every point's scene, the first point's simulation), where an
+ * error can still be answered; the simulation thread then runs the curves one after the other. */
+static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+{
+    static const char *const names[3] = { "T_K", "v_m_per_s", "k_N_per_m" };
+    if (c->client_run_id[0]) {
+        const s_hist *h = s_history_find(c->client_run_id);
+        if (h) {
+            if (h->kind != S_KIND_CAMPAIGN) {
+                vafmd_err_set(e, VAFMD_E_STATE, "client_run_id", "client_run_id '%s' was used for a %s",
+                              h->client_run_id, h->kind == VAFMD_RUN_TUNE ? "tune" : h->kind == VAFMD_RUN_REPLAY
+                              ? "replay" : "curve");
+                return NULL;
+            }
+            json_t *r = s_ok(c);
+            json_object_set_new(r, "campaign_id", json_integer((json_int_t)h->campaign_id));
+            json_object_set_new(r, "curves", json_integer((json_int_t)h->curves));
+            json_object_set_new(r, "run_id", json_integer((json_int_t)h->run_id));
+            json_object_set_new(r, "client_run_id", json_string(h->client_run_id));
+            json_object_set_new(r, "duplicate", json_true());
+            return r;
+        }
+    }
+    if (s_busy(d)) {
+        vafmd_err_set(e, VAFMD_E_STATE, "cmd", "a run is in progress; abort it or wait for its end");
+        return NULL;
+    }
+    vafmd_campaign *cp = calloc(1, sizeof *cp);
+    size_t n[3] = { 0, 0, 0 }, total_vals = 0;
+    for (int l = 0; l < 3; l++)
+        total_vals += n[l] = c->camp_list[l] ? json_array_size(c->camp_list[l]) : 0;
+    if (!cp || !(cp->lists = malloc((total_vals + 1) * sizeof(double)))) {
+        free(cp);
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "", "out of memory");
+        return NULL;
+    }
+    double *lp = cp->lists;
+    const double *lists[3];
+    for (int l = 0; l < 3; l++) {
+        lists[l] = n[l] ? lp : NULL;
+        for (size_t i = 0; i < n[l]; i++)
+            *lp++ = json_number_value(json_array_get(c->camp_list[l], i));
+    }
+    cp->base = d->scene;
+    cp->spec.T_K = lists[0];
+    cp->spec.n_T = n[0];
+    cp->spec.v_m_per_s = lists[1];
+    cp->spec.n_v = n[1];
+    cp->spec.k_N_per_m = lists[2];
+    cp->spec.n_k = n[2];
+    cp->spec.curves_per_point = c->camp_n;
+    cp->spec.first_curve = c->camp_first;
+    size_t points = vafm_campaign_points(&cp->spec);
+    cp->total = c->camp_n * (uint64_t)points; /* ≤ 1e9 · 1e5: no overflow */
+    /* every point's scene, as vafm campaign checks them before its first curve */
+    for (size_t pt = 0; pt < points; pt++) {
+        vafm_params pp;
+        vafm_error verr = { 0 };
+        int rc = vafm_campaign_point_params(&cp->base, &cp->spec, pt, &pp);
+        if (!rc)
+            rc = vafm_params_validate(&pp, &verr);
+        if (rc) {
+            const char *field = !strcmp(verr.field, "T_K") && n[0]                   ? names[0]
+                                : strstr(verr.field, "_m_per_s") && n[1]             ? names[1]
+                                : !strcmp(verr.field, "k_N_per_m") && n[2]           ? names[2]
+                                                                                     : verr.field;
+            vafmd_err_set(e, n[0] + n[1] + n[2] ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_INVALID_SCENE, field,
+                          "grid point %zu (T_K %g, v_m_per_s %g, k_N_per_m %g): %s", pt, pp.T_K,
+                          pp.v_retract_m_per_s, pp.k_N_per_m, verr.message[0] ? verr.message : vafm_strerror(rc));
+            free(cp->lists);
+            free(cp);
+            return NULL;
+        }
+    }
+    /* the first curve's simulation, built here so that an unstable scene is answered at once */
+    size_t pt0 = (size_t)(c->camp_first / c->camp_n);
+    vafm_params p0;
+    vafm_campaign_point_params(&cp->base, &cp->spec, pt0, &p0);
+    vafm_error verr = { 0 };
+    int rc = vafm_sim_new(&cp->sim, &p0, &verr);
+    if (rc) {
+        vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "grid point %zu: cannot build the simulation: %s", pt0,
+                      verr.message[0] ? verr.message : vafm_strerror(rc));
+        free(cp->lists);
+        free(cp);
+        return NULL;
+    }
+    cp->sim_point = pt0;
+    cp->campaign_id = d->next_campaign_id + 1;
+    cp->next = c->camp_first;
+    cp->first_run_id = d->next_run_id;
+    cp->set = d->set;
+    cp->log = atomic_load_explicit(&d->log.state, memory_order_acquire) == VAFMD_LOG_ON;
+    snprintf(cp->client_run_id, sizeof cp->client_run_id, "%s", c->client_run_id);
+    vafmd_sim_cmd sc;
+    memset(&sc, 0, sizeof sc);
+    sc.type = VAFMD_SIM_START;
+    sc.kind = VAFMD_RUN_CURVE;
+    sc.camp = cp;
+    if (!vafmd_ring_push(&d->ring, &sc)) {
+        vafm_sim_destroy(&cp->sim);
+        free(cp->lists);
+        free(cp);
+        vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
+        return NULL;
+    }
+    uint64_t curves = cp->total - c->camp_first; /* cp belongs to the simulation thread from here */
+    d->next_campaign_id++;
+    d->camp_total = curves + c->camp_first;
+    d->camp_first = c->camp_first;
+    d->camp_n = c->camp_n;
+    d->pending_run_id = d->camp_run_id = d->next_run_id;
+    uint64_t run_id = d->next_run_id;
+    d->next_run_id += curves;
+    d->runs_started++;
+    d->jobs_started++;
+    if (c->client_run_id[0]) {
+        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
+        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
+        h->run_id = run_id;
+        h->kind = S_KIND_CAMPAIGN;
+        h->campaign_id = d->next_campaign_id;
+        h->curves = curves + c->camp_first;
+    }
+    json_t *r = s_ok(c);
+    json_object_set_new(r, "campaign_id", json_integer((json_int_t)d->next_campaign_id));
+    json_object_set_new(r, "curves", json_integer((json_int_t)(curves + c->camp_first)));
+    json_object_set_new(r, "first_index", json_integer((json_int_t)c->camp_first));
+    json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
+    json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
+    json_object_set_new(r, "duplicate", json_false());
     return r;
 }
 
@@ -337,7 +557,8 @@ static json_t *s_execute(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
         json_object_set_new(r, "applies_to", json_string(s_busy(d) ? "next_run" : "now"));
         return r;
     case VAFMD_CMD_CURVE:
-    case VAFMD_CMD_TUNE: return s_start(d, c, e);
+    case VAFMD_CMD_TUNE:
+    case VAFMD_CMD_REPLAY: return s_start(d, c, e);
     case VAFMD_CMD_ABORT: {
         if (!s_busy(d)) {
             vafmd_err_set(e, VAFMD_E_STATE, "cmd", "no run is in progress");
@@ -351,13 +572,13 @@ static json_t *s_execute(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
             return NULL;
         }
         r = s_ok(c);
-        json_object_set_new(r, "run_id", json_integer((json_int_t)(d->next_run_id - 1)));
+        int st = atomic_load(&d->sh.state);
+        json_object_set_new(r, "run_id", json_integer((json_int_t)(st == VAFMD_RUNNING ? atomic_load(&d->sh.run_id)
+                                                                                   : d->pending_run_id)));
         return r;
     }
     case VAFMD_CMD_SHUTDOWN: *quit = 1; return s_ok(c);
-    case VAFMD_CMD_CAMPAIGN:
-        vafmd_err_set(e, VAFMD_E_NOT_IMPLEMENTED, "cmd", "'campaign' is not yet implemented in this vafmd");
-        return NULL;
+    case VAFMD_CMD_CAMPAIGN: return s_campaign(d, c, e);
     case VAFMD_CMD_LOG: return s_log(d, c, e);
     default: vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "command not handled"); return NULL;
     }

@@ -12,11 +12,12 @@
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdint.h>
+#include "vafm/campaign.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "daemon/spsc_ring.h"
 
-#define VAFMD_VERSION "0.1.0"
+#define VAFMD_VERSION "0.2.0"
 #define VAFMD_DEFAULT_REP "tcp://127.0.0.1:5555"
 #define VAFMD_DEFAULT_PUB "tcp://127.0.0.1:5556"
 #define VAFMD_MAX_CMD_BYTES 65536 /* larger requests get a "too_large" error reply */
@@ -29,12 +30,45 @@ typedef struct vafmd_settings {
     double sensitivity_m_per_V; /* InvOLS: vDeflection = deflection / sensitivity, m/V */
     double block_s;             /* samples per data block, as a duration, [1e-3, 1e-2] s */
     int hwm;                    /* PUB send high-water mark, messages per subscriber (set at start only) */
+    /* The detector chain (off unless set; protocol/wire.md §3.1): vDeflection_V = ADC(deflection /
+     * sensitivity + baseline offset + noise); deflection_m = vDeflection_V · sensitivity; force_N =
+     * k · deflection_m. Height and tip position stay exact. */
+    double noise_V_rms;         /* detector noise floor, V rms, [0, 10] (0: off) */
+    int adc_bits;               /* ADC resolution, bits, 0 (off: no quantisation, no clipping) or [4, 24] */
+    double adc_range_V;         /* ADC input range (full span), V, [1e-3, 100]: codes cover [-range/2, range/2) */
+    double baseline_offset_V;   /* baseline offset added to vDeflection, V, [-100, 100] */
 } vafmd_settings;
+
+/* 1 if any detector signal is on (else the samples are the simulation's, bit for bit). */
+static inline int vafmd_detector_on(const vafmd_settings *s)
+{
+    return s->noise_V_rms > 0 || s->adc_bits > 0 || s->baseline_offset_V != 0;
+}
 
 void vafmd_settings_default(vafmd_settings *s);
 
-enum vafmd_run_kind { VAFMD_RUN_CURVE = 0, VAFMD_RUN_TUNE = 1 };
+enum vafmd_run_kind { VAFMD_RUN_CURVE = 0, VAFMD_RUN_TUNE = 1, VAFMD_RUN_REPLAY = 2 };
 enum vafmd_sim_cmd_type { VAFMD_SIM_START = 1, VAFMD_SIM_ABORT = 2, VAFMD_SIM_QUIT = 3 };
+
+/* A campaign (protocol/wire.md, `campaign`): the grid of `vafm campaign`, run curve after curve by the
+ * simulation thread on its own. Global curve g (g = point·N + i, its random stream) is run
+ * first_run_id + (g - first_index). Built and checked by the control thread, then owned by the
+ * simulation thread (which frees it when the campaign ends). */
+typedef struct vafmd_campaign {
+    uint64_t campaign_id;
+    vafm_params base;              /* the scene at the campaign command */
+    double *lists;                 /* the T, v and k lists (one allocation); spec points into it */
+    vafm_campaign_spec spec;       /* curves_per_point = N; first_curve = first_index */
+    uint64_t total;                /* N · points: the grid's curves (global indices 0..total-1) */
+    uint64_t next;                 /* global index of the next curve to start */
+    uint64_t done;                 /* curves finished ok (simulation thread) */
+    uint64_t first_run_id;         /* run id of global curve first_index */
+    size_t sim_point;              /* grid point `sim` was built for, (size_t)-1: none */
+    vafm_sim *sim;                 /* the simulation of sim_point (reused for its N curves) */
+    vafmd_settings set;            /* settings in force for the whole campaign */
+    int log;                       /* 1: log its curves */
+    char client_run_id[65];
+} vafmd_campaign;
 
 /* One command for the simulation thread (copied through the ring). */
 typedef struct vafmd_sim_cmd {
@@ -43,10 +77,12 @@ typedef struct vafmd_sim_cmd {
     uint64_t run_id;
     uint64_t index;      /* curve index (RNG stream) */
     vafm_sim *sim;       /* START: ownership passes to the simulation thread */
+    struct vafmd_replay *replay; /* START of a VAFMD_RUN_REPLAY (sim is NULL): ownership passes (replay.h) */
     char *start_json;    /* START: the "run.start" message (malloc'ed; ownership passes) */
     vafmd_settings set;  /* settings in force for this run */
     int log;             /* START: 1 = push the run's samples to the HDF5 writer thread */
     char client_run_id[65];
+    vafmd_campaign *camp; /* START of a campaign (sim, start_json NULL): ownership passes */
 } vafmd_sim_cmd;
 
 /* ---- HDF5 logging (log.c) ------------------------------------------------------------------------
@@ -67,6 +103,8 @@ typedef struct vafmd_log_block {
 typedef struct vafmd_log_begin {
     vafm_params p;
     uint64_t run_id, index;
+    size_t point;        /* campaign grid point (0 outside campaigns) */
+    int detector;        /* 1: detector signals on: force is measured, the file gets no "tip position" */
     char client_run_id[65];
 } vafmd_log_begin;
 
@@ -96,6 +134,8 @@ typedef struct vafmd_log {
     atomic_uint_least64_t curves_dropped; /* logged curves not written: broken or a write error */
     atomic_uint_least64_t curves_skipped; /* aborted/failed curves, not written */
     atomic_int quit;                      /* writer thread: exit once OFF */
+    const char *test_stall;               /* tests only ($VAFMD_TEST_LOG_STALL): while this file exists the
+                                             writer takes nothing from the ring (forces overflows) */
     pthread_mutex_t err_mu;               /* guards err (writer thread ↔ control thread) */
     char err[512];                        /* last write error, "" if none */
 } vafmd_log;
@@ -126,6 +166,12 @@ typedef struct vafmd_shared {
                                          until it drains) */
     atomic_uint_least64_t seq;        /* next data sequence number */
     atomic_uint_least64_t run_samples; /* samples of the current run so far */
+    atomic_uint_least64_t jobs_done;   /* jobs (a curve, a tune, a whole campaign) finished: the daemon is
+                                          idle when it equals the control thread's jobs_started */
+    atomic_uint_least64_t extra_runs;  /* campaign curves started after each campaign's first */
+    atomic_uint_least64_t camp_id;     /* current (or last) campaign, 0: none */
+    atomic_uint_least64_t camp_done;   /* its curves finished ok */
+    atomic_uint_least64_t camp_next;   /* global index of its curve in progress (or next) */
 } vafmd_shared;
 
 /* CURVE security (auth.c). Configured = a server secret key is given; then both sockets are CURVE
@@ -150,13 +196,23 @@ typedef struct vafmd {
     vafmd_shared sh;
     vafm_params scene;
     vafmd_settings set;
-    uint64_t runs_started; /* control thread only */
+    uint64_t runs_started; /* control thread only (a campaign counts its first curve; sh.extra_runs the rest) */
+    uint64_t jobs_started; /* control thread only: curves, tunes and campaigns handed to the simulation */
+    uint64_t pending_run_id; /* control thread only: first run id of the last job started */
+    uint64_t next_campaign_id; /* control thread only */
+    uint64_t camp_total, camp_first, camp_n, camp_run_id; /* control thread only: the last campaign's
+                                                              grid and first run id (status) */
     uint64_t next_run_id;  /* control thread only */
     volatile sig_atomic_t *stop; /* set by SIGINT/SIGTERM */
     vafmd_log log;
     vafmd_auth auth;
 } vafmd;
 
+struct json_t;
+/* control.c: the "run.start" JSON of a run (also called by the simulation thread for campaign curves:
+ * pure, no shared state). camp: the run's "campaign" object (stolen) or NULL. NULL on no memory. */
+char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int kind, uint64_t run_id,
+                           uint64_t index, const char *client_run_id, double dt_s, struct json_t *camp);
 /* sim_thread.c */
 void *vafmd_sim_main(void *arg);
 /* log.c: the HDF5 writer thread */

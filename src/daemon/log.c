@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 #include "daemon/daemon.h"
 #include "vafm/h5.h"
 
@@ -82,6 +83,10 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
     const vafm_params *p = &c->begin->p;
     vafm_h5_curve hc;
     vafm_h5_curve_from_sim(&hc, &s, p, &end->result);
+    /* the layout's "tip position" is height + force/k (hdf5.md L14): with the detector on the force is a
+     * measured (noisy, quantised) one and the true tip is not that, so the column is left out */
+    if (c->begin->detector)
+        hc.tip_position_m = NULL;
     /* the group number is the file's curve count; the random stream index and the run are kept in the
      * free-text ids (the curve-group attribute list is closed) */
     char sid[48], cid[160];
@@ -92,7 +97,7 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
     hc.meta.curve_id = cid;
     vafm_h5_truth t;
     memset(&t, 0, sizeof t);
-    t.point = 0;
+    t.point = c->begin->point;
     t.T_K = p->T_K;
     t.v_m_per_s = p->v_retract_m_per_s;
     t.k_N_per_m = p->k_N_per_m;
@@ -165,6 +170,10 @@ void *vafmd_log_main(void *arg)
     for (;;) {
         vafmd_log_item it;
         int got = 0;
+        if (L->test_stall && !atomic_load_explicit(&L->quit, memory_order_acquire) && access(L->test_stall, F_OK) == 0) {
+            nanosleep(&(struct timespec){ 0, 1000000 }, NULL); /* test hook: a writer that does not keep up */
+            continue;
+        }
         int st = atomic_load_explicit(&L->state, memory_order_acquire);
         while (vafmd_ring_pop(&L->ring, &it)) {
             got = 1;

@@ -45,10 +45,12 @@ static const char s_usage[] =
     "  --sensitivity S    detector sensitivity (InvOLS), m/V (default 50e-9)\n"
     "  --hwm N            stream send high-water mark per subscriber, messages (default 1000)\n"
     "  -h, --help         this text\n"
-    "\nSETTINGS (get/set like scene parameters): speed, free_run, sensitivity_m_per_V, block_s, hwm\n"
-    "\nCOMMANDS (JSON on the REP socket, protocol/wire.md): hello get set presets curve tune abort status\n"
-    "  log shutdown; campaign replies \"not_implemented\" in this version\n"
-    "\nSTREAM topics: data, run.start, run.end, event, heartbeat (1 Hz)\n"
+    "\nSETTINGS (get/set like scene parameters): speed, free_run, sensitivity_m_per_V, block_s, hwm;\n"
+    "  detector signals, off unless set (also in --config \"values\"): noise_V_rms (V rms), adc_bits\n"
+    "  (0 or 4-24), adc_range_V (full span, V), baseline_offset_V (V)\n"
+    "\nCOMMANDS (JSON on the REP socket, protocol/wire.md): hello get set presets curve tune campaign\n"
+    "  abort status log shutdown\n"
+    "\nSTREAM topics: data, run.start, run.end, campaign.end, event, heartbeat (1 Hz)\n"
     "\nSIGNALS: SIGINT/SIGTERM end the run in progress (run.end \"aborted\") and exit 0\n"
     "\nEXIT STATUS: 0 clean shutdown, 1 runtime error (cannot bind), 2 usage or configuration error\n";
 
@@ -316,12 +318,23 @@ int main(int argc, char **argv)
         return 1;
     }
     vafmd_ring_init(&d.ring, d.ring_store, sizeof(vafmd_sim_cmd), VAFMD_RING_CAP);
-    d.log.ring_store = calloc(VAFMD_LOG_RING_CAP, sizeof(vafmd_log_item));
+    /* Test hooks (tests/test_daemon.py, log overflow): a smaller log ring ($VAFMD_TEST_LOG_RING, a power of
+     * two in [2, VAFMD_LOG_RING_CAP]) and a writer stalled while a file exists ($VAFMD_TEST_LOG_STALL). */
+    size_t log_cap = VAFMD_LOG_RING_CAP;
+    const char *env = getenv("VAFMD_TEST_LOG_RING");
+    if (env) {
+        unsigned long v = strtoul(env, NULL, 10);
+        if (v >= 2 && v <= VAFMD_LOG_RING_CAP && !(v & (v - 1)))
+            log_cap = v;
+    }
+    env = getenv("VAFMD_TEST_LOG_STALL");
+    d.log.test_stall = env && env[0] ? env : NULL;
+    d.log.ring_store = calloc(log_cap, sizeof(vafmd_log_item));
     if (!d.log.ring_store) {
         fprintf(stderr, "vafmd: out of memory\n");
         return 1;
     }
-    vafmd_ring_init(&d.log.ring, d.log.ring_store, sizeof(vafmd_log_item), VAFMD_LOG_RING_CAP);
+    vafmd_ring_init(&d.log.ring, d.log.ring_store, sizeof(vafmd_log_item), log_cap);
     atomic_init(&d.log.state, VAFMD_LOG_OFF);
     pthread_mutex_init(&d.log.err_mu, NULL);
     d.next_run_id = 1;

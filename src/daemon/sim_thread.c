@@ -18,6 +18,8 @@
 #include <jansson.h>
 #include <zmq.h>
 #include "daemon/daemon.h"
+#include "daemon/replay.h"
+#include "vafm/rng.h"
 #include "vafm/wire.h"
 
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
@@ -25,6 +27,10 @@
 #endif
 
 #define S_NS 1000000000LL
+/* The detector noise stream of curve (seed, index) is Philox stream `index` of the key seed ^ this
+ * constant ("DETECTR"): distinct from the physics stream (key seed), so the physics samples do not
+ * depend on whether the detector is on, and reproducible from (seed, index) alone. */
+#define S_DETECTOR_KEY UINT64_C(0x0044455445435452)
 #define S_MAX_EVENTS 16
 
 typedef struct s_event {
@@ -36,7 +42,8 @@ typedef struct s_run {
     int active;
     vafmd_sim_cmd cmd;     /* START command: sim, start_json, settings */
     size_t block_n;
-    double *ch[VAFMD_N_CHANNELS];
+    double *ch[VAFMD_N_CHANNELS + 1]; /* + time_s (replays); a channel not streamed is NULL */
+    double sens;           /* m/V: vDeflection = deflection / sens (a replay: its curve's sensitivity) */
     size_t fill;
     uint8_t first_seg;
     int seg_change;
@@ -49,11 +56,17 @@ typedef struct s_run {
     vafmd_log *log;        /* non-NULL: the run is logged (a curve with logging on) */
     vafmd_log_block *lb;   /* the block being filled for the writer thread, or NULL */
     int log_broken;        /* a log item was lost to a full ring: the writer drops the curve */
+    /* detector chain (vafmd_settings): on, its noise stream, ADC step and code range, spring constant */
+    int det;
+    vafm_rng det_rng;
+    double adc_q, code_min, code_max, k_N_per_m;
+    int clipped;           /* a sample of the current block hit the ADC range */
 } s_run;
 
 typedef struct s_ctx {
     vafmd *d;
     s_run run;
+    vafmd_campaign *camp;  /* the campaign in progress (owned), or NULL */
     int nodrop;            /* current ZMQ_XPUB_NODROP setting */
     int64_t t_boot;        /* CLOCK_MONOTONIC ns at thread start */
 } s_ctx;
@@ -139,15 +152,39 @@ static int s_sink(void *user, const vafm_samples *b)
         if (k >= r->block_n)
             return 1; /* cannot happen: advance is asked for at most the room left */
         r->ch[0][k] = b->height_m[i];
-        r->ch[1][k] = b->deflection_m[i];
+        if (r->ch[1]) /* replays stream only the channels their file has */
+            r->ch[1][k] = b->deflection_m[i];
         r->ch[2][k] = b->force_N[i];
         /* a division, not a multiplication by the inverse: bit-exact with deflection / sensitivity */
-        r->ch[3][k] = b->deflection_m[i] / r->cmd.set.sensitivity_m_per_V;
-        r->ch[4][k] = b->tip_m[i];
+        if (r->ch[3])
+            r->ch[3][k] = b->deflection_m[i] / r->sens;
+        if (r->ch[4])
+            r->ch[4][k] = b->tip_m[i];
+        if (r->ch[VAFMD_CH_TIME])
+            r->ch[VAFMD_CH_TIME][k] = b->time_s[i];
+        if (r->det) { /* the measured chain: detector volts, then deflection and force derived from them */
+            double v = r->ch[3][k] + r->cmd.set.baseline_offset_V;
+            if (r->cmd.set.noise_V_rms > 0)
+                v += r->cmd.set.noise_V_rms * vafm_rng_normal(&r->det_rng);
+            if (r->cmd.set.adc_bits > 0) {
+                double code = floor(v / r->adc_q + 0.5);
+                if (code > r->code_max) {
+                    code = r->code_max;
+                    r->clipped = 1;
+                } else if (code < r->code_min) {
+                    code = r->code_min;
+                    r->clipped = 1;
+                }
+                v = code * r->adc_q;
+            }
+            r->ch[3][k] = v;
+            r->ch[1][k] = v * r->cmd.set.sensitivity_m_per_V;
+            r->ch[2][k] = r->k_N_per_m * r->ch[1][k];
+        }
         if (r->lb) { /* the same doubles as the stream's: the file equals the stream bit for bit */
             r->lb->time_s[k] = b->time_s[i];
             r->lb->height_m[k] = b->height_m[i];
-            r->lb->force_N[k] = b->force_N[i];
+            r->lb->force_N[k] = r->ch[2][k];
             r->lb->tip_m[k] = b->tip_m[i];
             r->lb->segment[k] = b->segment[i];
         }
@@ -164,6 +201,18 @@ static int s_sink(void *user, const vafm_samples *b)
     }
     r->fill += b->n;
     return 0;
+}
+
+/* The sample source of a run: advance it by at most max samples, handing them to s_sink (which fills
+ * the block buffers from r->fill on). Contract for every source: @return 1 while the run goes on, 0 when
+ * it ended -- together with its last sample, never on a later call, so that the block holding that
+ * sample carries the LAST flag -- or a negative VAFM_E* code. */
+static int s_advance(s_run *r, size_t max)
+{
+    /* replay: a VAFMD_RUN_REPLAY run takes its samples from the replay source here (src/daemon/replay.c) */
+    if (r->cmd.replay)
+        return vafmd_replay_advance(r->cmd.replay, max, s_sink, r, &r->sens);
+    return vafm_sim_advance(r->cmd.sim, max, s_sink, r);
 }
 
 /* Hand one item to the writer thread without waiting: a full ring loses it (counted) and the curve. */
@@ -195,10 +244,14 @@ static void s_run_free(s_run *r)
 {
     free(r->lb);
     r->lb = NULL;
-    vafm_sim_destroy(&r->cmd.sim);
+    if (r->cmd.camp) /* a campaign's simulation belongs to the campaign (reused for a point's curves) */
+        r->cmd.sim = NULL;
+    else
+        vafm_sim_destroy(&r->cmd.sim);
     free(r->cmd.start_json);
     r->cmd.start_json = NULL;
-    for (int i = 0; i < VAFMD_N_CHANNELS; i++) {
+    vafmd_replay_free(&r->cmd.replay);
+    for (int i = 0; i <= VAFMD_CH_TIME; i++) {
         free(r->ch[i]);
         r->ch[i] = NULL;
     }
@@ -210,7 +263,11 @@ static json_t *s_num_or_null(double v)
     return isfinite(v) ? json_real(v) : json_null();
 }
 
-/* Publish run.end and report the run as done (the control thread may start the next one). */
+static void s_camp_end(s_ctx *x, const char *status, const char *message, int mark_done);
+
+/* Report the run as done and publish its run.end. The daemon turns idle (a new run is accepted) BEFORE
+ * run.end goes out, so a client may start the next run as soon as it sees run.end. A campaign's curve
+ * ends the job only if it is the campaign's last (or failed): then campaign.end follows run.end. */
 static void s_run_end(s_ctx *x, const char *status, int err_code)
 {
     s_run *r = &x->run;
@@ -218,7 +275,9 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     json_t *j = json_object();
     json_object_set_new(j, "run_id", json_integer((json_int_t)r->cmd.run_id));
     json_object_set_new(j, "client_run_id", r->cmd.client_run_id[0] ? json_string(r->cmd.client_run_id) : json_null());
-    json_object_set_new(j, "kind", json_string(r->cmd.kind == VAFMD_RUN_TUNE ? "tune" : "curve"));
+    json_object_set_new(j, "kind", json_string(r->cmd.kind == VAFMD_RUN_TUNE     ? "tune"
+                                               : r->cmd.kind == VAFMD_RUN_REPLAY ? "replay"
+                                                                                 : "curve"));
     json_object_set_new(j, "status", json_string(status));
     if (err_code) {
         const vafm_error *e = vafm_sim_error(r->cmd.sim);
@@ -235,6 +294,11 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     json_object_set_new(j, "worst_late_ns", json_integer((json_int_t)r->worst_late_ns));
     json_object_set_new(j, "dropped", json_integer((json_int_t)(atomic_load(&sh->dropped) - r->dropped_at_start)));
     json_object_set_new(j, "wall_s", json_real((double)(s_now() - r->t_start) / 1e9));
+    vafmd_campaign *cp = r->cmd.camp;
+    if (cp)
+        json_object_set_new(j, "campaign", json_pack("{s:I,s:I,s:I}", "campaign_id", (json_int_t)cp->campaign_id,
+                                                     "curve", (json_int_t)r->cmd.index, "curves",
+                                                     (json_int_t)cp->total));
     if (r->cmd.kind == VAFMD_RUN_CURVE) {
         vafm_curve_result res;
         if (vafm_sim_result(r->cmd.sim, &res) == 0) {
@@ -245,11 +309,16 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
             json_object_set_new(o, "pulloff_spring_N", s_num_or_null(res.pulloff_spring_N));
             json_object_set_new(o, "detach_force_N", s_num_or_null(res.detach_force_N));
             json_object_set_new(o, "detach_height_m", s_num_or_null(res.detach_height_m));
+            json_object_set_new(o, "detach_eq_force_N", s_num_or_null(res.detach_eq_force_N));
             json_object_set_new(o, "detach_time_s", s_num_or_null(res.detach_time_s));
             json_object_set_new(o, "touch_time_s", s_num_or_null(res.touch_time_s));
+            json_object_set_new(o, "touch_height_m", s_num_or_null(res.touch_height_m));
             json_object_set_new(o, "retract_start_s", s_num_or_null(res.retract_start_s));
             json_object_set_new(o, "duration_s", s_num_or_null(res.duration_s));
             json_object_set_new(o, "samples", json_integer((json_int_t)res.samples));
+            json_object_set_new(o, "steps", json_integer((json_int_t)res.steps));
+            json_object_set_new(o, "steps_contact", json_integer((json_int_t)res.steps_contact));
+            json_object_set_new(o, "steps_free", json_integer((json_int_t)res.steps_free));
             json_object_set_new(j, "result", o);
             if (!strcmp(status, "ok") && !(res.flags & VAFM_CURVE_NO_CONTACT) && isfinite(res.detach_time_s))
                 s_send_json(x, "event", json_pack("{s:I,s:s,s:o,s:o,s:o}", "run_id", (json_int_t)r->cmd.run_id,
@@ -268,10 +337,51 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
         }
         s_log_push(r, VAFMD_LOG_END, le);
     }
-    s_send_json(x, "run.end", j);
+    int ok = !strcmp(status, "ok") && !err_code;
+    if (cp && ok)
+        atomic_store_explicit(&sh->camp_done, ++cp->done, memory_order_relaxed);
+    int job_over = !cp || !ok || cp->next >= cp->total;
+    char *text = json_dumps(j, JSON_COMPACT);
+    json_decref(j);
     s_run_free(r);
-    atomic_store_explicit(&sh->state, VAFMD_IDLE, memory_order_relaxed);
-    atomic_fetch_add_explicit(&sh->runs_done, 1, memory_order_release);
+    atomic_fetch_add_explicit(&sh->runs_done, 1, memory_order_relaxed);
+    if (job_over) { /* the log items above were pushed before this release (log stop relies on it) */
+        atomic_store_explicit(&sh->state, VAFMD_IDLE, memory_order_relaxed);
+        atomic_fetch_add_explicit(&sh->jobs_done, 1, memory_order_release);
+    }
+    if (text) {
+        s_send_text(x, "run.end", text);
+        free(text);
+    }
+    if (cp && job_over)
+        s_camp_end(x, ok ? "ok" : !strcmp(status, "aborted") ? "aborted" : "error", NULL, 0);
+}
+
+/* Publish campaign.end and free the campaign. mark_done: the job is not yet reported done (no curve
+ * of it was running). */
+static void s_camp_end(s_ctx *x, const char *status, const char *message, int mark_done)
+{
+    vafmd_campaign *cp = x->camp;
+    vafmd_shared *sh = &x->d->sh;
+    if (!cp)
+        return;
+    x->camp = NULL;
+    if (mark_done) {
+        atomic_store_explicit(&sh->state, VAFMD_IDLE, memory_order_relaxed);
+        atomic_fetch_add_explicit(&sh->jobs_done, 1, memory_order_release);
+    }
+    json_t *j = json_object();
+    json_object_set_new(j, "campaign_id", json_integer((json_int_t)cp->campaign_id));
+    json_object_set_new(j, "client_run_id", cp->client_run_id[0] ? json_string(cp->client_run_id) : json_null());
+    json_object_set_new(j, "status", json_string(status));
+    json_object_set_new(j, "error", message ? json_pack("{s:s}", "message", message) : json_null());
+    json_object_set_new(j, "curves_done", json_integer((json_int_t)cp->done));
+    json_object_set_new(j, "curves", json_integer((json_int_t)cp->total));
+    json_object_set_new(j, "first_index", json_integer((json_int_t)cp->spec.first_curve));
+    s_send_json(x, "campaign.end", j);
+    vafm_sim_destroy(&cp->sim);
+    free(cp->lists);
+    free(cp);
 }
 
 static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
@@ -282,11 +392,20 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     r->cmd = *c;
     r->prev_seg = -1;
     r->t_start = s_now();
-    const vafm_params *p = vafm_sim_params(c->sim);
-    r->block_n = vafmd_block_samples(p->sample_rate_Hz, c->set.block_s);
+    const vafm_params *p = c->replay ? NULL : vafm_sim_params(c->sim); /* a replay has no scene */
+    r->block_n = vafmd_block_samples(p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay), c->set.block_s);
+    r->sens = c->set.sensitivity_m_per_V;
     r->first_seq = atomic_load_explicit(&sh->seq, memory_order_relaxed);
     r->dropped_at_start = atomic_load(&sh->dropped);
     r->active = 1;
+    r->det = p && vafmd_detector_on(&c->set); /* replays stream the recorded signals */
+    if (r->det) {
+        vafm_rng_init(&r->det_rng, p->seed ^ S_DETECTOR_KEY, c->index);
+        r->adc_q = c->set.adc_bits > 0 ? ldexp(c->set.adc_range_V, -c->set.adc_bits) : 0;
+        r->code_max = c->set.adc_bits > 0 ? ldexp(1.0, c->set.adc_bits - 1) - 1 : 0;
+        r->code_min = c->set.adc_bits > 0 ? -ldexp(1.0, c->set.adc_bits - 1) : 0;
+        r->k_N_per_m = p->k_N_per_m;
+    }
     if (c->log && c->kind == VAFMD_RUN_CURVE) {
         r->log = &x->d->log;
         vafmd_log_begin *lb = calloc(1, sizeof *lb);
@@ -294,6 +413,8 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
             lb->p = *p;
             lb->run_id = c->run_id;
             lb->index = c->index;
+            lb->point = c->camp ? c->camp->sim_point : 0;
+            lb->detector = vafmd_detector_on(&c->set);
             memcpy(lb->client_run_id, c->client_run_id, sizeof lb->client_run_id);
         }
         s_log_push(r, VAFMD_LOG_BEGIN, lb);
@@ -303,10 +424,11 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
     s_send_text(x, "run.start", c->start_json);
     int rc = 0;
-    for (int i = 0; i < VAFMD_N_CHANNELS; i++)
-        if (!(r->ch[i] = malloc(r->block_n * sizeof(double))))
+    unsigned chmask = c->replay ? vafmd_replay_channels(c->replay) : VAFMD_CH_LIVE_MASK;
+    for (int i = 0; i <= VAFMD_CH_TIME; i++)
+        if ((chmask >> i & 1) && !(r->ch[i] = malloc(r->block_n * sizeof(double))))
             rc = VAFM_ENOMEM;
-    if (!rc)
+    if (!rc && !c->replay)
         rc = c->kind == VAFMD_RUN_TUNE ? vafm_sim_tune_begin(c->sim, c->index) : vafm_sim_curve_begin(c->sim, c->index);
     /* the clock of the run starts when its first sample can be computed: setting up the scene (tables,
      * first contact solve) is not acquisition time */
@@ -323,26 +445,30 @@ static void s_run_block(s_ctx *x)
     r->fill = 0;
     r->seg_change = 0;
     r->n_ev = 0;
+    r->clipped = 0;
     if (r->log && !r->log_broken && !r->lb && !(r->lb = s_log_block_new(r->block_n))) {
         r->log_broken = 1;
         atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
     }
     int rc = 1;
     while (r->fill < r->block_n && rc == 1)
-        rc = vafm_sim_advance(r->cmd.sim, r->block_n - r->fill, s_sink, r);
+        rc = s_advance(r, r->block_n - r->fill);
     if (r->fill > 0) {
         uint32_t flags = 0;
         if (rc != 1)
             flags |= VAFM_WIRE_FLAG_LAST;
         if (r->seg_change)
             flags |= VAFM_WIRE_FLAG_SEG_CHANGE;
-        const vafm_params *p = vafm_sim_params(r->cmd.sim);
-        double fs = p->sample_rate_Hz;
+        if (r->clipped)
+            flags |= VAFM_WIRE_FLAG_CLIPPED;
+        double fs = r->cmd.replay ? vafmd_replay_rate_Hz(r->cmd.replay) : vafm_sim_params(r->cmd.sim)->sample_rate_Hz;
         uint64_t end = r->samples + r->fill;
+        /* a replay is paced by its recorded times (replay.c), a simulation by its sample index */
+        double t_end = r->cmd.replay ? vafmd_replay_clock_s(r->cmd.replay) : (double)end / fs;
         if (r->cmd.set.free_run)
             flags |= VAFM_WIRE_FLAG_FREE_RUN;
         else {
-            int64_t deadline = r->t_start + (int64_t)llround((double)end / fs / r->cmd.set.speed * 1e9);
+            int64_t deadline = r->t_start + (int64_t)llround(t_end / r->cmd.set.speed * 1e9);
             int64_t now = s_now();
             if (now > deadline) {
                 uint64_t late = (uint64_t)(now - deadline);
@@ -371,21 +497,22 @@ static void s_run_block(s_ctx *x)
             .block_index = r->block_index,
             .first_sample = r->samples,
             .n_samples = (uint32_t)r->fill,
-            .n_channels = VAFMD_N_CHANNELS,
+            .n_channels = 0, /* counted below */
             .segment = r->first_seg,
             .sample_rate_Hz = fs,
             .t0_ns = (int64_t)llround((double)r->samples / fs * 1e9),
             .flags = flags,
         };
         unsigned char hb[VAFM_WIRE_HEADER_SIZE];
+        const void *part[3 + VAFMD_N_CHANNELS] = { "data", hb };
+        size_t len[3 + VAFMD_N_CHANNELS] = { 4, sizeof hb };
+        for (int i = 0; i <= VAFMD_CH_TIME; i++)
+            if (r->ch[i]) {
+                part[2 + h.n_channels] = r->ch[i];
+                len[2 + h.n_channels++] = r->fill * sizeof(double);
+            }
         vafm_wire_header_encode(&h, hb);
-        const void *part[2 + VAFMD_N_CHANNELS] = { "data", hb };
-        size_t len[2 + VAFMD_N_CHANNELS] = { 4, sizeof hb };
-        for (int i = 0; i < VAFMD_N_CHANNELS; i++) {
-            part[2 + i] = r->ch[i];
-            len[2 + i] = r->fill * sizeof(double);
-        }
-        s_send(x, part, len, 2 + VAFMD_N_CHANNELS);
+        s_send(x, part, len, 2 + h.n_channels);
         if (r->lb) {
             r->lb->n = r->fill;
             vafmd_log_block *lb = r->lb;
@@ -396,6 +523,16 @@ static void s_run_block(s_ctx *x)
             s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:s,s:s}", "run_id", (json_int_t)r->cmd.run_id, "kind",
                                               "segment", "sample", (json_int_t)r->ev[i].sample, "from",
                                               s_seg_name(r->ev[i].from), "to", s_seg_name(r->ev[i].to)));
+        if (r->cmd.replay) { /* replay: the curves of the selection that began in this block */
+            vafmd_replay_event rev[VAFMD_REPLAY_MAX_EVENTS];
+            int nrev = vafmd_replay_take_events(r->cmd.replay, rev, VAFMD_REPLAY_MAX_EVENTS);
+            for (int i = 0; i < nrev; i++)
+                s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:I,s:I,s:I,s:I}", "run_id", (json_int_t)r->cmd.run_id,
+                                                  "kind", "curve", "sample", (json_int_t)rev[i].sample, "curve",
+                                                  (json_int_t)rev[i].curve, "selection_index",
+                                                  (json_int_t)rev[i].selection, "pass", (json_int_t)rev[i].pass,
+                                                  "samples", (json_int_t)rev[i].samples));
+        }
         atomic_store_explicit(&sh->seq, h.seq + 1, memory_order_relaxed);
         r->samples = end;
         r->block_index++;
@@ -407,6 +544,64 @@ static void s_run_block(s_ctx *x)
         s_run_end(x, "ok", 0);
     else if (rc < 0)
         s_run_end(x, rc == VAFM_EABORT ? "aborted" : "error", rc);
+}
+
+/* Start the campaign's next curve (global index cp->next) on this thread, without the control thread.
+ * Building the simulation of a new grid point happens here, between two curves (it allocates and
+ * tabulates: not in the paced per-block path); the N curves of a point reuse it, each from its own
+ * random stream, exactly as vafm_campaign_run does. */
+static void s_camp_next(s_ctx *x)
+{
+    vafmd_campaign *cp = x->camp;
+    vafmd_shared *sh = &x->d->sh;
+    uint64_t g = cp->next, first = cp->spec.first_curve;
+    size_t point = (size_t)(g / cp->spec.curves_per_point);
+    vafm_params pp;
+    int rc = vafm_campaign_point_params(&cp->base, &cp->spec, point, &pp);
+    if (!rc && point != cp->sim_point) {
+        vafm_sim_destroy(&cp->sim);
+        cp->sim_point = (size_t)-1;
+        rc = vafm_sim_new(&cp->sim, &pp, NULL);
+        if (!rc)
+            cp->sim_point = point;
+    }
+    if (rc) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "cannot build the simulation of grid point %zu: %s", point, vafm_strerror(rc));
+        s_camp_end(x, "error", msg, 1);
+        return;
+    }
+    json_t *cj = json_object();
+    json_object_set_new(cj, "campaign_id", json_integer((json_int_t)cp->campaign_id));
+    json_object_set_new(cj, "curve", json_integer((json_int_t)g));
+    json_object_set_new(cj, "curves", json_integer((json_int_t)cp->total));
+    json_object_set_new(cj, "first_index", json_integer((json_int_t)first));
+    json_object_set_new(cj, "point", json_integer((json_int_t)point));
+    json_object_set_new(cj, "T_K", json_real(pp.T_K));
+    json_object_set_new(cj, "v_m_per_s", json_real(pp.v_retract_m_per_s));
+    json_object_set_new(cj, "k_N_per_m", json_real(pp.k_N_per_m));
+    vafmd_sim_cmd c;
+    memset(&c, 0, sizeof c);
+    c.type = VAFMD_SIM_START;
+    c.kind = VAFMD_RUN_CURVE;
+    c.run_id = cp->first_run_id + (g - first);
+    c.index = g;
+    c.sim = cp->sim;
+    c.set = cp->set;
+    c.log = cp->log;
+    c.camp = cp;
+    memcpy(c.client_run_id, cp->client_run_id, sizeof c.client_run_id);
+    c.start_json = vafmd_run_start_json(&pp, &cp->set, VAFMD_RUN_CURVE, c.run_id, g, cp->client_run_id,
+                                        vafm_sim_dt(cp->sim), cj);
+    if (!c.start_json) {
+        s_camp_end(x, "error", "out of memory", 1);
+        return;
+    }
+    cp->next = g + 1;
+    atomic_store_explicit(&sh->camp_next, g, memory_order_relaxed);
+    if (g != first)
+        atomic_fetch_add_explicit(&sh->extra_runs, 1, memory_order_relaxed);
+    s_run_start(x, &c);
 }
 
 static void s_heartbeat(s_ctx *x, int64_t now)
@@ -423,6 +618,11 @@ static void s_heartbeat(s_ctx *x, int64_t now)
     json_object_set_new(j, "worst_late_ns", json_integer((json_int_t)atomic_load(&sh->worst_late_ns)));
     json_object_set_new(j, "dropped", json_integer((json_int_t)atomic_load(&sh->dropped)));
     json_object_set_new(j, "uptime_s", json_real((double)(now - x->t_boot) / 1e9));
+    json_object_set_new(j, "campaign", x->camp ? json_pack("{s:I,s:I,s:I}", "campaign_id",
+                                                           (json_int_t)x->camp->campaign_id, "curves_done",
+                                                           (json_int_t)x->camp->done, "curves",
+                                                           (json_int_t)x->camp->total)
+                                               : json_null());
     s_send_json(x, "heartbeat", j);
 }
 
@@ -459,14 +659,19 @@ void *vafmd_sim_main(void *arg)
             if (c.type == VAFMD_SIM_START) {
                 if (x->run.active) /* the control thread prevents this; never leak the run either way */
                     s_run_end(x, "aborted", VAFM_EABORT);
-                s_run_start(x, &c);
-            } else if (c.type == VAFMD_SIM_ABORT) {
+                s_camp_end(x, "aborted", NULL, 0);
+                if (c.camp) { /* a campaign: its first curve starts here, the others as each one ends */
+                    x->camp = c.camp;
+                    atomic_store_explicit(&x->d->sh.camp_id, c.camp->campaign_id, memory_order_relaxed);
+                    atomic_store_explicit(&x->d->sh.camp_done, 0, memory_order_relaxed);
+                    s_camp_next(x);
+                } else
+                    s_run_start(x, &c);
+            } else if (c.type == VAFMD_SIM_ABORT || c.type == VAFMD_SIM_QUIT) {
                 if (x->run.active)
-                    s_run_end(x, "aborted", 0);
-            } else if (c.type == VAFMD_SIM_QUIT) {
-                if (x->run.active)
-                    s_run_end(x, "aborted", 0);
-                quit = 1;
+                    s_run_end(x, "aborted", 0); /* ends its campaign too */
+                s_camp_end(x, "aborted", NULL, 1);
+                quit = c.type == VAFMD_SIM_QUIT;
             }
         }
         if (quit)
@@ -479,6 +684,8 @@ void *vafmd_sim_main(void *arg)
             if (next_hb < now) /* after a long stall: keep the 1 Hz grid, skip the missed beats */
                 next_hb = now + S_NS - (now - next_hb) % S_NS;
         }
+        if (!x->run.active && x->camp) /* a campaign goes on by itself */
+            s_camp_next(x);
         if (x->run.active)
             s_run_block(x);
         else

@@ -280,15 +280,37 @@ class Stream:
                 if self.last_seq is None or h.seq > self.last_seq:
                     self.last_seq = h.seq
                 yield topic, (h, chans, gap)
-            elif topic in ("run.start", "run.end", "event", "heartbeat"):
+            elif topic in ("run.start", "run.end", "event", "heartbeat", "campaign.end"):
                 yield topic, json.loads(parts[1])
             # other topics: ignored (wire.md §6)
 
     def runs(self, timeout=None, include_partial=False, deadline=None):
         """Yield each Run at its run.end. Runs joined mid-way (no run.start seen) are skipped unless
         include_partial. `timeout`, `deadline` as for messages()."""
+        for kind, x in self._runs_and(timeout, include_partial, deadline):
+            if kind == "run":
+                yield x
+
+    def campaign(self, campaign_id, timeout=None, strict=True):
+        """Collect the runs of campaign `campaign_id` (run.start's "campaign" object names it) up to its
+        campaign.end, waiting at most `timeout` seconds in all. Returns (runs in arrival order, campaign.end).
+        With strict, raise GapError if a block of one of its runs was lost."""
+        timeout = self.timeout if timeout is None else timeout
+        runs = []
+        for kind, x in self._runs_and(timeout, False, time.monotonic() + timeout):
+            if kind == "run" and (x.start.get("campaign") or {}).get("campaign_id") == campaign_id:
+                if strict and not x.complete:
+                    raise GapError(f"campaign {campaign_id}: run {x.run_id}: {x.gaps} data block(s) lost")
+                runs.append(x)
+            elif kind == "campaign.end" and x.get("campaign_id") == campaign_id:
+                return runs, x
+
+    def _runs_and(self, timeout, include_partial, deadline):
+        """("run", Run) at each run.end and ("campaign.end", message)."""
         for topic, p in self.messages(timeout, deadline):
-            if topic == "data":
+            if topic == "campaign.end":
+                yield topic, p
+            elif topic == "data":
                 h, chans, gap = p
                 run = self._pending.setdefault(h.run_id, Run(h.run_id))
                 run.gaps += gap
@@ -314,7 +336,7 @@ class Stream:
                     if run.start is None and not include_partial:
                         continue
                     run._finish()
-                    yield run
+                    yield "run", run
 
     def run(self, run_id, timeout=None, strict=True):
         """Collect run `run_id` up to its run.end, waiting at most `timeout` seconds (default the stream's)

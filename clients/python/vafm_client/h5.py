@@ -1,0 +1,170 @@
+# SPDX-License-Identifier: MIT
+"""Loader of HDF5 force-curve files in afmformats' layout (protocol/hdf5.md), with h5py.
+
+    from vafm_client import load_h5
+    f = load_h5("curves.h5")
+    for c in f.curves:                  # Curve: channels as numpy arrays, metadata, ground truth
+        F, z = c["force"], c["height (piezo)"]
+        print(c.group, c.meta["spring constant"], c.truth and c.truth["pulloff_spring_N"])
+    print(f.is_vafm, f.scene["k_N_per_m"], f.seed, f.grid)
+
+Any file of the layout loads (vafm's, afmformats' exports, instrument conversions: `time` and
+`tip position` may be absent); vafm's provenance (scene, grid, seed, ground truth) is read when present.
+A file that breaks the layout's structure (root objects that are not curve groups named 0..n-1, a curve
+without force/heights/segment, channels of different lengths, an imaging mode other than
+force-distance) raises ValueError naming the file, the object and the rule (protocol/hdf5.md L4-L10).
+"""
+import json
+
+import numpy as np
+
+CHANNELS = ("force", "height (measured)", "height (piezo)", "segment", "time", "tip position")
+REQUIRED = ("force", "height (measured)", "height (piezo)", "segment")
+TRUTH = "vafm ground truth"
+
+
+def _str(v):
+    if isinstance(v, bytes):
+        return v.decode("utf-8", "replace")
+    if isinstance(v, np.ndarray) and v.shape == ():
+        return _str(v[()])
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+class Curve:
+    """One curve group: `channels` {name: numpy array} (the datasets present, SI; force positive
+    repulsive, heights decreasing toward the sample), `meta` {attribute: value} (afmformats' names:
+    "spring constant", "rate approach", ...), `units` {name: unit}, `group` (its number) and `truth`
+    (vafm's ground-truth row as a dict, or None)."""
+
+    def __init__(self, group, channels, units, meta, truth=None):
+        self.group, self.channels, self.units, self.meta, self.truth = group, channels, units, meta, truth
+
+    def __getitem__(self, name):
+        return self.channels[name]
+
+    def __contains__(self, name):
+        return name in self.channels
+
+    def __len__(self):
+        return len(self.channels["force"])
+
+    @property
+    def force(self):
+        return self.channels["force"]
+
+    @property
+    def height(self):
+        return self.channels["height (piezo)"]
+
+    @property
+    def segment(self):
+        return self.channels["segment"]
+
+    @property
+    def time(self):
+        """Seconds from the start of the curve, or None (optional in the layout)."""
+        return self.channels.get("time")
+
+    @property
+    def approach(self):
+        """Boolean mask of the approach samples (segment 0)."""
+        return self.segment == 0
+
+    @property
+    def retract(self):
+        """Boolean mask of the retract samples (segment 1)."""
+        return self.segment == 1
+
+    def __repr__(self):
+        return f"<Curve {self.group}: {len(self)} samples, channels {sorted(self.channels)}>"
+
+
+class H5File:
+    """A loaded file: `curves` (list of Curve, in group order), `software`, `software_version`, `attrs`
+    (every root attribute), and for vafm files (`is_vafm`) `format_version`, `scene` (dict), `grid`
+    (dict), `seed`, `created` and `truth` (the ground-truth table as a numpy structured array, one row per
+    curve, or None)."""
+
+    def __init__(self, path, curves, attrs, truth):
+        self.path, self.curves, self.attrs, self.truth = path, curves, attrs, truth
+        self.software = attrs.get("software")
+        self.software_version = attrs.get("software version")
+        self.format_version = attrs.get("vafm format version")
+        self.is_vafm = self.format_version is not None
+        self.scene = json.loads(attrs["vafm scene"]) if "vafm scene" in attrs else None
+        self.grid = json.loads(attrs["vafm grid"]) if "vafm grid" in attrs else None
+        self.seed = int(attrs["vafm seed"]) if "vafm seed" in attrs else None
+        self.created = attrs.get("vafm created")
+
+    def __len__(self):
+        return len(self.curves)
+
+    def __getitem__(self, i):
+        return self.curves[i]
+
+    def __iter__(self):
+        return iter(self.curves)
+
+    def __repr__(self):
+        return f"<H5File {self.path}: {len(self.curves)} curve(s), software {self.software}>"
+
+
+def _bad(path, obj, rule, what):
+    return ValueError(f"[{rule}] {path}: {obj}: {what}")
+
+
+def _truth_table(root):
+    """The merged table plus any per-flush parts a killed writer left ("vafm ground truth from <i>")."""
+    parts = []
+    if TRUTH in root.attrs:
+        parts.append(np.asarray(root.attrs[TRUTH]))
+    for name in sorted((n for n in root.attrs if n.startswith(TRUTH + " from ")),
+                       key=lambda n: int(n.rsplit(" ", 1)[1])):
+        parts.append(np.asarray(root.attrs[name]))
+    if not parts:
+        return None
+    t = np.concatenate([p.reshape(-1) for p in parts])
+    return t[np.argsort(t["curve"], kind="stable")]
+
+
+def load_h5(path, channels=True):
+    """Load every curve of `path` (channels=False: metadata and ground truth only, no arrays read)."""
+    import h5py  # Debian: python3-h5py; imported here so that the stream client does not need it
+    with h5py.File(path, "r") as root:
+        attrs = {k: _str(v) for k, v in root.attrs.items() if not k.startswith(TRUTH)}
+        for k in ("software", "software version"):
+            if k not in attrs:
+                raise _bad(path, "/", "L3", f"root attribute '{k}' missing")
+        names = list(root.keys())
+        for n in names:
+            if not (n.isdigit() and (n == "0" or not n.startswith("0"))) or not isinstance(root[n], h5py.Group):
+                raise _bad(path, f"/{n}", "L4", "the root holds only curve groups named 0, 1, 2, ...")
+        groups = sorted(int(n) for n in names)
+        if groups != list(range(len(groups))):
+            raise _bad(path, "/", "L4", "curve groups are not numbered 0..n-1 without gaps")
+        truth = _truth_table(root)
+        rows = {int(r["curve"]): r for r in truth} if truth is not None else {}
+        curves = []
+        for g in groups:
+            grp = root[str(g)]
+            for n in grp:
+                if n not in CHANNELS:
+                    raise _bad(path, f"/{g}/{n}", "L5", "not a dataset name of the layout")
+            for n in REQUIRED:
+                if n not in grp:
+                    raise _bad(path, f"/{g}", "L6", f"dataset '{n}' missing")
+            meta = {k: _str(v) for k, v in grp.attrs.items()}
+            if meta.get("imaging mode") != "force-distance":
+                raise _bad(path, f"/{g}", "L10", f"imaging mode is {meta.get('imaging mode')!r}, not force-distance")
+            units = {n: _str(grp[n].attrs.get("unit")) for n in grp}
+            lengths = {n: grp[n].shape for n in grp}
+            if len(set(lengths.values())) != 1 or len(next(iter(lengths.values()))) != 1:
+                raise _bad(path, f"/{g}", "L7", f"datasets are not 1-D of one length: {lengths}")
+            chans = {n: grp[n][()] for n in grp} if channels else {}
+            row = rows.get(g)
+            t = {k: _str(row[k]) for k in row.dtype.names} if row is not None else None
+            curves.append(Curve(g, chans, units, meta, t))
+    return H5File(path, curves, attrs, truth)

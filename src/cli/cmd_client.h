@@ -1,0 +1,8 @@
+/* SPDX-License-Identifier: MIT */
+/* `vafm ctl`, `vafm status`, `vafm listen`: the CLI as a client of vafmd (cmd_client.c; rows in cli_ext.c). */
+#ifndef VAFM_CLI_CMD_CLIENT_H
+#define VAFM_CLI_CMD_CLIENT_H
+int vafm_cli_ctl(int argc, char **argv);
+int vafm_cli_status(int argc, char **argv);
+int vafm_cli_listen(int argc, char **argv);
+#endif

@@ -1,0 +1,233 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * vafm_campaign_run_source (the hook MPI campaigns use): a campaign over the indices a source hands
+ * out, in any order, must deliver exactly those curves, in the source's order, one at a time, each
+ * bit-identical (result and every sample) to the same index computed alone with vafm_sim_curve on the
+ * point's scene, for any thread count; the source is never called concurrently and may block; its
+ * error, an index out of range and a stopping callback end the campaign with the documented codes.
+ * Deterministic: no statistics.
+ */
+#include <stdint.h>
+#include <string.h>
+#include <time.h>
+
+#include "harness.h"
+#include "vafm/campaign.h"
+#include "vafm/params.h"
+#include "vafm/sim.h"
+
+#define T_N 6       /* curves per point */
+#define T_TOTAL 12  /* two points */
+
+static uint64_t t_fnv(uint64_t h, const void *p, size_t n)
+{
+    const unsigned char *b = p;
+    for (size_t i = 0; i < n; i++)
+        h = (h ^ b[i]) * 1099511628211ULL;
+    return h;
+}
+
+static uint64_t t_hash_samples(const vafm_samples *s)
+{
+    uint64_t h = 1469598103934665603ULL;
+    const double *ch[5] = { s->time_s, s->height_m, s->deflection_m, s->force_N, s->tip_m };
+    for (int i = 0; i < 5; i++)
+        h = t_fnv(h, ch[i], s->n * sizeof(double));
+    return t_fnv(h, s->segment, s->n);
+}
+
+/* The reference: one curve alone, with the library's single-curve API (samples collected whole). */
+/* Field by field, bit for bit (NaN equals NaN; padding ignored). */
+static int t_same(const vafm_curve_result *a, const vafm_curve_result *b)
+{
+    const double da[] = { a->pulloff_sampled_N, a->pulloff_spring_N, a->detach_force_N, a->detach_height_m,
+                          a->detach_eq_force_N, a->detach_time_s, a->touch_time_s, a->touch_height_m,
+                          a->retract_start_s, a->duration_s };
+    const double db[] = { b->pulloff_sampled_N, b->pulloff_spring_N, b->detach_force_N, b->detach_height_m,
+                          b->detach_eq_force_N, b->detach_time_s, b->touch_time_s, b->touch_height_m,
+                          b->retract_start_s, b->duration_s };
+    return a->index == b->index && a->flags == b->flags && a->samples == b->samples && a->steps == b->steps &&
+           a->steps_contact == b->steps_contact && a->steps_free == b->steps_free && !memcmp(da, db, sizeof da);
+}
+
+typedef struct t_buf {
+    size_t n, cap;
+    double *c[5];
+    uint8_t *seg;
+} t_buf;
+
+static int t_collect(void *user, const vafm_samples *b)
+{
+    t_buf *t = user;
+    if (t->n + b->n > t->cap) {
+        size_t cap = t->cap ? t->cap * 2 : 4096;
+        while (cap < t->n + b->n)
+            cap *= 2;
+        for (int i = 0; i < 5; i++)
+            t->c[i] = realloc(t->c[i], cap * sizeof(double));
+        t->seg = realloc(t->seg, cap);
+        t->cap = cap;
+    }
+    const double *src[5] = { b->time_s, b->height_m, b->deflection_m, b->force_N, b->tip_m };
+    for (int i = 0; i < 5; i++)
+        memcpy(t->c[i] + t->n, src[i], b->n * sizeof(double));
+    memcpy(t->seg + t->n, b->segment, b->n);
+    t->n += b->n;
+    return 0;
+}
+
+static vafm_params t_base;
+static double t_v[2];
+static vafm_campaign_spec t_spec;
+static vafm_curve_result t_ref[T_TOTAL];
+static uint64_t t_ref_hash[T_TOTAL];
+
+static void t_setup(void)
+{
+    vafm_error err = { 0 };
+    ENSURE(vafm_params_preset(&t_base, "paper-fig4", &err) == 0);
+    /* fast ramps: ~1 ms per curve; two speeds so workers switch scenes */
+    t_v[0] = 6.4e-4;
+    t_v[1] = 1.28e-3;
+    memset(&t_spec, 0, sizeof t_spec);
+    t_spec.v_m_per_s = t_v;
+    t_spec.n_v = 2;
+    t_spec.curves_per_point = T_N;
+    t_spec.keep_samples = 1;
+    for (uint64_t i = 0; i < T_TOTAL; i++) {
+        vafm_params pp;
+        ENSURE(vafm_campaign_point_params(&t_base, &t_spec, (size_t)(i / T_N), &pp) == 0);
+        vafm_sim *s = NULL;
+        ENSURE(vafm_sim_new(&s, &pp, &err) == 0);
+        t_buf b = { 0 };
+        ENSURE(s && vafm_sim_curve(s, i, t_collect, &b, &t_ref[i]) == 0);
+        vafm_samples all = { b.n, 0, b.c[0], b.c[1], b.c[2], b.c[3], b.c[4], b.seg };
+        t_ref_hash[i] = t_hash_samples(&all);
+        for (int c = 0; c < 5; c++)
+            free(b.c[c]);
+        free(b.seg);
+        vafm_sim_destroy(&s);
+    }
+    /* the curves differ from one another, so comparing them means something */
+    ENSURE(t_ref_hash[0] != t_ref_hash[1] && t_ref_hash[0] != t_ref_hash[T_N] && t_ref[0].samples > 100);
+    ENSURE(!t_same(&t_ref[0], &t_ref[1]));
+}
+
+/* A source over a fixed list; sleeps a little to look like a network round trip. */
+typedef struct t_src {
+    const uint64_t *list;
+    size_t n, pos;
+    int inside, overlap;
+    int fail_after;      /* >0: return VAFM_EIO after this many indices */
+    uint64_t bad_index;  /* != 0: hand out this index first */
+} t_src;
+
+static int t_source(void *user, uint64_t *index)
+{
+    t_src *s = user;
+    if (__atomic_fetch_add(&s->inside, 1, __ATOMIC_SEQ_CST) != 0)
+        s->overlap = 1;
+    struct timespec ts = { 0, 200000 };
+    nanosleep(&ts, NULL);
+    int r;
+    if (s->bad_index) {
+        *index = s->bad_index;
+        s->bad_index = 0;
+        r = 1;
+    } else if (s->fail_after > 0 && s->pos == (size_t)s->fail_after) {
+        r = VAFM_EIO;
+    } else if (s->pos < s->n) {
+        *index = s->list[s->pos++];
+        r = 1;
+    } else {
+        r = 0;
+    }
+    __atomic_fetch_sub(&s->inside, 1, __ATOMIC_SEQ_CST);
+    return r;
+}
+
+typedef struct t_got {
+    uint64_t idx[T_TOTAL * 2];
+    size_t n;
+    int bad_point, bad_curve, stop_at;
+} t_got;
+
+static int t_deliver(void *user, const vafm_campaign_curve *c)
+{
+    t_got *g = user;
+    if (g->n < T_TOTAL * 2)
+        g->idx[g->n] = c->index;
+    g->n++;
+    if (c->point != c->index / T_N || c->params->v_retract_m_per_s != t_v[c->point])
+        g->bad_point = 1;
+    if (c->index >= T_TOTAL || c->status || !t_same(&c->result, &t_ref[c->index]) ||
+        t_hash_samples(&c->samples) != t_ref_hash[c->index])
+        g->bad_curve = 1;
+    return g->stop_at && g->n >= (size_t)g->stop_at;
+}
+
+static void test_source_order_and_identity(void)
+{
+    /* out of order, with gaps (7 of 12 indices), across both points */
+    static const uint64_t list[] = { 11, 2, 9, 0, 5, 6, 3 };
+    const size_t n = sizeof list / sizeof list[0];
+    const int threads[3] = { 1, 2, 3 };
+    for (int k = 0; k < 3; k++) {
+        vafm_campaign_spec sp = t_spec;
+        sp.threads = threads[k];
+        sp.first_curve = 4; /* ignored with a source */
+        t_src src = { list, n, 0, 0, 0, 0, 0 };
+        t_got got;
+        memset(&got, 0, sizeof got);
+        vafm_error err = { 0 };
+        ENSURE_MSG(vafm_campaign_run_source(&t_base, &sp, t_source, &src, t_deliver, &got, &err) == 0, "%s",
+                   err.message);
+        ENSURE_MSG(got.n == n, "threads %d: %zu curves delivered, want %zu", threads[k], got.n, n);
+        for (size_t i = 0; i < n && i < got.n; i++)
+            ENSURE_MSG(got.idx[i] == list[i], "threads %d: curve %zu is index %llu, want %llu", threads[k], i,
+                       (unsigned long long)got.idx[i], (unsigned long long)list[i]);
+        ENSURE(!got.bad_point);
+        ENSURE_MSG(!got.bad_curve, "threads %d: a curve differs from the same index run alone", threads[k]);
+        ENSURE(!src.overlap);
+    }
+}
+
+static void test_source_errors(void)
+{
+    static const uint64_t list[] = { 0, 1, 2, 3, 4, 5, 6, 7 };
+    /* the source's error stops the campaign with that error; the curves handed out before are delivered */
+    t_src src = { list, 8, 0, 0, 0, 3, 0 };
+    t_got got;
+    memset(&got, 0, sizeof got);
+    vafm_campaign_spec sp = t_spec;
+    sp.threads = 2;
+    ENSURE(vafm_campaign_run_source(&t_base, &sp, t_source, &src, t_deliver, &got, NULL) == VAFM_EIO);
+    ENSURE(got.n == 3 && !got.bad_curve);
+
+    /* an index beyond the campaign is refused */
+    t_src bad = { list, 8, 0, 0, 0, 0, T_TOTAL };
+    memset(&got, 0, sizeof got);
+    ENSURE(vafm_campaign_run_source(&t_base, &sp, t_source, &bad, t_deliver, &got, NULL) == VAFM_EINVAL);
+    ENSURE(got.n == 0);
+
+    /* a callback that stops: VAFM_EABORT, nothing delivered after it */
+    t_src all = { list, 8, 0, 0, 0, 0, 0 };
+    memset(&got, 0, sizeof got);
+    got.stop_at = 2;
+    ENSURE(vafm_campaign_run_source(&t_base, &sp, t_source, &all, t_deliver, &got, NULL) == VAFM_EABORT);
+    ENSURE(got.n == 2);
+
+    /* source NULL is vafm_campaign_run: every index from first_curve, in order */
+    memset(&got, 0, sizeof got);
+    sp.first_curve = 7;
+    ENSURE(vafm_campaign_run_source(&t_base, &sp, NULL, NULL, t_deliver, &got, NULL) == 0);
+    ENSURE(got.n == T_TOTAL - 7 && got.idx[0] == 7 && got.idx[got.n - 1] == T_TOTAL - 1 && !got.bad_curve);
+}
+
+int main(void)
+{
+    t_setup();
+    RUN_TEST(test_source_order_and_identity);
+    RUN_TEST(test_source_errors);
+    return harness_done();
+}
