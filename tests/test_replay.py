@@ -586,3 +586,52 @@ def test_cli_replay_end_to_end(fig4, tmp_path):
     for args in ([], ["a.h5", "--speed", "fast"], ["a.h5", "--bogus"], ["a.h5", "b.h5"]):
         p = subprocess.run([VAFM_CLI, "replay", *args], capture_output=True, text=True, timeout=60)
         assert p.returncode == 2 and "usage" in p.stderr, (args, p)
+
+
+@pytest.mark.skipif(not VAFM_CLI, reason="set VAFM_CLI to the vafm executable")
+def test_cli_listen_records_a_replay_to_csv(tmp_path):
+    """`vafm listen` records a replay of an instrument file: the channels the file lacks (tip position)
+    are empty cells, the others equal the file's values bit for bit (%.17g round-trips a double), and the
+    time column is the file's own (non-uniform here)."""
+    path = tmp_path / "inst.h5"
+    rng = np.random.default_rng(11)
+    k, sens = 0.05, 40e-9
+    ch = instrument_curve(rng, 300, 200, k)
+    t = np.cumsum(rng.uniform(0.5e-4, 1.5e-4, 500))
+    t -= t[0]  # hdf5.md L13: starts at 0, strictly increasing
+    ch["time"] = t
+    with h5py.File(path, "w") as f:
+        f.attrs["software"], f.attrs["software version"] = "an instrument", "1.0"
+        write_curve(f, 0, ch, {"imaging mode": "force-distance", "spring constant": k, "sensitivity": sens})
+    d = Daemon("--free-run")
+    out = tmp_path / "rec.csv"
+    listen = subprocess.Popen([VAFM_CLI, "listen", "--endpoint", d.rep, "--pub", d.pub, "--out", str(out)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        t_end = time.monotonic() + 20
+        line = ""
+        while "subscribed" not in line:  # the subscription is in place once listen says so
+            assert time.monotonic() < t_end and listen.poll() is None, listen.communicate()
+            line = listen.stderr.readline()
+        time.sleep(0.2)  # its XPUB subscription reaches the daemon
+        r = d.cmd({"cmd": "replay", "path": str(path)})
+        assert r["status"] == "ok", r
+        _, err = listen.communicate(timeout=30)
+        assert listen.returncode == 0, err
+    finally:
+        if listen.poll() is None:
+            listen.kill()
+        assert d.stop() == 0
+    rows = out.read_text().splitlines()
+    assert rows[0] == "time_s,height_m,deflection_m,force_N,tip_m,segment,vDeflection_V,run_id"
+    cells = [row.split(",") for row in rows[1:]]
+    assert len(cells) == 500
+    col = {name: i for i, name in enumerate(rows[0].split(","))}
+    num = lambda name: np.array([float(c[col[name]]) for c in cells])  # noqa: E731
+    assert all(c[col["tip_m"]] == "" for c in cells)  # absent from the file, so from the stream
+    assert np.array_equal(bits(num("time_s")), bits(t))
+    assert np.array_equal(bits(num("force_N")), bits(ch["force"]))
+    assert np.array_equal(bits(num("height_m")), bits(ch["height (piezo)"]))
+    assert np.array_equal(bits(num("deflection_m")), bits(ch["force"] / k))
+    assert np.array_equal(bits(num("vDeflection_V")), bits(ch["force"] / k / sens))
+    assert [int(c[col["segment"]]) for c in cells] == list(ch["segment"])

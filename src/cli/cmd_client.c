@@ -502,6 +502,8 @@ static const char *s_listen_usage =
     "                     run's scene as provenance, its curve result as ground truth; tunes are not\n"
     "                     written there); anything else: CSV (default '-': stdout) with the columns of\n"
     "                     `vafm samples` (protocol/csv.md) plus vDeflection_V and run_id, every run\n"
+    "                     (a replay: the file's time column if it has one; cells of channels the file\n"
+    "                     lacks are empty)\n"
     "  --runs N           stop after N complete runs (default 1; 0: until SIGINT/SIGTERM)\n"
     "  --start KIND       after subscribing, start one run (curve or tune) and record it\n"
     "  --index I          with --start: the run's random stream index (default 0)\n"
@@ -523,7 +525,8 @@ static const char *const s_chan_names[S_NCH] = {"height_m", "deflection_m", "for
 typedef struct s_run {
     int64_t run_id;        /* -1: none in progress */
     int active, skip;      /* skip: joined mid-run, or failed */
-    int map[S_NCH];        /* stream channel of each column */
+    int map[S_NCH];        /* stream channel of each column, -1: absent (a replay of a file without it) */
+    int map_time;          /* stream channel "time_s" (replays of files with a time column), or -1 */
     json_t *start;         /* run.start */
     double fs, t_off;
     uint64_t gaps;
@@ -617,12 +620,23 @@ static void s_result_from_json(json_t *j, vafm_curve_result *r)
     r->steps_free = s_ju64(j, "steps_free");
 }
 
+/* One CSV cell: empty where the run has no such channel (protocol/csv.md), else %.17g (round trip). */
+static int s_csv_cell(FILE *f, const s_run *r, int k, size_t i)
+{
+    return r->map[k] < 0 ? 0 : fprintf(f, "%.17g", r->col[k][i]);
+}
+
 static int s_write_csv(s_listen *L, const s_run *r)
 {
     int bad = 0;
-    for (size_t i = 0; i < r->n && !bad; i++)
-        bad = fprintf(L->csv, "%.17g,%.17g,%.17g,%.17g,%.17g,%u,%.17g,%" PRId64 "\n", r->time_s[i], r->col[0][i],
-                      r->col[1][i], r->col[2][i], r->col[4][i], (unsigned)r->seg[i], r->col[3][i], r->run_id) < 0;
+    static const int order[4] = { 0, 1, 2, 4 }; /* height, deflection, force, tip; then segment, vDeflection */
+    for (size_t i = 0; i < r->n && !bad; i++) {
+        bad |= fprintf(L->csv, "%.17g", r->time_s[i]) < 0;
+        for (int c = 0; c < 4; c++)
+            bad |= fputc(',', L->csv) == EOF || s_csv_cell(L->csv, r, order[c], i) < 0;
+        bad |= fprintf(L->csv, ",%u,", (unsigned)r->seg[i]) < 0 || s_csv_cell(L->csv, r, 3, i) < 0;
+        bad |= fprintf(L->csv, ",%" PRId64 "\n", r->run_id) < 0;
+    }
     bad |= fflush(L->csv) != 0;
     if (bad)
         s_err(L->x, "writing '%s' failed", L->out);
@@ -721,6 +735,13 @@ static int s_run_end(s_listen *L, s_run *r, const vafm_client_msg *m)
     return rc;
 }
 
+/* The run's kind from its run.start ("curve", "tune", "replay"), "" if unknown. */
+static const char *s_run_kind(const s_run *r)
+{
+    const char *k = json_string_value(json_object_get(r->start, "kind"));
+    return k ? k : "";
+}
+
 /* run.start of a run: begin recording it (unless it started before we subscribed). */
 static int s_run_start(s_listen *L, s_run *r, const vafm_client_msg *m)
 {
@@ -732,12 +753,18 @@ static int s_run_start(s_listen *L, s_run *r, const vafm_client_msg *m)
     /* the time `vafm samples` prints: the centre of the interval with antialias=mean, its end with point */
     const char *aa = json_string_value(json_object_get(json_object_get(r->start, "scene"), "antialias"));
     r->t_off = aa && !strcmp(aa, "point") ? 1.0 : 0.5;
+    r->map_time = -1;
+    for (size_t i = 0; i < m->n_channel_names; i++)
+        if (!strcmp(m->channel_names[i], "time_s"))
+            r->map_time = (int)i;
     for (int k = 0; k < S_NCH; k++) {
         r->map[k] = -1;
         for (size_t i = 0; i < m->n_channel_names; i++)
             if (!strcmp(m->channel_names[i], s_chan_names[k]))
                 r->map[k] = (int)i;
-        if (r->map[k] < 0) {
+        /* live runs stream all five; a replay streams what its file has (wire.md, replay), at least
+         * height and force */
+        if (r->map[k] < 0 && (k == 0 || k == 2 || strcmp(s_run_kind(r), "replay"))) {
             s_err(L->x, "run %" PRId64 ": the stream has no channel %s", r->run_id, s_chan_names[k]);
             r->skip = 1;
             return S_RUNTIME;
@@ -771,15 +798,23 @@ static int s_run_data(s_listen *L, s_run *r, const vafm_client_msg *m)
         return S_RUNTIME;
     }
     for (int k = 0; k < S_NCH; k++) {
+        if (r->map[k] < 0) { /* absent from this replay: NaN here, an empty CSV cell */
+            for (size_t i = 0; i < h->n_samples; i++)
+                r->col[k][r->n + i] = NAN;
+            continue;
+        }
         if ((size_t)r->map[k] >= m->n_channels) {
             s_err(L->x, "run %" PRId64 ": data block without channel %s", r->run_id, s_chan_names[k]);
             return S_RUNTIME;
         }
         memcpy(r->col[k] + r->n, m->channels[r->map[k]], h->n_samples * sizeof(double));
     }
+    if (r->map_time >= 0 && (size_t)r->map_time < m->n_channels) /* a replay's recorded times */
+        memcpy(r->time_s + r->n, m->channels[r->map_time], h->n_samples * sizeof(double));
     for (size_t i = 0; i < h->n_samples; i++) {
         r->seg[r->n + i] = (uint8_t)h->segment;
-        r->time_s[r->n + i] = ((double)(r->n + i) + r->t_off) / r->fs;
+        if (r->map_time < 0)
+            r->time_s[r->n + i] = ((double)(r->n + i) + r->t_off) / r->fs;
     }
     r->n += h->n_samples;
     return 0;
