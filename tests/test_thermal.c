@@ -830,6 +830,97 @@ done:
     free(tr.x);
 }
 
+/* ---- 4b. box-car samples of the exact free propagation ---------------------------------------- */
+
+/* Autocovariance of the free cantilever's position (units of kT/k) at lag τ, s: the damped oscillator
+ * (underdamped: ω0 > η/2) or, overdamped (Brownian, ζ = mη), e^{−(k/ζ)|τ|}. */
+static double s_cov_free(double w0, double eta, int overdamped, double tau)
+{
+    tau = fabs(tau);
+    if (overdamped)
+        return exp(-w0 * w0 / eta * tau);
+    const double w1 = sqrt(w0 * w0 - 0.25 * eta * eta);
+    return exp(-0.5 * eta * tau) * (cos(w1 * tau) + 0.5 * eta / w1 * sin(w1 * tau));
+}
+
+/* Covariance of two box-car means over [0, Ts] and [jTs, (j+1)Ts]: ∫ (1 − |s|/Ts)/Ts C(jTs + s) ds
+ * over |s| < Ts (composite Simpson on each half, where C is smooth; 4000 panels: error < 1e-12). */
+static double s_cov_boxcar(double w0, double eta, int overdamped, double Ts, int j)
+{
+    const int n = 4000;
+    double sum = 0.0;
+    for (int half = -1; half <= 1; half += 2) {
+        const double h = Ts / n;
+        double acc = 0.0;
+        for (int i = 0; i <= n; i++) {
+            const double sv = half * h * i;
+            const double f = (1.0 - fabs(sv) / Ts) / Ts * s_cov_free(w0, eta, overdamped, j * Ts + sv);
+            acc += f * (i == 0 || i == n ? 1.0 : (i % 2 ? 4.0 : 2.0));
+        }
+        sum += acc * h / 3.0;
+    }
+    return sum;
+}
+
+/* With antialias = mean a sample is the time average of the path over its interval; the exact free
+ * propagation takes few long steps per sample where the sample rate is high (here 2, Brownian 1), so
+ * each step must carry the exact integral of the path (free_ou.c), not its end value. Checked on
+ * the variances of x and of its first and second differences, whose expectations follow from the
+ * box-car-averaged autocovariance Γ_j (closed-form C(τ), quadrature above): Var x = Γ0,
+ * Var Δx = 2(Γ0 − Γ1), Var Δ²x = 6Γ0 − 8Γ1 + 2Γ2. The second difference weighs the spectrum near fs/2,
+ * where averaging the end values of two steps instead of the path leaves 5% more (Brownian, one step
+ * per sample: 26% more). Lever f0 = 10 kHz, Q = 0.63 (the paper-fig1 lever's Q), fs = 25 f0.
+ * N = 2^20 samples (2^18 short), 100 blocks: σ ≈ 0.2–0.5% (double short); each at 5σ. */
+static void test_boxcar_exact(void)
+{
+    const size_t n = LONG_OR((size_t)1 << 20, (size_t)1 << 18);
+    for (int od = 0; od < 2; od++) {
+        vafm_params p;
+        s_lever(&p);
+        const double w0 = 2.0 * S_PI * S_F0, eta = w0 / 0.63;
+        p.eta_per_s = eta;
+        p.sample_rate_Hz = 25.0 * S_F0;
+        p.antialias = VAFM_ANTIALIAS_MEAN;
+        p.free_exact = 1;
+        p.seed = 611 + (uint64_t)od;
+        if (od)
+            p.integrator = vafm_integrator_brownian;
+        s_trace tr = { 0 };
+        int r = s_tune(&p, n, &tr);
+        ENSURE(r == 0 && tr.n == n);
+        if (r || tr.n != n) {
+            free(tr.x);
+            continue;
+        }
+        const double var = VAFM_KB_J_PER_K * p.T_K / p.k_N_per_m, Ts = 1.0 / p.sample_rate_Hz;
+        double mean = 0.0;
+        for (size_t i = 0; i < n; i++)
+            mean += tr.x[i] / (double)n;
+        for (size_t i = 0; i < n; i++)
+            tr.x[i] = (tr.x[i] - mean) / sqrt(var);
+        double g[3];
+        for (int j = 0; j < 3; j++)
+            g[j] = s_cov_boxcar(w0, eta, od, Ts, j);
+        const double want[3] = { g[0], 2.0 * (g[0] - g[1]), 6.0 * g[0] - 8.0 * g[1] + 2.0 * g[2] };
+        double got[3], se[3];
+        for (int d = 0; d < 3; d++) {
+            s_acc a;
+            s_acc_init(&a, (long)(n - 2));
+            for (size_t i = 2; i < n; i++) {
+                const double v = d == 0 ? tr.x[i] : d == 1 ? tr.x[i] - tr.x[i - 1]
+                                                            : tr.x[i] - 2.0 * tr.x[i - 1] + tr.x[i - 2];
+                s_acc_push(&a, v * v);
+            }
+            s_acc_result(&a, &got[d], &se[d]);
+            fprintf(stderr, "  boxcar %s: Var %s = %.5f +- %.5f (theory %.5f)\n", od ? "brownian" : "langevin",
+                    d == 0 ? "x  " : d == 1 ? "dx " : "d2x", got[d], se[d], want[d]);
+            ENSURE_MSG(fabs(got[d] - want[d]) < 5.0 * se[d], "%s: Var of difference order %d: %.5f vs %.5f (se %.5f)",
+                       od ? "brownian" : "langevin", d, got[d], want[d], se[d]);
+        }
+        free(tr.x);
+    }
+}
+
 /* ---- 5. exact free propagation vs plain small steps ------------------------------------------- */
 
 /* The SI lever's tune with free_exact = 1 against gjf at a small step (ω0 dt = 0.05, 16 steps per
@@ -971,6 +1062,7 @@ int main(void)
     RUN_TEST(test_paper_vv);
     RUN_TEST(test_brownian_euler);
     RUN_TEST(test_psd);
+    RUN_TEST(test_boxcar_exact);
     RUN_TEST(test_exact_vs_steps);
     RUN_TEST(test_athermal_no_draws);
     return harness_done();

@@ -12,8 +12,10 @@
  * decides where that holds (far from the instability, small excursions) and supplies the centre line.
  */
 #include <math.h>
+#include <string.h>
 
 #include "core/kernel.h"
+#include "core/well_exact.h"
 
 void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int overdamped)
 {
@@ -25,6 +27,7 @@ void vafm_well_ou_setup(vafm_free_ou *o, double m, double stiff, double eta, dou
 {
     o->h = h;
     o->overdamped = overdamped;
+    o->integrate = 0;
     if (overdamped) {
         double rate = stiff / (m * eta);
         o->a = exp(-rate * h);
@@ -68,6 +71,54 @@ void vafm_well_ou_setup(vafm_free_ou *o, double m, double stiff, double eta, dou
     o->l22 = r > 0 ? sqrt(r) : 0.0;
 }
 
+/* g(x) = 2x − 2b − b², b = 1 − e^{−x}: x²·Var(I)/σ²·r²-style combination of the overdamped OU, which
+ * is (2/3)x³ + O(x⁴) and cancels in the direct form for small x: there it comes from d = x − b − x²/2
+ * = Σ_{n≥3} (−x)ⁿ/n! as g = 2d + x³ + 2xd − x⁴/4 − x²d − d² (no cancellation worse than 1/3). */
+static double s_g_overdamped(double x)
+{
+    if (x >= 0.1) {
+        const double b = -expm1(-x);
+        return 2.0 * x - 2.0 * b - b * b;
+    }
+    double d = 0.0, term = x * x / 2.0;
+    for (int n = 3; n <= 30; n++) {
+        term *= -x / n;
+        d += term;
+    }
+    return 2.0 * d + x * x * x + 2.0 * x * d - 0.25 * x * x * x * x - x * x * d - d * d;
+}
+
+void vafm_free_ou_integrate(vafm_free_ou *o, const vafm_kernel *K)
+{
+    const double m = K->m, stiff = K->k, eta = K->co[0].eta_tot, kT = K->kT, h = o->h;
+    memset(o->p3, 0, sizeof o->p3);
+    memset(o->c3, 0, sizeof o->c3);
+    o->integrate = 1;
+    if (o->overdamped) {
+        /* y' = −r y + noise, stationary variance σ² = kT/k. Given y0: E[y1] = a y0, E[I] = (b/r) y0 and
+         * Var y1 = σ²(1 − a²), Cov(y1, I) = σ² b²/r, Var I = σ² g(rh)/r² (a = e^{−rh}, b = 1 − a) */
+        const double r = stiff / (m * eta), x = r * h, s2 = kT / stiff;
+        const double a = exp(-x), b = -expm1(-x);
+        const double v11 = s2 * -expm1(-2.0 * x), v12 = s2 * b * b / r, v22 = s2 * s_g_overdamped(x) / (r * r);
+        o->p3[0][0] = a;
+        o->p3[2][0] = b / r;
+        o->c3[0][0] = v11 > 0 ? sqrt(v11) : 0.0;
+        o->c3[2][0] = o->c3[0][0] > 0 ? v12 / o->c3[0][0] : 0.0;
+        const double rest = v22 - o->c3[2][0] * o->c3[2][0];
+        o->c3[2][2] = rest > 0 ? sqrt(rest) : 0.0;
+        return;
+    }
+    /* the augmented oscillator (y, z, I) through Van Loan's block exponential (well_exact.c) */
+    vafm_well3 W;
+    vafm_well3_setup(&W, stiff / m, eta, 2.0 * eta * kT / m, h);
+    for (int i = 0; i < 3; i++) {
+        o->p3[i][0] = W.phi[i][0];
+        o->p3[i][1] = W.phi[i][1];
+        for (int j = 0; j <= i; j++)
+            o->c3[i][j] = W.chol[i][j];
+    }
+}
+
 void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o)
 {
     vafm_well_ou_step(K, o, K->uspr0, K->v_spr, 0);
@@ -77,8 +128,25 @@ void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double 
 {
     const double tau0 = (double)K->n * K->dt;
     double y = K->u - (c0 + c1 * tau0), z = K->w - c1;
-    double ny, nz;
-    if (o->overdamped) {
+    double ny, nz, nI = 0.0;
+    if (o->integrate) {
+        /* (y, z, I) jointly: the sample mean gets the exact integral of the path over the step */
+        ny = o->p3[0][0] * y + o->p3[0][1] * z;
+        nz = o->p3[1][0] * y + o->p3[1][1] * z;
+        nI = o->p3[2][0] * y + o->p3[2][1] * z;
+        if (K->thermal) {
+            double x1 = vafm_rng_normal_inline(&K->rng), x2 = vafm_rng_normal_inline(&K->rng);
+            if (o->overdamped) {
+                ny += o->c3[0][0] * x1;
+                nI += o->c3[2][0] * x1 + o->c3[2][2] * x2;
+            } else {
+                double x3 = vafm_rng_normal_inline(&K->rng);
+                ny += o->c3[0][0] * x1;
+                nz += o->c3[1][0] * x1 + o->c3[1][1] * x2;
+                nI += o->c3[2][0] * x1 + o->c3[2][1] * x2 + o->c3[2][2] * x3;
+            }
+        }
+    } else if (o->overdamped) {
         ny = o->a * y;
         if (K->thermal)
             ny += o->sd * vafm_rng_normal_inline(&K->rng);
@@ -103,8 +171,14 @@ void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double 
         K->Fc = 0.0;
         K->f = fs;
     }
-    K->acc_u += K->u;
-    K->acc_uspr += K->u_spr;
+    if (o->integrate) { /* the step's time averages: centre line at mid-step plus I/h */
+        const double mid = tau0 + 0.5 * o->h;
+        K->acc_u += c0 + c1 * mid + nI / o->h;
+        K->acc_uspr += K->uspr0 + K->v_spr * mid;
+    } else {
+        K->acc_u += K->u;
+        K->acc_uspr += K->u_spr;
+    }
     K->acc_n++;
     if (fs < K->fs_min)
         K->fs_min = fs;

@@ -180,9 +180,18 @@ typedef struct vafm_free_ou {
     double e11, e12, e21, e22; /* mean propagator of (y, z) = (u − u_spr, w − v_spr) */
     double l11, l21, l22;      /* Cholesky factor of the step covariance */
     double a, sd;              /* overdamped: y' = a·y + sd·ξ */
+    /* Box-car output (antialias = mean): the sample is the time average of u, so each step also draws
+     * I = ∫y dτ over the step, jointly Gaussian with the end state (the right-end value of a few long
+     * steps would filter the samples by the wrong kernel: the PSD tail near fs/2 comes out ~20% high
+     * at two steps per sample). integrate = 1 switches it on (vafm_free_ou_integrate). */
+    int integrate;
+    double p3[3][2];           /* mean propagator of (y, z, I) from (y, z) */
+    double c3[3][3];           /* lower Cholesky factor of their step covariance */
 } vafm_free_ou;
 
 void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int overdamped);
+/** Make the steps of o also integrate y for box-car output samples (3 normals per step instead of 2). */
+void vafm_free_ou_integrate(vafm_free_ou *o, const vafm_kernel *K);
 /** One exact step of length o->h (out of contact, support at constant speed). */
 void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o);
 

@@ -119,6 +119,8 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
         nf = s->nm.n_sub;
     s->n_free = nf < 1 ? 1 : nf;
     vafm_free_ou_setup(&s->ou, K, Ts / (double)s->n_free, s->it->overdamped);
+    if (p->antialias == VAFM_ANTIALIAS_MEAN)
+        vafm_free_ou_integrate(&s->ou, K);
     s->sigma_free = sqrt(rd->kT / rd->k);
     s->adaptive = s->nm.n_sub_far != s->nm.n_sub;
     /* The exact well step costs about as much as a few hundred integrator steps (block exponential,
