@@ -96,6 +96,8 @@ static const char *const s_corpus[] = {
     "{\"cmd\":\"set\",\"preset\":\"paper-fig4\",\"values\":{\"speed\":2,\"free_run\":true,\"block_s\":0.002}}",
     "{\"cmd\":\"set\",\"preset\":\"nope\"}",
     "{\"cmd\":\"set\",\"values\":{\"hwm\":5}}",
+    "{\"cmd\":\"set\",\"values\":{\"lookahead_s\":0.5}}",
+    "{\"cmd\":\"set\",\"values\":{\"lookahead_s\":-1,\"speed\":0}}",
     "{\"cmd\":\"set\",\"values\":{\"dt_s\":1}}",
     "{\"cmd\":\"presets\"}",
     "{\"cmd\":\"curve\",\"index\":3,\"client_run_id\":\"abc\"}",

@@ -935,3 +935,165 @@ def test_log_kill9_loses_at_most_the_curve_in_progress(tmp_path):
             assert np.array_equal(f[str(i)]["force"][:].view(np.uint64),
                                   stream_channel(blocks, "force_N").view(np.uint64))
     vafm_info_ok(path)
+
+
+# ---- compute ahead (lookahead_s; protocol/wire.md §5.1) --------------------------------------------------
+# paper-fig4 computes about as fast as real time (~63 ms of samples per curve at 200 kS/s), so at speed 0.1
+# the simulation runs far ahead of the release and the FIFO matters; these tests check its semantics, not
+# its speed (bench/bench_daemon.py measures that).
+
+def collect_timed(s, run_id, timeout_ms=TIMEOUT_MS):
+    """Like collect_run, with each data block's receive time (time.monotonic_ns: CLOCK_MONOTONIC, the
+    daemon's pacing clock): (start, [(header, channels, t_recv_ns)], events, end)."""
+    start, blocks, events = None, [], []
+    while True:
+        if not s.poll(timeout_ms):
+            raise AssertionError("stream went silent")
+        parts = s.recv_multipart()
+        t = time.monotonic_ns()
+        if parts[0] == b"data":
+            h = HEADER.unpack(parts[1])
+            if h[4] == run_id:
+                blocks.append((h, parts[2:], t))
+        elif parts[0] in (b"run.start", b"run.end", b"event"):
+            j = json.loads(parts[1])
+            if j["run_id"] != run_id:
+                continue
+            if parts[0] == b"run.start":
+                start = start or j
+            elif parts[0] == b"event":
+                events.append(j)
+            else:
+                return start, blocks, events, j
+
+
+def assert_never_early(blocks, t_cmd_ns, speed):
+    """Block b may not be released before t_start + (first + n)/fs/speed, and the daemon takes t_start
+    after it received the command, so t_cmd_ns (taken before sending it) gives a strict lower bound: no
+    tolerance needed. A block released when computed (ahead of its time) fails this by far."""
+    for h, _, t in blocks:
+        due = t_cmd_ns + (h[6] + h[7]) / h[10] / speed * 1e9
+        assert t >= due, f"block {h[5]} received {(due - t) / 1e6:.3f} ms before its deadline"
+
+
+def paced_curve(d, s, index, speed, poll_status=False):
+    """One paced curve: (start, blocks, events, end, highest `queued` seen in status while it ran)."""
+    t_cmd = time.monotonic_ns()
+    r = d.cmd({"cmd": "curve", "index": index})
+    assert r["status"] == "ok", r
+    most = 0
+    if poll_status:
+        while True:
+            st = d.cmd({"cmd": "status"})
+            most = max(most, st["queued"])
+            assert st["queued"] <= st["lookahead_blocks"]
+            if st["state"] == "idle":
+                break
+            time.sleep(0.005)
+    start, blocks, events, end = collect_timed(s, r["run_id"])
+    assert end["status"] == "ok", end  # late blocks possible on a loaded machine: not the subject here
+    assert_never_early(blocks, t_cmd, speed)
+    return start, blocks, events, end, most
+
+
+def test_lookahead_setting_range_and_status(fig4):
+    g = fig4.cmd({"cmd": "get", "names": ["lookahead_s"], "info": True})
+    assert g["values"]["lookahead_s"] == 1.0
+    assert (g["info"]["lookahead_s"]["min"], g["info"]["lookahead_s"]["max"]) == (0, 10)
+    for bad in (-0.1, 10.5, 1e9):
+        error_ok(fig4.cmd({"cmd": "set", "values": {"lookahead_s": bad}}), "out_of_range", "lookahead_s")
+    error_ok(fig4.cmd({"cmd": "set", "values": {"lookahead_s": "1"}}), "wrong_type", "lookahead_s")
+    assert fig4.cmd({"cmd": "get", "names": ["lookahead_s"]})["values"]["lookahead_s"] == 1.0  # unchanged
+    assert fig4.cmd({"cmd": "set", "values": {"lookahead_s": 0}})["status"] == "ok"
+    st = fig4.cmd({"cmd": "status"})
+    assert st["lookahead_s"] == 0 and st["queued"] == 0
+
+
+def test_lookahead_memory_cap(fig4):
+    # 10 s at 50 MS/s would be 2001 blocks of 262 144 samples x 5 channels (10 MiB each): the FIFO is
+    # clamped to 256 MiB, floor(2^28 / (10 485 760 + slot bookkeeping of a few kB)) = 25 blocks
+    assert fig4.cmd({"cmd": "set", "values": {"sample_rate_Hz": 5e7, "block_s": 0.01, "lookahead_s": 10,
+                                                "free_run": False}})["status"] == "ok"
+    s = fig4.sub()
+    settle(fig4, s)
+    r = fig4.cmd({"cmd": "tune", "duration_s": 1e-4})
+    _, _, _, end = collect_run(s, r["run_id"])
+    assert end["status"] == "ok" and end["samples"] == 5000
+    st = fig4.wait_idle()
+    assert st["lookahead_blocks"] == 25 and st["queued"] == 0
+
+
+def test_lookahead_never_early_and_stream_unchanged(fig4):
+    """With and without lookahead: every block at or after its deadline, the same blocks bit for bit
+    (both equal to the CLI's samples of the same (seed, index)), and only the lookahead run queues more
+    than one block (status `queued`)."""
+    speed = 0.1
+    s = fig4.sub()
+    settle(fig4, s)
+    runs = {}
+    for la in (0, 1.0):
+        assert fig4.cmd({"cmd": "set", "values": {"free_run": False, "speed": speed, "lookahead_s": la}})["status"] == "ok"
+        runs[la] = paced_curve(fig4, s, 3, speed, poll_status=True)
+        st = fig4.cmd({"cmd": "status"})
+        # capacity: 1 + ceil(lookahead_s * fs / block_samples) blocks
+        bn = runs[la][0]["block_samples"]
+        assert st["lookahead_blocks"] == 1 + int(np.ceil(la * runs[la][0]["sample_rate_Hz"] / bn))
+    assert runs[0][4] <= 1
+    # the whole curve (13 blocks) is computed at about 1x while it is released at 0.1x: even 5 times
+    # slower computation (a loaded machine, sanitizers) queues several blocks
+    assert runs[1.0][4] >= 2, runs[1.0][4]
+    a, b = runs[0][1], runs[1.0][1]
+    assert len(a) == len(b) == runs[0][3]["blocks"] == runs[1.0][3]["blocks"]
+    for (ha, ca, _), (hb, cb, _) in zip(a, b):
+        # block index, first sample, n, channels, segment, flags but LATE (a loaded machine may be late)
+        assert ha[5:10] == hb[5:10] and ha[12] & ~1 == hb[12] & ~1
+        assert ca == cb  # the channel payloads, byte for byte
+    def ev(r):
+        return [{k: v for k, v in e.items() if k != "run_id"} for e in r[2]]
+    assert ev(runs[0]) == ev(runs[1.0]) and "segment" in [e["kind"] for e in ev(runs[0])]
+    assert bool(b[-1][0][12] & 4) and not any(h[12] & 4 for h, _, _ in b[:-1])  # LAST on the last block only
+    if VAFM_CLI:
+        ref = read_cli_samples(3)
+        got = np.concatenate([np.frombuffer(c[2], "<f8") for _, c, _ in b])
+        assert np.array_equal(got, ref[:, 3])  # force_N, bit for bit
+
+
+def test_lookahead_log_equals_stream_and_abort_drops_queue(fig4, tmp_path):
+    h5py = pytest.importorskip("h5py")
+    speed = 0.05
+    path = tmp_path / "la.h5"
+    assert fig4.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = fig4.sub()
+    settle(fig4, s)
+    assert fig4.cmd({"cmd": "set", "values": {"free_run": False, "speed": 0.5, "lookahead_s": 1.0}})["status"] == "ok"
+    start, blocks, _, end, _ = paced_curve(fig4, s, 5, 0.5)
+    # abort with a full FIFO: lookahead 0.02 s = 1 + 4 blocks of 1000 samples, filled in ~25 ms while the
+    # first block is due after 100 ms
+    assert fig4.cmd({"cmd": "set", "values": {"speed": speed, "lookahead_s": 0.02}})["status"] == "ok"
+    t_cmd = time.monotonic_ns()
+    r = fig4.cmd({"cmd": "curve", "index": 6})
+    deadline = time.time() + 20
+    while True:
+        st = fig4.cmd({"cmd": "status"})
+        if st["state"] == "running" and st["queued"] == st["lookahead_blocks"] == 5:
+            break
+        assert time.time() < deadline, st
+        time.sleep(0.002)
+    t0 = time.monotonic()
+    assert fig4.cmd({"cmd": "abort"})["status"] == "ok"
+    _, ab, _, aend = collect_timed(s, r["run_id"])
+    took = time.monotonic() - t0
+    assert aend["status"] == "aborted" and took < 0.5, (aend, took)
+    assert len(ab) == aend["blocks"] < 13 and aend["samples"] == sum(h[7] for h, _, _ in ab)
+    assert_never_early(ab, t_cmd, speed)  # the queued blocks were dropped, not flushed
+    st = fig4.wait_idle()
+    assert st["queued"] == 0
+    st = fig4.cmd({"cmd": "log", "stop": True})["log"]
+    assert (st["curves"], st["curves_skipped"], st["curves_dropped"], st["overflows"]) == (1, 1, 0, 0), st
+    with h5py.File(path, "r") as f:  # the paced lookahead curve, bit for bit; the aborted one is not there
+        assert sorted(f.keys()) == ["0"]
+        c = h5_curve(f, 0)
+        for k, name in ((2, "force"), (0, "height (piezo)"), (4, "tip position")):
+            got = np.concatenate([np.frombuffer(ch[k], "<f8") for _, ch, _ in blocks])
+            assert np.array_equal(c[name].view(np.uint64), got.view(np.uint64)), name
+        assert len(c["force"]) == end["samples"]

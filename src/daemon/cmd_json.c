@@ -18,6 +18,7 @@ void vafmd_settings_default(vafmd_settings *s)
     s->sensitivity_m_per_V = 50e-9;
     s->block_s = 5e-3;
     s->hwm = 1000;
+    s->lookahead_s = 1.0;
     s->noise_V_rms = 0;
     s->adc_bits = 0;
     s->adc_range_V = 20;
@@ -53,6 +54,8 @@ static const s_setting s_settings[] = {
       "detector sensitivity (InvOLS): vDeflection_V = deflection_m / sensitivity" },
     { "block_s", S_SET_REAL, "s", 1e-3, 1e-2, 0, "duration of the samples of one data block" },
     { "hwm", S_SET_INT, "messages", 1, 1e7, 1, "stream send high-water mark per subscriber (--hwm; read-only)" },
+    { "lookahead_s", S_SET_REAL, "s", 0, 10, 0,
+      "compute ahead: seconds of samples computed before their release (0: none); at most 256 MiB per run" },
     { "noise_V_rms", S_SET_REAL, "V", 0, 10, 0,
       "detector noise floor on vDeflection, V rms (0: off); white, Gaussian, its own random stream" },
     { "adc_bits", S_SET_INT, "bits", 0, 24, 0,
@@ -89,6 +92,8 @@ static json_t *s_setting_value(const vafmd_settings *s, const s_setting *f)
         return json_real(s->adc_range_V);
     if (!strcmp(f->name, "baseline_offset_V"))
         return json_real(s->baseline_offset_V);
+    if (!strcmp(f->name, "lookahead_s"))
+        return json_real(s->lookahead_s);
     return json_integer(s->hwm);
 }
 
@@ -138,6 +143,8 @@ static int s_setting_apply(vafmd_settings *s, const s_setting *f, json_t *v, vaf
         s->sensitivity_m_per_V = x;
     else if (!strcmp(f->name, "block_s"))
         s->block_s = x;
+    else if (!strcmp(f->name, "lookahead_s"))
+        s->lookahead_s = x;
     return 0;
 }
 

@@ -214,6 +214,9 @@ static json_t *s_status(vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "last_seq", seq ? json_integer((json_int_t)(seq - 1)) : json_null());
     json_object_set_new(r, "speed", json_real(d->set.speed));
     json_object_set_new(r, "free_run", json_boolean(d->set.free_run));
+    json_object_set_new(r, "lookahead_s", json_real(d->set.lookahead_s));
+    json_object_set_new(r, "lookahead_blocks", json_integer((json_int_t)atomic_load(&sh->lookahead_blocks)));
+    json_object_set_new(r, "queued", json_integer((json_int_t)atomic_load(&sh->queued)));
     json_object_set_new(r, "log", s_log_report(d));
     uint64_t cid = d->next_campaign_id;
     if (cid) { /* the last campaign accepted; until the simulation thread takes it up, nothing is done */

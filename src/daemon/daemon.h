@@ -30,6 +30,9 @@ typedef struct vafmd_settings {
     double sensitivity_m_per_V; /* InvOLS: vDeflection = deflection / sensitivity, m/V */
     double block_s;             /* samples per data block, as a duration, [1e-3, 1e-2] s */
     int hwm;                    /* PUB send high-water mark, messages per subscriber (set at start only) */
+    double lookahead_s;         /* compute ahead: samples computed before their release, as a duration of
+                                   samples, [0, 10] s (0: each block is computed just before its deadline);
+                                   memory at most VAFMD_LOOKAHEAD_MAX_BYTES per run (fewer blocks then) */
     /* The detector chain (off unless set; protocol/wire.md §3.1): vDeflection_V = ADC(deflection /
      * sensitivity + baseline offset + noise); deflection_m = vDeflection_V · sensitivity; force_N =
      * k · deflection_m. Height and tip position stay exact. */
@@ -140,6 +143,7 @@ typedef struct vafmd_log {
     char err[512];                        /* last write error, "" if none */
 } vafmd_log;
 
+#define VAFMD_LOOKAHEAD_MAX_BYTES (256u << 20) /* memory of a run's compute-ahead FIFO (sim_thread.c) */
 #define VAFMD_MAX_BLOCK_SAMPLES 262144 /* bounds a block's memory at very high sample rates */
 /* Samples per data block: round(fs · block duration), at least 1, at most VAFMD_MAX_BLOCK_SAMPLES. */
 static inline size_t vafmd_block_samples(double fs, double block_s)
@@ -172,6 +176,8 @@ typedef struct vafmd_shared {
     atomic_uint_least64_t camp_id;     /* current (or last) campaign, 0: none */
     atomic_uint_least64_t camp_done;   /* its curves finished ok */
     atomic_uint_least64_t camp_next;   /* global index of its curve in progress (or next) */
+    atomic_uint_least64_t queued;      /* blocks computed ahead, not yet released (current run) */
+    atomic_uint_least64_t lookahead_blocks; /* capacity of the current (or last) run's FIFO, blocks */
 } vafmd_shared;
 
 /* CURVE security (auth.c). Configured = a server secret key is given; then both sockets are CURVE

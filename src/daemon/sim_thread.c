@@ -4,7 +4,18 @@
  * CLOCK_MONOTONIC deadline (t_start + (end sample of the block)/fs/speed: no drift, whatever the
  * computation time), and publishes it on the XPUB socket it owns.
  *
- * It never waits on anyone: commands arrive through the SPSC ring (polled between blocks), reports go
+ * Compute ahead: the cost of a sample is not uniform (the contact phase near detachment steps more
+ * slowly than real time while the whole curve is faster), so blocks are computed into a bounded FIFO
+ * (the `lookahead_s` setting: seconds of samples, preallocated at run start, ≤ VAFMD_LOOKAHEAD_MAX_BYTES)
+ * and released from it at their deadlines. The loop: release every queued block whose deadline has
+ * passed; else compute a piece of the next block if there is room; else sleep until the head's deadline
+ * (at most 1 ms, to keep looking at the command ring). A block is computed in pieces (1/16 block, at most
+ * S_PIECE_NS of work before the loop looks again) so that a due block waits at most one piece. Release
+ * does exactly what publication did before compute-ahead (header, events, log block, counters), so the
+ * stream and the log file do not depend on the lookahead; unreleased blocks were never published and are
+ * dropped by abort/shutdown.
+ *
+ * It never waits on anyone: commands arrive through the SPSC ring (polled between pieces), reports go
  * out through atomics, and the socket is used with ZMQ_DONTWAIT. A subscriber at its high-water mark
  * loses the message (counted), the others still get it.
  */
@@ -32,11 +43,27 @@
  * depend on whether the detector is on, and reproducible from (seed, index) alone. */
 #define S_DETECTOR_KEY UINT64_C(0x0044455445435452)
 #define S_MAX_EVENTS 16
+#define S_PIECE_NS 500000LL /* compute at most this long (plus one piece) before releasing or polling */
 
 typedef struct s_event {
     uint64_t sample;
     int from, to;
 } s_event;
+
+/* A computed block waiting for its deadline in the run's FIFO. */
+typedef struct s_block {
+    size_t n;                          /* samples */
+    double *ch[VAFMD_N_CHANNELS + 1];  /* into the run's preallocated store; NULL: channel not streamed */
+    uint32_t flags;                    /* LAST, SEG_CHANGE, CLIPPED (LATE and FREE_RUN at release) */
+    uint8_t first_seg;
+    s_event ev[S_MAX_EVENTS];
+    int n_ev;
+    vafmd_replay_event rev[VAFMD_REPLAY_MAX_EVENTS]; /* replay: curves that began in this block */
+    int n_rev;
+    int64_t deadline;                  /* CLOCK_MONOTONIC ns */
+    int64_t ready;                     /* when its computation ended */
+    vafmd_log_block *lb;               /* its samples for the writer thread (pushed at release), or NULL */
+} s_block;
 
 typedef struct s_run {
     int active;
@@ -61,6 +88,15 @@ typedef struct s_run {
     vafm_rng det_rng;
     double adc_q, code_min, code_max, k_N_per_m;
     int clipped;           /* a sample of the current block hit the ADC range */
+    /* compute-ahead FIFO: qn complete blocks from q[qhead]; the block being filled (if filling) is
+     * q[(qhead + qn) % qcap]; ch[], fill, ev, lb above describe that block while it fills */
+    s_block *q;
+    double *qstore;        /* the channel arrays of all slots (one allocation at run start) */
+    size_t qcap, qhead, qn;
+    int filling;
+    int src_rc;            /* the source's last return: 1 more to come, 0 ended, < 0 error */
+    uint64_t computed;     /* samples in complete blocks (queued or published) */
+    double piece_ns;       /* estimated compute time of one piece (fast attack, slow decay) */
 } s_run;
 
 typedef struct s_ctx {
@@ -240,10 +276,19 @@ static vafmd_log_block *s_log_block_new(size_t n)
     return b;
 }
 
-static void s_run_free(s_run *r)
+static void s_run_free(s_run *r, vafmd_shared *sh)
 {
     free(r->lb);
     r->lb = NULL;
+    /* unreleased blocks were never published: dropped (their log blocks too: the curve is not written) */
+    for (size_t i = 0; r->q && i < r->qn; i++)
+        free(r->q[(r->qhead + i) % r->qcap].lb);
+    free(r->q);
+    r->q = NULL;
+    free(r->qstore);
+    r->qstore = NULL;
+    r->qn = 0;
+    atomic_store_explicit(&sh->queued, 0, memory_order_relaxed);
     if (r->cmd.camp) /* a campaign's simulation belongs to the campaign (reused for a point's curves) */
         r->cmd.sim = NULL;
     else
@@ -251,10 +296,8 @@ static void s_run_free(s_run *r)
     free(r->cmd.start_json);
     r->cmd.start_json = NULL;
     vafmd_replay_free(&r->cmd.replay);
-    for (int i = 0; i <= VAFMD_CH_TIME; i++) {
-        free(r->ch[i]);
-        r->ch[i] = NULL;
-    }
+    for (int i = 0; i <= VAFMD_CH_TIME; i++)
+        r->ch[i] = NULL; /* pointed into qstore */
     r->active = 0;
 }
 
@@ -264,6 +307,7 @@ static json_t *s_num_or_null(double v)
 }
 
 static void s_camp_end(s_ctx *x, const char *status, const char *message, int mark_done);
+static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs);
 
 /* Report the run as done and publish its run.end. The daemon turns idle (a new run is accepted) BEFORE
  * run.end goes out, so a client may start the next run as soon as it sees run.end. A campaign's curve
@@ -343,7 +387,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     int job_over = !cp || !ok || cp->next >= cp->total;
     char *text = json_dumps(j, JSON_COMPACT);
     json_decref(j);
-    s_run_free(r);
+    s_run_free(r, sh);
     atomic_fetch_add_explicit(&sh->runs_done, 1, memory_order_relaxed);
     if (job_over) { /* the log items above were pushed before this release (log stop relies on it) */
         atomic_store_explicit(&sh->state, VAFMD_IDLE, memory_order_relaxed);
@@ -423,11 +467,9 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->run_samples, 0, memory_order_relaxed);
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
     s_send_text(x, "run.start", c->start_json);
-    int rc = 0;
     unsigned chmask = c->replay ? vafmd_replay_channels(c->replay) : VAFMD_CH_LIVE_MASK;
-    for (int i = 0; i <= VAFMD_CH_TIME; i++)
-        if ((chmask >> i & 1) && !(r->ch[i] = malloc(r->block_n * sizeof(double))))
-            rc = VAFM_ENOMEM;
+    r->src_rc = 1;
+    int rc = s_queue_alloc(x, chmask, p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay));
     if (!rc && !c->replay)
         rc = c->kind == VAFMD_RUN_TUNE ? vafm_sim_tune_begin(c->sim, c->index) : vafm_sim_curve_begin(c->sim, c->index);
     /* the clock of the run starts when its first sample can be computed: setting up the scene (tables,
@@ -437,113 +479,223 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
         s_run_end(x, "error", rc);
 }
 
-/* Compute, pace and publish one block. */
-static void s_run_block(s_ctx *x)
+/* The compute-ahead FIFO of a run: 1 + ceil(lookahead_s · fs / block_n) slots (1, i.e. no lookahead:
+ * compute a block, wait for its deadline, release it), fewer if the slots, their channel arrays and (a
+ * logged run) their log blocks would pass VAFMD_LOOKAHEAD_MAX_BYTES; at least 1. Free run: 1 (blocks go
+ * out as soon as they are computed). */
+static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs)
+{
+    s_run *r = &x->run;
+    size_t nch = 0;
+    for (int i = 0; i <= VAFMD_CH_TIME; i++)
+        nch += chmask >> i & 1;
+    double per = (double)sizeof(s_block) + (double)(nch * r->block_n * sizeof(double)) +
+                 (r->log ? (double)(sizeof(vafmd_log_block) + r->block_n * (4 * sizeof(double) + 1)) : 0);
+    double want = r->cmd.set.free_run ? 1 : 1 + ceil(r->cmd.set.lookahead_s * fs / (double)r->block_n);
+    double most = floor((double)VAFMD_LOOKAHEAD_MAX_BYTES / per);
+    if (!(want <= most))
+        want = most;
+    if (!(want >= 1))
+        want = 1;
+    r->qcap = (size_t)want;
+    r->q = calloc(r->qcap, sizeof *r->q);
+    r->qstore = malloc(r->qcap * (nch ? nch : 1) * r->block_n * sizeof(double));
+    if (!r->q || !r->qstore)
+        return VAFM_ENOMEM;
+    for (size_t k = 0; k < r->qcap; k++) {
+        double *p = r->qstore + k * nch * r->block_n;
+        for (int i = 0; i <= VAFMD_CH_TIME; i++)
+            if (chmask >> i & 1) {
+                r->q[k].ch[i] = p;
+                p += r->block_n;
+            }
+    }
+    atomic_store_explicit(&x->d->sh.lookahead_blocks, r->qcap, memory_order_relaxed);
+    return 0;
+}
+
+static double s_run_fs(const s_run *r)
+{
+    return r->cmd.replay ? vafmd_replay_rate_Hz(r->cmd.replay) : vafm_sim_params(r->cmd.sim)->sample_rate_Hz;
+}
+
+/* Compute into the FIFO's free slot: from its start or where the last call stopped, until the block is
+ * full or the run ends, or S_PIECE_NS of work has passed, or the head block falls due (then the loop
+ * releases it and comes back). A complete block is queued with its deadline. */
+static void s_compute(s_ctx *x)
+{
+    s_run *r = &x->run;
+    s_block *b = &r->q[(r->qhead + r->qn) % r->qcap];
+    if (!r->filling) {
+        r->filling = 1;
+        r->fill = 0;
+        r->seg_change = 0;
+        r->n_ev = 0;
+        r->clipped = 0;
+        for (int i = 0; i <= VAFMD_CH_TIME; i++)
+            r->ch[i] = b->ch[i];
+        if (r->log && !r->log_broken && !(r->lb = s_log_block_new(r->block_n))) {
+            r->log_broken = 1;
+            atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
+        }
+    }
+    int64_t t0 = s_now(), t = t0, due = r->qn ? r->q[r->qhead].deadline : INT64_MAX;
+    size_t piece = (r->block_n + 15) / 16;
+    int rc = 1;
+    while (r->fill < r->block_n) {
+        size_t m = r->block_n - r->fill;
+        if (m > piece)
+            m = piece;
+        size_t fill0 = r->fill;
+        rc = s_advance(r, m);
+        int64_t t1 = s_now();
+        if (r->fill > fill0) { /* a piece's cost, from this one (scaled to a whole piece) */
+            double c = (double)(t1 - t) * (double)piece / (double)(r->fill - fill0);
+            r->piece_ns = c > r->piece_ns ? c : 0.9 * r->piece_ns + 0.1 * c;
+        }
+        t = t1;
+        if (rc != 1)
+            break;
+        /* stop when the head is due, or before a piece that would end after its deadline if the FIFO
+         * is at least half full (then waiting for the release costs no lateness; below half, every
+         * moment of computation counts more than a piece of release jitter) */
+        if (r->fill < r->block_n &&
+            (t >= due || (2 * r->qn >= r->qcap && t + (int64_t)r->piece_ns >= due) || t - t0 >= S_PIECE_NS))
+            return; /* go on later */
+    }
+    r->filling = 0;
+    r->src_rc = rc;
+    if (r->fill == 0) {
+        free(r->lb);
+        r->lb = NULL;
+        return;
+    }
+    b->n = r->fill;
+    b->flags = (rc != 1 ? VAFM_WIRE_FLAG_LAST : 0) | (r->seg_change ? VAFM_WIRE_FLAG_SEG_CHANGE : 0) |
+               (r->clipped ? VAFM_WIRE_FLAG_CLIPPED : 0);
+    b->first_seg = r->first_seg;
+    b->n_ev = r->n_ev;
+    memcpy(b->ev, r->ev, (size_t)r->n_ev * sizeof *r->ev);
+    /* replay: the curves of the selection that began in this block */
+    b->n_rev = r->cmd.replay ? vafmd_replay_take_events(r->cmd.replay, b->rev, VAFMD_REPLAY_MAX_EVENTS) : 0;
+    b->lb = r->lb;
+    r->lb = NULL;
+    if (b->lb)
+        b->lb->n = r->fill;
+    uint64_t end = r->computed + r->fill;
+    /* a replay is paced by its recorded times (replay.c), a simulation by its sample index */
+    double t_end = r->cmd.replay ? vafmd_replay_clock_s(r->cmd.replay) : (double)end / s_run_fs(r);
+    b->deadline = r->t_start + (int64_t)llround(t_end / r->cmd.set.speed * 1e9);
+    b->ready = s_now();
+    r->computed = end;
+    r->qn++;
+    atomic_store_explicit(&x->d->sh.queued, r->qn, memory_order_relaxed);
+}
+
+/* Publish the FIFO's head block (its deadline has passed, or free run): header and samples, its log
+ * block, its events, the counters. It is late if it was not computed by its deadline. */
+static void s_release(s_ctx *x, int64_t now)
 {
     s_run *r = &x->run;
     vafmd_shared *sh = &x->d->sh;
-    r->fill = 0;
-    r->seg_change = 0;
-    r->n_ev = 0;
-    r->clipped = 0;
-    if (r->log && !r->log_broken && !r->lb && !(r->lb = s_log_block_new(r->block_n))) {
-        r->log_broken = 1;
-        atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
+    s_block *b = &r->q[r->qhead];
+    uint32_t flags = b->flags;
+    double fs = s_run_fs(r);
+    if (r->cmd.set.free_run)
+        flags |= VAFM_WIRE_FLAG_FREE_RUN;
+    else if (b->ready > b->deadline) {
+        uint64_t late = (uint64_t)(now - b->deadline);
+        flags |= VAFM_WIRE_FLAG_LATE;
+        r->late_blocks++;
+        atomic_fetch_add_explicit(&sh->late_blocks, 1, memory_order_relaxed);
+        if (late > r->worst_late_ns)
+            r->worst_late_ns = late;
+        if (late > atomic_load_explicit(&sh->worst_late_ns, memory_order_relaxed))
+            atomic_store_explicit(&sh->worst_late_ns, late, memory_order_relaxed);
+        if (!r->overrun_reported) {
+            r->overrun_reported = 1;
+            s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:I}", "run_id", (json_int_t)r->cmd.run_id,
+                                              "kind", "overrun", "block", (json_int_t)r->block_index,
+                                              "late_ns", (json_int_t)late));
+        }
     }
-    int rc = 1;
-    while (r->fill < r->block_n && rc == 1)
-        rc = s_advance(r, r->block_n - r->fill);
-    if (r->fill > 0) {
-        uint32_t flags = 0;
-        if (rc != 1)
-            flags |= VAFM_WIRE_FLAG_LAST;
-        if (r->seg_change)
-            flags |= VAFM_WIRE_FLAG_SEG_CHANGE;
-        if (r->clipped)
-            flags |= VAFM_WIRE_FLAG_CLIPPED;
-        double fs = r->cmd.replay ? vafmd_replay_rate_Hz(r->cmd.replay) : vafm_sim_params(r->cmd.sim)->sample_rate_Hz;
-        uint64_t end = r->samples + r->fill;
-        /* a replay is paced by its recorded times (replay.c), a simulation by its sample index */
-        double t_end = r->cmd.replay ? vafmd_replay_clock_s(r->cmd.replay) : (double)end / fs;
-        if (r->cmd.set.free_run)
-            flags |= VAFM_WIRE_FLAG_FREE_RUN;
-        else {
-            int64_t deadline = r->t_start + (int64_t)llround(t_end / r->cmd.set.speed * 1e9);
-            int64_t now = s_now();
-            if (now > deadline) {
-                uint64_t late = (uint64_t)(now - deadline);
-                flags |= VAFM_WIRE_FLAG_LATE;
-                r->late_blocks++;
-                atomic_fetch_add_explicit(&sh->late_blocks, 1, memory_order_relaxed);
-                if (late > r->worst_late_ns)
-                    r->worst_late_ns = late;
-                if (late > atomic_load_explicit(&sh->worst_late_ns, memory_order_relaxed))
-                    atomic_store_explicit(&sh->worst_late_ns, late, memory_order_relaxed);
-                if (!r->overrun_reported) {
-                    r->overrun_reported = 1;
-                    s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:I}", "run_id", (json_int_t)r->cmd.run_id,
-                                                      "kind", "overrun", "block", (json_int_t)r->block_index,
-                                                      "late_ns", (json_int_t)late));
-                }
-            } else
-                s_sleep_until(deadline);
+    vafm_wire_header h = {
+        .magic = VAFM_WIRE_MAGIC,
+        .version = VAFM_WIRE_PROTOCOL_VERSION,
+        .header_size = VAFM_WIRE_HEADER_SIZE,
+        .seq = atomic_load_explicit(&sh->seq, memory_order_relaxed),
+        .run_id = r->cmd.run_id,
+        .block_index = r->block_index,
+        .first_sample = r->samples,
+        .n_samples = (uint32_t)b->n,
+        .n_channels = 0, /* counted below */
+        .segment = b->first_seg,
+        .sample_rate_Hz = fs,
+        .t0_ns = (int64_t)llround((double)r->samples / fs * 1e9),
+        .flags = flags,
+    };
+    unsigned char hb[VAFM_WIRE_HEADER_SIZE];
+    const void *part[3 + VAFMD_N_CHANNELS] = { "data", hb };
+    size_t len[3 + VAFMD_N_CHANNELS] = { 4, sizeof hb };
+    for (int i = 0; i <= VAFMD_CH_TIME; i++)
+        if (b->ch[i]) {
+            part[2 + h.n_channels] = b->ch[i];
+            len[2 + h.n_channels++] = b->n * sizeof(double);
         }
-        vafm_wire_header h = {
-            .magic = VAFM_WIRE_MAGIC,
-            .version = VAFM_WIRE_PROTOCOL_VERSION,
-            .header_size = VAFM_WIRE_HEADER_SIZE,
-            .seq = atomic_load_explicit(&sh->seq, memory_order_relaxed),
-            .run_id = r->cmd.run_id,
-            .block_index = r->block_index,
-            .first_sample = r->samples,
-            .n_samples = (uint32_t)r->fill,
-            .n_channels = 0, /* counted below */
-            .segment = r->first_seg,
-            .sample_rate_Hz = fs,
-            .t0_ns = (int64_t)llround((double)r->samples / fs * 1e9),
-            .flags = flags,
-        };
-        unsigned char hb[VAFM_WIRE_HEADER_SIZE];
-        const void *part[3 + VAFMD_N_CHANNELS] = { "data", hb };
-        size_t len[3 + VAFMD_N_CHANNELS] = { 4, sizeof hb };
-        for (int i = 0; i <= VAFMD_CH_TIME; i++)
-            if (r->ch[i]) {
-                part[2 + h.n_channels] = r->ch[i];
-                len[2 + h.n_channels++] = r->fill * sizeof(double);
-            }
-        vafm_wire_header_encode(&h, hb);
-        s_send(x, part, len, 2 + h.n_channels);
-        if (r->lb) {
-            r->lb->n = r->fill;
-            vafmd_log_block *lb = r->lb;
-            r->lb = NULL;
-            s_log_push(r, VAFMD_LOG_BLOCK, lb);
-        }
-        for (int i = 0; i < r->n_ev; i++)
-            s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:s,s:s}", "run_id", (json_int_t)r->cmd.run_id, "kind",
-                                              "segment", "sample", (json_int_t)r->ev[i].sample, "from",
-                                              s_seg_name(r->ev[i].from), "to", s_seg_name(r->ev[i].to)));
-        if (r->cmd.replay) { /* replay: the curves of the selection that began in this block */
-            vafmd_replay_event rev[VAFMD_REPLAY_MAX_EVENTS];
-            int nrev = vafmd_replay_take_events(r->cmd.replay, rev, VAFMD_REPLAY_MAX_EVENTS);
-            for (int i = 0; i < nrev; i++)
-                s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:I,s:I,s:I,s:I}", "run_id", (json_int_t)r->cmd.run_id,
-                                                  "kind", "curve", "sample", (json_int_t)rev[i].sample, "curve",
-                                                  (json_int_t)rev[i].curve, "selection_index",
-                                                  (json_int_t)rev[i].selection, "pass", (json_int_t)rev[i].pass,
-                                                  "samples", (json_int_t)rev[i].samples));
-        }
-        atomic_store_explicit(&sh->seq, h.seq + 1, memory_order_relaxed);
-        r->samples = end;
-        r->block_index++;
-        atomic_fetch_add_explicit(&sh->samples, r->fill, memory_order_relaxed);
-        atomic_fetch_add_explicit(&sh->blocks, 1, memory_order_relaxed);
-        atomic_store_explicit(&sh->run_samples, r->samples, memory_order_relaxed);
+    vafm_wire_header_encode(&h, hb);
+    s_send(x, part, len, 2 + h.n_channels);
+    if (b->lb) { /* pushed at release: an unreleased (aborted) block never reaches the writer */
+        vafmd_log_block *lb = b->lb;
+        b->lb = NULL;
+        s_log_push(r, VAFMD_LOG_BLOCK, lb);
     }
-    if (rc == 0)
-        s_run_end(x, "ok", 0);
-    else if (rc < 0)
-        s_run_end(x, rc == VAFM_EABORT ? "aborted" : "error", rc);
+    for (int i = 0; i < b->n_ev; i++)
+        s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:s,s:s}", "run_id", (json_int_t)r->cmd.run_id, "kind",
+                                          "segment", "sample", (json_int_t)b->ev[i].sample, "from",
+                                          s_seg_name(b->ev[i].from), "to", s_seg_name(b->ev[i].to)));
+    for (int i = 0; i < b->n_rev; i++)
+        s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:I,s:I,s:I,s:I}", "run_id", (json_int_t)r->cmd.run_id,
+                                          "kind", "curve", "sample", (json_int_t)b->rev[i].sample, "curve",
+                                          (json_int_t)b->rev[i].curve, "selection_index",
+                                          (json_int_t)b->rev[i].selection, "pass", (json_int_t)b->rev[i].pass,
+                                          "samples", (json_int_t)b->rev[i].samples));
+    atomic_store_explicit(&sh->seq, h.seq + 1, memory_order_relaxed);
+    r->samples += b->n;
+    r->block_index++;
+    atomic_fetch_add_explicit(&sh->samples, b->n, memory_order_relaxed);
+    atomic_fetch_add_explicit(&sh->blocks, 1, memory_order_relaxed);
+    atomic_store_explicit(&sh->run_samples, r->samples, memory_order_relaxed);
+    r->qhead = (r->qhead + 1) % r->qcap;
+    r->qn--;
+    atomic_store_explicit(&sh->queued, r->qn, memory_order_relaxed);
+}
+
+/* One step of a run: release the due blocks; end the run once its last block is out; else compute a
+ * piece if the FIFO has room; else sleep until the head is due (at most 1 ms: the command ring, the
+ * heartbeat and new subscribers are looked at between steps). */
+static void s_run_step(s_ctx *x)
+{
+    s_run *r = &x->run;
+    int64_t now = s_now();
+    while (r->qn > 0 && (r->cmd.set.free_run || now >= r->q[r->qhead].deadline)) {
+        s_release(x, now);
+        now = s_now();
+    }
+    if (r->qn == 0 && r->src_rc != 1 && !r->filling) {
+        if (r->src_rc == 0)
+            s_run_end(x, "ok", 0);
+        else
+            s_run_end(x, r->src_rc == VAFM_EABORT ? "aborted" : "error", r->src_rc);
+        return;
+    }
+    int64_t t = r->qn ? r->q[r->qhead].deadline : INT64_MAX;
+    /* room: compute, unless the FIFO is at least half full and the head falls due before a piece
+     * would be done (a piece would delay its release; s_compute) */
+    if (r->src_rc == 1 && r->qn < r->qcap && (2 * r->qn < r->qcap || now + (int64_t)r->piece_ns < t)) {
+        s_compute(x);
+        return;
+    }
+    s_sleep_until(t < now + 1000000 ? t : now + 1000000);
 }
 
 /* Start the campaign's next curve (global index cp->next) on this thread, without the control thread.
@@ -687,7 +839,7 @@ void *vafmd_sim_main(void *arg)
         if (!x->run.active && x->camp) /* a campaign goes on by itself */
             s_camp_next(x);
         if (x->run.active)
-            s_run_block(x);
+            s_run_step(x);
         else
             s_sleep_until(now + 1000000); /* idle: look at the ring every millisecond */
     }
