@@ -7,10 +7,7 @@ comes from $VAFMD, the vafm CLI from $VAFM_CLI. Logged runs use paper-fig4 (~0.1
 """
 import json
 import os
-import shutil
-import struct
 import subprocess
-import tempfile
 import time
 
 import numpy as np
@@ -21,84 +18,11 @@ h5py = pytest.importorskip("h5py")
 
 VAFMD = os.environ.get("VAFMD")
 VAFM_CLI = os.environ.get("VAFM_CLI")
-HEADER = struct.Struct("<IHHQQQQIHHdqII")  # protocol/wire.md §4, 72 bytes
 LIVE = ["height_m", "deflection_m", "force_N", "vDeflection_V", "tip_m"]
-TIMEOUT_MS = 20000
 
 pytestmark = pytest.mark.skipif(not VAFMD, reason="set VAFMD to the vafmd executable")
 
-
-class Daemon:
-    def __init__(self, *args):
-        self.dir = tempfile.mkdtemp(prefix="vafmd-replay-")
-        self.rep, self.pub = f"ipc://{self.dir}/rep", f"ipc://{self.dir}/pub"
-        self.proc = subprocess.Popen([VAFMD, "--rep", self.rep, "--pub", self.pub, *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        self.ctx = zmq.Context()
-        self.req = None
-        self._connect()
-        deadline = time.time() + 10
-        while True:  # the first hello may race the bind: retry with fresh sockets
-            try:
-                assert self.cmd({"cmd": "hello"}, timeout=500)["status"] == "ok"
-                break
-            except zmq.Again:
-                assert self.proc.poll() is None, self.proc.communicate()
-                assert time.time() < deadline, "vafmd did not answer hello"
-                self._connect()
-
-    def _connect(self):
-        if self.req is not None:
-            self.req.close(0)
-        self.req = self.ctx.socket(zmq.REQ)
-        self.req.setsockopt(zmq.LINGER, 0)
-        self.req.connect(self.rep)
-
-    def cmd(self, obj, timeout=TIMEOUT_MS):
-        self.req.send(json.dumps(obj).encode())
-        if not self.req.poll(timeout):
-            raise zmq.Again("no reply")
-        return json.loads(self.req.recv())
-
-    def sub(self):
-        s = self.ctx.socket(zmq.SUB)
-        s.setsockopt(zmq.LINGER, 0)
-        s.setsockopt(zmq.SUBSCRIBE, b"")
-        s.connect(self.pub)
-        assert s.poll(TIMEOUT_MS), "no heartbeat after subscribing"  # the greeting: subscription in place
-        assert s.recv_multipart()[0] == b"heartbeat"
-        return s
-
-    def wait_idle(self, timeout=30):
-        deadline = time.time() + timeout
-        while time.time() < deadline:
-            st = self.cmd({"cmd": "status"})
-            if st["state"] == "idle":
-                return st
-            time.sleep(0.01)
-        raise AssertionError("vafmd stayed busy")
-
-    def stop(self):
-        if self.proc.poll() is None:
-            try:
-                self.cmd({"cmd": "shutdown"}, timeout=5000)
-            except zmq.Again:
-                pass
-        try:
-            rc = self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            rc = self.proc.wait()
-        self.ctx.destroy(0)
-        shutil.rmtree(self.dir, ignore_errors=True)
-        return rc
-
-
-@pytest.fixture
-def fig4():
-    d = Daemon("--preset", "paper-fig4", "--free-run")
-    yield d
-    assert d.stop() == 0
+from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, fig4, reap_daemons  # noqa: E402,F401 (fixtures)
 
 
 def collect_run(s, run_id, timeout_ms=TIMEOUT_MS):
@@ -168,7 +92,7 @@ def log_curves(d, s, path, indices):
 
 def test_logged_run_replays_bit_for_bit(fig4, tmp_path):
     path = tmp_path / "log.h5"
-    s = fig4.sub()
+    s = fig4.sub(greet=True)
     live = log_curves(fig4, s, path, [0, 3])[0]
     rr = fig4.cmd({"cmd": "replay", "path": str(path), "curves": "0", "client_run_id": "rp1"})
     assert rr["status"] == "ok", rr
@@ -225,7 +149,7 @@ def test_pacing_follows_recorded_rate(tmp_path, speed, passes):
     block (the run's clock starts after the reply is sent: at most a few ms earlier than it is read)."""
     d = Daemon("--preset", "paper-fig4", "--free-run")
     try:
-        s = d.sub()
+        s = d.sub(greet=True)
         path = tmp_path / "log.h5"
         log_curves(d, s, path, [1])
         with h5py.File(path, "r") as f:
@@ -298,7 +222,7 @@ def test_instrument_file_without_time_or_provenance(tmp_path):
             curves.append(ch)
     d = Daemon("--free-run")
     try:
-        s = d.sub()
+        s = d.sub(greet=True)
         rr_ = d.cmd({"cmd": "replay", "path": str(path), "curves": "2,0-1"})
         assert rr_["status"] == "ok", rr_
         start, blocks, events, end, _, _ = collect_run(s, rr_["run_id"])
@@ -360,7 +284,7 @@ def test_non_uniform_time_streamed_with_timestamps(tmp_path):
         write_curve(f, 0, ch, {"imaging mode": "force-distance", "spring constant": 0.1})  # no rates, no sensitivity
     d = Daemon()
     try:
-        s = d.sub()
+        s = d.sub(greet=True)
         speed = 10
         rr = d.cmd({"cmd": "replay", "path": str(path), "speed": speed})
         assert rr["status"] == "ok", rr
@@ -415,7 +339,7 @@ def minimal_file(path, mutate=None):
 
 
 def test_damaged_files_refused_and_daemon_stays_up(fig4, tmp_path):
-    s = fig4.sub()
+    s = fig4.sub(greet=True)
     logged = tmp_path / "log.h5"
     log_curves(fig4, s, logged, [2])
     size = logged.stat().st_size
@@ -487,7 +411,7 @@ def test_byte_flips_refused_or_replayed(fig4, tmp_path):
     """30 copies of a vafm log with one random bit flipped each (fixed seed): each replay either streams
     (a flip outside checksummed metadata and channels) or is refused with bad_file (with this seed: 1
     streams, 29 are refused); the daemon survives all of them."""
-    s = fig4.sub()
+    s = fig4.sub(greet=True)
     logged = tmp_path / "log.h5"
     log_curves(fig4, s, logged, [5])
     data = bytearray(logged.read_bytes())
@@ -534,7 +458,7 @@ def test_selection_over_memory_bound_refused(fig4, tmp_path):
 def test_loop_forever_until_abort_and_busy(fig4, tmp_path):
     path = minimal_file(tmp_path / "ok.h5")
     assert fig4.cmd({"cmd": "set", "values": {"free_run": False}})["status"] == "ok"
-    s = fig4.sub()
+    s = fig4.sub(greet=True)
     assert fig4.cmd({"cmd": "log", "path": str(tmp_path / "log.h5")})["status"] == "ok"  # replays are not logged
     rr = fig4.cmd({"cmd": "replay", "path": str(path), "loop": "forever", "speed": 10})  # 50 ms a pass at 1000 Hz
     assert rr["status"] == "ok", rr
@@ -561,7 +485,7 @@ def test_loop_forever_until_abort_and_busy(fig4, tmp_path):
 
 @pytest.mark.skipif(not VAFM_CLI, reason="set VAFM_CLI to the vafm executable")
 def test_cli_replay_end_to_end(fig4, tmp_path):
-    s = fig4.sub()
+    s = fig4.sub(greet=True)
     path = tmp_path / "log.h5"
     runs = log_curves(fig4, s, path, [4, 6])
     # a relative path from the CLI's working directory: the CLI makes it absolute for the daemon

@@ -280,6 +280,29 @@ char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int 
 }
 
 /* replay: the file is read and checked here (replay.c); the simulation thread streams it from memory. */
+
+/* A run handed to the simulation thread: count it, remember its client run id (idempotent retries)
+ * and build the ok reply. */
+static json_t *s_run_accepted(vafmd *d, const vafmd_cmd *c, uint64_t run_id, int kind, size_t block_n)
+{
+    d->pending_run_id = run_id;
+    d->next_run_id++;
+    d->runs_started++;
+    d->jobs_started++;
+    if (c->client_run_id[0]) {
+        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
+        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
+        h->run_id = run_id;
+        h->kind = kind;
+    }
+    json_t *r = s_ok(c);
+    json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
+    json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
+    json_object_set_new(r, "duplicate", json_false());
+    json_object_set_new(r, "block_samples", json_integer((json_int_t)block_n));
+    return r;
+}
+
 static json_t *s_start_replay(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
     vafmd_sim_cmd sc;
@@ -301,22 +324,7 @@ static json_t *s_start_replay(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
         return NULL;
     }
-    d->pending_run_id = run_id;
-    d->next_run_id++;
-    d->runs_started++;
-    d->jobs_started++;
-    if (c->client_run_id[0]) {
-        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
-        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
-        h->run_id = run_id;
-        h->kind = VAFMD_RUN_REPLAY;
-    }
-    json_t *r = s_ok(c);
-    json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
-    json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
-    json_object_set_new(r, "duplicate", json_false());
-    json_object_set_new(r, "block_samples", json_integer((json_int_t)block_n));
-    return r;
+    return s_run_accepted(d, c, run_id, VAFMD_RUN_REPLAY, block_n);
 }
 
 static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
@@ -384,22 +392,7 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
         return NULL;
     }
-    d->pending_run_id = run_id;
-    d->next_run_id++;
-    d->runs_started++;
-    d->jobs_started++;
-    if (c->client_run_id[0]) {
-        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
-        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
-        h->run_id = run_id;
-        h->kind = kind;
-    }
-    json_t *r = s_ok(c);
-    json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
-    json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
-    json_object_set_new(r, "duplicate", json_false());
-    json_object_set_new(r, "block_samples", json_integer((json_int_t)block_n));
-    return r;
+    return s_run_accepted(d, c, run_id, kind, block_n);
 }
 
 /* `campaign`: check the whole grid here (every point's scene, the first point's simulation), where an

@@ -1,0 +1,135 @@
+# SPDX-License-Identifier: MIT
+"""A vafmd started by a test: private ipc:// endpoints (or ephemeral loopback TCP ports), a REQ socket
+with retry on the first hello, subscriptions, shutdown. Shared by test_daemon.py and test_replay.py
+(pytest puts this folder on sys.path). The daemon path comes from $VAFMD."""
+import json
+import os
+import shutil
+import socket
+import struct
+import subprocess
+import tempfile
+import time
+
+import pytest
+import zmq
+
+VAFMD = os.environ.get("VAFMD")
+TIMEOUT_MS = 20000
+HEADER = struct.Struct("<IHHQQQQIHHdqII")  # the data header, protocol/wire.md §4 (72 bytes)
+
+_STARTED = []  # every daemon process a test started: reaped after the test, also when it failed
+
+
+@pytest.fixture(autouse=True)
+def reap_daemons():
+    yield
+    while _STARTED:
+        p = _STARTED.pop()
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
+class Daemon:
+    def __init__(self, *args, tcp=False, curve=None, env=None):
+        self.curve = curve  # (server public key, client public key, client secret key), Z85 bytes
+        self.dir = tempfile.mkdtemp(prefix="vafmd-")
+        if tcp:
+            self.rep, self.pub = (f"tcp://127.0.0.1:{free_port()}", f"tcp://127.0.0.1:{free_port()}")
+        else:
+            self.rep, self.pub = f"ipc://{self.dir}/rep", f"ipc://{self.dir}/pub"
+        self.proc = subprocess.Popen([VAFMD, "--rep", self.rep, "--pub", self.pub, *args],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     env={**os.environ, **env} if env else None)
+        _STARTED.append(self.proc)
+        self.ctx = zmq.Context()
+        self.req = None
+        self._connect()
+        deadline = time.time() + 10
+        while True:  # the first hello may race the bind: retry with fresh sockets
+            try:
+                assert self.cmd({"cmd": "hello"}, timeout=500)["status"] == "ok"
+                break
+            except zmq.Again:
+                assert self.proc.poll() is None, self.proc.communicate()
+                assert time.time() < deadline, "vafmd did not answer hello"
+                self._connect()
+
+    def _connect(self):
+        if self.req is not None:
+            self.req.close(0)
+        self.req = self.ctx.socket(zmq.REQ)
+        self.req.setsockopt(zmq.LINGER, 0)
+        self.secure(self.req)
+        self.req.connect(self.rep)
+
+    def secure(self, sock, curve=None):
+        curve = curve or self.curve
+        if curve:
+            sock.curve_serverkey, sock.curve_publickey, sock.curve_secretkey = curve
+
+    def send_raw(self, data, timeout=TIMEOUT_MS):
+        if isinstance(data, list):
+            self.req.send_multipart(data)
+        else:
+            self.req.send(data)
+        if not self.req.poll(timeout):
+            raise zmq.Again("no reply")
+        return json.loads(self.req.recv())
+
+    def cmd(self, obj, timeout=TIMEOUT_MS):
+        return self.send_raw(json.dumps(obj).encode(), timeout)
+
+    def sub(self, rcvhwm=None, topics=(b"",), curve=None, greet=False):
+        """A SUB socket on the stream. greet: wait for the heartbeat the daemon sends every new
+        subscriber, so the subscription is known to be in place (needs topics to include heartbeat)."""
+        s = self.ctx.socket(zmq.SUB)
+        s.setsockopt(zmq.LINGER, 0)
+        self.secure(s, curve)
+        if rcvhwm is not None:
+            s.setsockopt(zmq.RCVHWM, rcvhwm)
+        for t in topics:
+            s.setsockopt(zmq.SUBSCRIBE, t)
+        s.connect(self.pub)
+        if greet:
+            assert s.poll(TIMEOUT_MS), "no heartbeat after subscribing"
+            assert s.recv_multipart()[0] == b"heartbeat"
+        return s
+
+    def wait_idle(self, timeout=30):
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            st = self.cmd({"cmd": "status"})
+            if st["state"] == "idle":
+                return st
+            time.sleep(0.01)
+        raise AssertionError("vafmd stayed busy")
+
+    def stop(self):
+        if self.proc.poll() is None:
+            try:
+                self.cmd({"cmd": "shutdown"}, timeout=5000)
+            except zmq.Again:
+                pass
+        try:
+            rc = self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            rc = self.proc.wait()
+        self.ctx.destroy(0)
+        shutil.rmtree(self.dir, ignore_errors=True)
+        return rc
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def fig4():
+    d = Daemon("--preset", "paper-fig4", "--free-run")
+    yield d
+    assert d.stop() == 0
