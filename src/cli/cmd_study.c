@@ -1150,9 +1150,9 @@ int vafm_cmd_study(int argc, char **argv)
                          "Time-step bias of gjf at ω·dt = 0.6, from the work–precision table (N = 2000, γ̃ = 0.229, "
                          "k̃ = 0.1, k_BT̃ = 0.01, ṽ = 1e-3): −0.1 combined standard errors, i.e. |bias| ≲ 2 × 5.7e-4 "
                          "= 1.1e-3 F_JKR on the mean pull-off force (the table cannot resolve less), KS distance "
-                         "0.020 (5%% critical value 0.043). That table's scene is paper-fig4's (the velocity studies); for the "
-                         "paper-fig1 scene (distribution, hysteresis) no bias was measured. Where a study measures "
-                         "its own bias (athermal: a quarter step) it is quoted there.%s\n",
+                         "0.020 (5%% critical value 0.043). That table's scene is paper-fig4's (the velocity studies). Where a study measures "
+                         "its own bias (distribution: 100 curves at a quarter step; athermal: a quarter step) it is "
+                         "quoted there; the hysteresis curve has no bias measurement.%s\n",
                 ctx.quick ? " With --quick's N the statistical errors dominate everything." : "");
         if (isfinite(ctx.min_se))
             fprintf(ctx.rep, "\nHere the smallest standard error of a mean force is %.2g F_JKR, %s the time-step bias "
