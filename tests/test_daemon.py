@@ -22,7 +22,7 @@ CHANNELS = ["height_m", "deflection_m", "force_N", "vDeflection_V", "tip_m"]
 
 pytestmark = pytest.mark.skipif(not VAFMD, reason="set VAFMD to the vafmd executable")
 
-from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, fig4, reap_daemons  # noqa: E402,F401 (fixtures)
+from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, collect_run, error_ok, fig4, reap_daemons  # noqa: E402,F401
 
 
 def settle(d, s):
@@ -32,38 +32,6 @@ def settle(d, s):
     assert parts[0] == b"heartbeat", parts[0]
     hb = json.loads(parts[1])
     assert hb["state"] in ("idle", "running") and "last_seq" in hb and "dropped" in hb
-
-
-def collect_run(s, run_id, timeout_ms=TIMEOUT_MS):
-    """All messages of run `run_id` up to its run.end: (start, blocks, events, end)."""
-    start, blocks, events = None, [], []
-    while True:
-        if not s.poll(timeout_ms):
-            raise AssertionError("stream went silent")
-        parts = s.recv_multipart()
-        topic = parts[0]
-        if topic == b"data":
-            h = HEADER.unpack(parts[1])
-            if h[4] == run_id:
-                blocks.append((h, parts[2:]))
-        elif topic in (b"run.start", b"run.end", b"event"):
-            j = json.loads(parts[1])
-            if j["run_id"] != run_id:
-                continue
-            if topic == b"run.start":
-                start = start or j
-            elif topic == b"event":
-                events.append(j)
-            else:
-                return start, blocks, events, j
-
-
-def error_ok(r, code, field=None):
-    assert r["status"] == "error", r
-    assert r["code"] == code, r
-    assert isinstance(r["message"], str) and r["message"], r
-    if field is not None:
-        assert r["field"] == field, r
 
 
 def test_hello(fig4):

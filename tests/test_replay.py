@@ -22,37 +22,8 @@ LIVE = ["height_m", "deflection_m", "force_N", "vDeflection_V", "tip_m"]
 
 pytestmark = pytest.mark.skipif(not VAFMD, reason="set VAFMD to the vafmd executable")
 
-from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, fig4, reap_daemons  # noqa: E402,F401 (fixtures)
-
-
-def collect_run(s, run_id, timeout_ms=TIMEOUT_MS):
-    """All messages of run `run_id` up to its run.end: (start, blocks, events, end, t_first, t_last):
-    the wall-clock receive times of the first and the last data block."""
-    start, blocks, events, t_first, t_last = None, [], [], None, None
-    deadline = time.monotonic() + 120  # heartbeats keep the stream alive: bound the wait for run.end
-    while True:
-        assert time.monotonic() < deadline, "no run.end"
-        if not s.poll(timeout_ms):
-            raise AssertionError("stream went silent")
-        parts = s.recv_multipart()
-        now = time.monotonic()
-        topic = parts[0]
-        if topic == b"data":
-            h = HEADER.unpack(parts[1])
-            if h[4] == run_id:
-                blocks.append((h, parts[2:]))
-                t_first = t_first or now
-                t_last = now
-        elif topic in (b"run.start", b"run.end", b"event"):
-            j = json.loads(parts[1])
-            if j["run_id"] != run_id:
-                continue
-            if topic == b"run.start":
-                start = start or j
-            elif topic == b"event":
-                events.append(j)
-            else:
-                return start, blocks, events, j, t_first, t_last
+from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, error_ok, fig4, reap_daemons  # noqa: E402,F401
+from vafmd_harness import collect_run_timed as collect_run  # noqa: E402 (this file also times the blocks)
 
 
 def arrays(start, blocks):
@@ -61,14 +32,6 @@ def arrays(start, blocks):
     for h, frames in blocks:
         assert h[8] == len(names) == len(frames), (h, names)
     return {n: np.concatenate([np.frombuffer(f[k], "<f8") for _, f in blocks]) for k, n in enumerate(names)}
-
-
-def error_ok(r, code, field=None):
-    assert r["status"] == "error", r
-    assert r["code"] == code, r
-    assert isinstance(r["message"], str) and r["message"], r
-    if field is not None:
-        assert r["field"] == field, r
 
 
 def bits(a):

@@ -133,3 +133,47 @@ def fig4():
     d = Daemon("--preset", "paper-fig4", "--free-run")
     yield d
     assert d.stop() == 0
+
+
+def collect_run_timed(s, run_id, timeout_ms=TIMEOUT_MS):
+    """All messages of run `run_id` up to its run.end: (start, blocks, events, end, t_first, t_last), the
+    last two the monotonic receive times of the first and the last data block."""
+    start, blocks, events, t_first, t_last = None, [], [], None, None
+    deadline = time.monotonic() + 120  # heartbeats keep the stream alive: bound the wait for run.end
+    while True:
+        assert time.monotonic() < deadline, "no run.end"
+        if not s.poll(timeout_ms):
+            raise AssertionError("stream went silent")
+        parts = s.recv_multipart()
+        now = time.monotonic()
+        topic = parts[0]
+        if topic == b"data":
+            h = HEADER.unpack(parts[1])
+            if h[4] == run_id:
+                blocks.append((h, parts[2:]))
+                t_first = t_first or now
+                t_last = now
+        elif topic in (b"run.start", b"run.end", b"event"):
+            j = json.loads(parts[1])
+            if j["run_id"] != run_id:
+                continue
+            if topic == b"run.start":
+                start = start or j
+            elif topic == b"event":
+                events.append(j)
+            else:
+                return start, blocks, events, j, t_first, t_last
+
+
+def collect_run(s, run_id, timeout_ms=TIMEOUT_MS):
+    """All messages of run `run_id` up to its run.end: (start, blocks, events, end)."""
+    return collect_run_timed(s, run_id, timeout_ms)[:4]
+
+
+def error_ok(r, code, field=None):
+    """r is an error reply with this stable code (and offending field, if given) and a message."""
+    assert r["status"] == "error", r
+    assert r["code"] == code, r
+    assert isinstance(r["message"], str) and r["message"], r
+    if field is not None:
+        assert r["field"] == field, r
