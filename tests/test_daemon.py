@@ -22,7 +22,7 @@ CHANNELS = ["height_m", "deflection_m", "force_N", "vDeflection_V", "tip_m"]
 
 pytestmark = pytest.mark.skipif(not VAFMD, reason="set VAFMD to the vafmd executable")
 
-from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, collect_run, error_ok, fig4, reap_daemons  # noqa: E402,F401
+from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, collect_run, error_ok, fig4, reap_daemons, receive_run  # noqa: E402,F401
 
 
 def settle(d, s):
@@ -797,28 +797,10 @@ def test_log_kill9_loses_at_most_the_curve_in_progress(tmp_path):
 # its speed (bench/bench_daemon.py measures that).
 
 def collect_timed(s, run_id, timeout_ms=TIMEOUT_MS):
-    """Like collect_run, with each data block's receive time (time.monotonic_ns: CLOCK_MONOTONIC, the
-    daemon's pacing clock): (start, [(header, channels, t_recv_ns)], events, end)."""
-    start, blocks, events = None, [], []
-    while True:
-        if not s.poll(timeout_ms):
-            raise AssertionError("stream went silent")
-        parts = s.recv_multipart()
-        t = time.monotonic_ns()
-        if parts[0] == b"data":
-            h = HEADER.unpack(parts[1])
-            if h[4] == run_id:
-                blocks.append((h, parts[2:], t))
-        elif parts[0] in (b"run.start", b"run.end", b"event"):
-            j = json.loads(parts[1])
-            if j["run_id"] != run_id:
-                continue
-            if parts[0] == b"run.start":
-                start = start or j
-            elif parts[0] == b"event":
-                events.append(j)
-            else:
-                return start, blocks, events, j
+    """Like collect_run, with each data block's receive time in ns (time.monotonic_ns: CLOCK_MONOTONIC,
+    the daemon's pacing clock): (start, [(header, channels, t_recv_ns)], events, end)."""
+    start, blocks, events, end, t_ns = receive_run(s, run_id, timeout_ms)
+    return start, [(h, frames, t) for (h, frames), t in zip(blocks, t_ns)], events, end
 
 
 def assert_never_early(blocks, t_cmd_ns, speed):

@@ -135,24 +135,24 @@ def fig4():
     assert d.stop() == 0
 
 
-def collect_run_timed(s, run_id, timeout_ms=TIMEOUT_MS):
-    """All messages of run `run_id` up to its run.end: (start, blocks, events, end, t_first, t_last), the
-    last two the monotonic receive times of the first and the last data block."""
-    start, blocks, events, t_first, t_last = None, [], [], None, None
+def receive_run(s, run_id, timeout_ms=TIMEOUT_MS):
+    """All messages of run `run_id` up to its run.end: (start, blocks, events, end, t_ns), blocks as
+    (header, channel frames) and t_ns their receive times (time.monotonic_ns: CLOCK_MONOTONIC, the
+    daemon's pacing clock)."""
+    start, blocks, events, t_ns = None, [], [], []
     deadline = time.monotonic() + 120  # heartbeats keep the stream alive: bound the wait for run.end
     while True:
         assert time.monotonic() < deadline, "no run.end"
         if not s.poll(timeout_ms):
             raise AssertionError("stream went silent")
         parts = s.recv_multipart()
-        now = time.monotonic()
+        now = time.monotonic_ns()
         topic = parts[0]
         if topic == b"data":
             h = HEADER.unpack(parts[1])
             if h[4] == run_id:
                 blocks.append((h, parts[2:]))
-                t_first = t_first or now
-                t_last = now
+                t_ns.append(now)
         elif topic in (b"run.start", b"run.end", b"event"):
             j = json.loads(parts[1])
             if j["run_id"] != run_id:
@@ -162,12 +162,19 @@ def collect_run_timed(s, run_id, timeout_ms=TIMEOUT_MS):
             elif topic == b"event":
                 events.append(j)
             else:
-                return start, blocks, events, j, t_first, t_last
+                return start, blocks, events, j, t_ns
 
 
 def collect_run(s, run_id, timeout_ms=TIMEOUT_MS):
-    """All messages of run `run_id` up to its run.end: (start, blocks, events, end)."""
-    return collect_run_timed(s, run_id, timeout_ms)[:4]
+    """(start, blocks, events, end) of run `run_id` (receive_run without the times)."""
+    return receive_run(s, run_id, timeout_ms)[:4]
+
+
+def collect_run_timed(s, run_id, timeout_ms=TIMEOUT_MS):
+    """(start, blocks, events, end, t_first, t_last): with the time.monotonic() receive times of the first
+    and the last data block (None without blocks)."""
+    start, blocks, events, end, t_ns = receive_run(s, run_id, timeout_ms)
+    return start, blocks, events, end, t_ns[0] / 1e9 if t_ns else None, t_ns[-1] / 1e9 if t_ns else None
 
 
 def error_ok(r, code, field=None):
