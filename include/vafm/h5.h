@@ -189,6 +189,12 @@ VAFM_API void vafm_h5_writer_destroy(vafm_h5_writer **w);
 VAFM_API void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_params *p,
                                      const vafm_curve_result *r);
 
+/** Fill a ground-truth row for a simulated curve: grid point `point`, the scene's T, retract speed and
+ *  spring constant, the curve result (status 0). result.index stays the curve's stream index: a writer
+ *  that numbers rows by group sets it afterwards. */
+VAFM_API void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params *p,
+                                     const vafm_curve_result *r);
+
 /**
  * Open a file for reading. The file must follow the layout: root attributes "software" and "software
  * version", only curve groups at the root; curve groups are checked when read.

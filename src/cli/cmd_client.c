@@ -680,13 +680,8 @@ static int s_write_h5(s_listen *L, const s_run *r, json_t *end)
      * column then (hdf5.md L14), as in vafmd's own log (wire.md §3.1.1) */
     if (json_is_true(json_object_get(json_object_get(r->start, "detector"), "on")))
         hc.tip_position_m = NULL;
-    vafm_h5_truth t;
-    memset(&t, 0, sizeof t);
-    t.point = s_ju64(json_object_get(r->start, "campaign"), "point"); /* a campaign's grid point, else 0 */
-    t.T_K = p.T_K;
-    t.v_m_per_s = p.v_retract_m_per_s;
-    t.k_N_per_m = p.k_N_per_m;
-    t.result = res;
+    vafm_h5_truth t; /* point: a campaign's grid point, else 0 */
+    vafm_h5_truth_from_sim(&t, s_ju64(json_object_get(r->start, "campaign"), "point"), &p, &res);
     t.result.index = vafm_h5_writer_count(L->w); /* the group number; the stream index is in curve id */
     if ((rc = vafm_h5_writer_append(L->w, &hc, &t, &e)) != 0 || (rc = vafm_h5_writer_flush(L->w, &e)) != 0) {
         s_err(L->x, "%s: run %" PRId64 ": %s%s%s", L->out, r->run_id, e.message, e.field[0] ? " at " : "",

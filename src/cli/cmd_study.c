@@ -108,12 +108,7 @@ static int s_cb(void *user, const vafm_campaign_curve *c)
     vafm_h5_curve hc;
     vafm_h5_curve_from_sim(&hc, &c->samples, c->params, &c->result);
     vafm_h5_truth t;
-    memset(&t, 0, sizeof t);
-    t.point = c->point;
-    t.T_K = c->params->T_K;
-    t.v_m_per_s = c->params->v_retract_m_per_s;
-    t.k_N_per_m = c->params->k_N_per_m;
-    t.result = c->result;
+    vafm_h5_truth_from_sim(&t, c->point, c->params, &c->result);
     int rc = vafm_h5_writer_append(r->w, &hc, &t, &r->e);
     if (rc) {
         r->werr = rc;

@@ -1152,12 +1152,7 @@ static int s_camp_curve(void *user, const vafm_campaign_curve *c)
     hc.meta.session_id = cp->session_id;
     hc.meta.curve_id = cid;
     vafm_h5_truth t;
-    memset(&t, 0, sizeof t);
-    t.point = c->point;
-    t.T_K = c->params->T_K;
-    t.v_m_per_s = c->params->v_retract_m_per_s;
-    t.k_N_per_m = c->params->k_N_per_m;
-    t.result = c->result;
+    vafm_h5_truth_from_sim(&t, c->point, c->params, &c->result);
     vafm_error e;
     memset(&e, 0, sizeof e);
     pthread_mutex_lock(&cp->mu);

@@ -96,12 +96,7 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
     hc.meta.session_id = sid;
     hc.meta.curve_id = cid;
     vafm_h5_truth t;
-    memset(&t, 0, sizeof t);
-    t.point = c->begin->point;
-    t.T_K = p->T_K;
-    t.v_m_per_s = p->v_retract_m_per_s;
-    t.k_N_per_m = p->k_N_per_m;
-    t.result = end->result;
+    vafm_h5_truth_from_sim(&t, c->begin->point, p, &end->result);
     t.result.index = vafm_h5_writer_count(L->w);
     vafm_error e;
     memset(&e, 0, sizeof e);

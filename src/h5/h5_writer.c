@@ -854,3 +854,13 @@ void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_
         m->z_range_m = hmax - hmin;
     m->segment_count = 2;
 }
+
+void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params *p, const vafm_curve_result *r)
+{
+    memset(t, 0, sizeof *t);
+    t->point = point;
+    t->T_K = p->T_K;
+    t->v_m_per_s = p->v_retract_m_per_s;
+    t->k_N_per_m = p->k_N_per_m;
+    t->result = *r;
+}
