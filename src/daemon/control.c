@@ -279,7 +279,19 @@ char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int 
     return text;
 }
 
-/* replay: the file is read and checked here (replay.c); the simulation thread streams it from memory. */
+/* Remember a start that carries a client run id, so that a retry of it is answered, not run again.
+ * @return the entry (for kind-specific fields), or NULL without a client run id. */
+static s_hist *s_history_add(const vafmd_cmd *c, uint64_t run_id, int kind)
+{
+    if (!c->client_run_id[0])
+        return NULL;
+    s_hist *h = &s_history[s_history_n++ % S_HISTORY];
+    memset(h, 0, sizeof *h);
+    snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
+    h->run_id = run_id;
+    h->kind = kind;
+    return h;
+}
 
 /* A run handed to the simulation thread: count it, remember its client run id (idempotent retries)
  * and build the ok reply. */
@@ -289,12 +301,7 @@ static json_t *s_run_accepted(vafmd *d, const vafmd_cmd *c, uint64_t run_id, int
     d->next_run_id++;
     d->runs_started++;
     d->jobs_started++;
-    if (c->client_run_id[0]) {
-        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
-        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
-        h->run_id = run_id;
-        h->kind = kind;
-    }
+    s_history_add(c, run_id, kind);
     json_t *r = s_ok(c);
     json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
     json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
@@ -303,6 +310,7 @@ static json_t *s_run_accepted(vafmd *d, const vafmd_cmd *c, uint64_t run_id, int
     return r;
 }
 
+/* replay: the file is read and checked here (replay.c); the simulation thread streams it from memory. */
 static json_t *s_start_replay(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
     vafmd_sim_cmd sc;
@@ -511,11 +519,8 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     d->next_run_id += curves;
     d->runs_started++;
     d->jobs_started++;
-    if (c->client_run_id[0]) {
-        s_hist *h = &s_history[s_history_n++ % S_HISTORY];
-        snprintf(h->client_run_id, sizeof h->client_run_id, "%s", c->client_run_id);
-        h->run_id = run_id;
-        h->kind = S_KIND_CAMPAIGN;
+    s_hist *h = s_history_add(c, run_id, S_KIND_CAMPAIGN);
+    if (h) {
         h->campaign_id = d->next_campaign_id;
         h->curves = curves + c->camp_first;
     }
