@@ -246,6 +246,27 @@ static double t_P(const t_br *b, double t)
     return t2 * (t2 + 4.0 * b->s_m * t + 6.0 * b->s_m * b->s_m);
 }
 
+/* The branch of (γ, k) in the t variable, and t* (the instability u*) by bisection of the monotone P. */
+static double t_branch(t_br *b, double g, double k, const vafm_quasistatic *q)
+{
+    b->c = sqrt(2.0 * T_PI * g);
+    b->s_m = cbrt(b->c / 4.0);
+    b->u_min = q->u_min;
+    b->k = k;
+    b->du_spr = 0.0;
+    double lo = 0.0, hi = 1.0 + b->s_m, du_star = q->u_star - q->u_min;
+    for (int it = 0; it < 3000; ++it) {
+        double mid = 0.5 * (lo + hi);
+        if (!(mid > lo && mid < hi))
+            break;
+        if (t_P(b, mid) < du_star)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
 /* −dV/du = k(u_spr − u) − F: the net force on the body */
 static double t_g(const t_br *b, double t)
 {
@@ -315,22 +336,7 @@ static void test_barrier(void)
         vafm_quasistatic q;
         ENSURE(vafm_theory_quasistatic(g, k, &q) == VAFM_OK);
         t_br b;
-        b.c = sqrt(2.0 * T_PI * g);
-        b.s_m = cbrt(b.c / 4.0);
-        b.u_min = q.u_min;
-        b.k = k;
-        /* t* from u*: invert P by bisection (monotone) */
-        double lo = 0.0, hi = 1.0 + b.s_m, du_star = q.u_star - q.u_min;
-        for (int it = 0; it < 3000; ++it) {
-            double mid = 0.5 * (lo + hi);
-            if (!(mid > lo && mid < hi))
-                break;
-            if (t_P(&b, mid) < du_star)
-                lo = mid;
-            else
-                hi = mid;
-        }
-        const double ts = lo;
+        const double ts = t_branch(&b, g, k, &q);
         double prev_err = INFINITY;
         int n_valid = 0;
         for (int j = 0; j <= 6; ++j) {
@@ -402,22 +408,8 @@ static void test_mfpt_kramers(void)
     ENSURE(vafm_theory_quasistatic(g, k, &q) == VAFM_OK);
     ENSURE(vafm_contact_init(&c, vafm_contact_jkr, g) == VAFM_OK);
     t_br b;
-    b.c = sqrt(2.0 * T_PI * g);
-    b.s_m = cbrt(b.c / 4.0);
-    b.u_min = q.u_min;
-    b.k = k;
+    const double ts = t_branch(&b, g, k, &q);
     b.du_spr = (q.u_spr_star + y) - q.u_min;
-    double lo = 0.0, hi = 1.0 + b.s_m, du_star = q.u_star - q.u_min;
-    for (int it = 0; it < 3000; ++it) {
-        double mid = 0.5 * (lo + hi);
-        if (!(mid > lo && mid < hi))
-            break;
-        if (t_P(&b, mid) < du_star)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    const double ts = lo;
     ENSURE(t_g(&b, 0.0) < 0.0 && t_g(&b, ts) > 0.0);
     double t_top = t_root(&b, 0.0, ts), hi2 = 2.0 * ts + 1.0;
     while (t_g(&b, hi2) > 0.0)
