@@ -1295,6 +1295,22 @@ static void test_damaged_files(void)
 
 /* ---- kill -9 and resume ---------------------------------------------------------------------------- */
 
+/* Fork a writer child running fn(path, resume, write end of a pipe) (fn never returns); the parent keeps
+ * the read end in pfd[0]. @return the child's pid, or −1 (no pipe). */
+static pid_t s_spawn_writer(void (*fn)(const char *, int, int), const char *path, int resume, int pfd[2])
+{
+    if (pipe(pfd))
+        return -1;
+    fflush(NULL);
+    pid_t pid = fork();
+    if (pid == 0) {
+        close(pfd[0]);
+        fn(path, resume, pfd[1]);
+    }
+    close(pfd[1]);
+    return pid;
+}
+
 /* Child: run (or resume) the campaign into path with a flush after each curve, reporting each flushed
  * curve's index on fd. */
 static void kill_child(const char *path, int resume, int fd)
@@ -1319,15 +1335,9 @@ static void test_kill_resume(void)
     int kills = 0, rounds = 0;
     for (; rounds < 12; rounds++) {
         int pfd[2];
-        if (pipe(pfd))
+        pid_t pid = s_spawn_writer(kill_child, path, rounds > 0, pfd);
+        if (pid < 0)
             break;
-        fflush(NULL);
-        pid_t pid = fork();
-        if (pid == 0) {
-            close(pfd[0]);
-            kill_child(path, rounds > 0, pfd[1]);
-        }
-        close(pfd[1]);
         /* kill after 1–2 more flushes and a random delay (0–25 ms: inside a curve, a write or a flush),
          * except in the last round, which runs to the end */
         int last = kills >= 4;
@@ -1427,15 +1437,9 @@ static void test_kill_during_flush(void)
     int rounds = LONG_OR(80, 30), bad = 0;
     for (int r = 0; r < rounds && !bad; r++) {
         int pfd[2];
-        if (pipe(pfd))
+        pid_t pid = s_spawn_writer(flush_child, path, r > 0, pfd);
+        if (pid < 0)
             break;
-        fflush(NULL);
-        pid_t pid = fork();
-        if (pid == 0) {
-            close(pfd[0]);
-            flush_child(path, r > 0, pfd[1]);
-        }
-        close(pfd[1]);
         uint64_t idx;
         if (read(pfd[0], &idx, sizeof idx) == (ssize_t)sizeof idx)
             flushed = idx + 1;
