@@ -22,6 +22,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench_util.h"
 #include "vafm/integrator.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
@@ -43,16 +44,9 @@ typedef struct s_clock {
     double wall, cpu; /* s */
 } s_clock;
 
-static double s_clock_s(clockid_t id)
-{
-    struct timespec ts;
-    clock_gettime(id, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static s_clock s_now(void)
 {
-    s_clock c = { s_clock_s(CLOCK_MONOTONIC), s_clock_s(CLOCK_PROCESS_CPUTIME_ID) };
+    s_clock c = { bench_clock_s(CLOCK_MONOTONIC), bench_clock_s(CLOCK_PROCESS_CPUTIME_ID) };
     return c;
 }
 
@@ -483,19 +477,6 @@ static void s_cpu_model(char *buf, size_t len)
     fclose(f);
 }
 
-/* The 1-minute load average: on a shared machine wall times include waiting for the CPU, CPU times do not. */
-static double s_loadavg(void)
-{
-    double l = NAN;
-    FILE *f = fopen("/proc/loadavg", "r");
-    if (f) {
-        if (fscanf(f, "%lf", &l) != 1)
-            l = NAN;
-        fclose(f);
-    }
-    return l;
-}
-
 static FILE *s_open(const char *dir, const char *name)
 {
     char path[4096];
@@ -616,7 +597,7 @@ int main(int argc, char **argv)
 {
     const char *dir = argc > 1 ? argv[1] : ".";
     static s_bench b; /* static: a few kB of rows, zero-initialised */
-    b.load0 = s_loadavg();
+    b.load0 = bench_loadavg();
     if (s_bench_kernel(&b) || s_bench_scene(&b))
         return 1;
     s_ratios(&b);
@@ -639,6 +620,6 @@ int main(int argc, char **argv)
     for (size_t i = 0; i < sizeof runs / sizeof runs[0] && n_rtf < S_MAX_RTF; i++)
         if (s_rtf_run(&o[n_rtf], &runs[i]) == 0)
             n_rtf++;
-    b.load1 = s_loadavg();
+    b.load1 = bench_loadavg();
     return s_emit(dir, &b, o, n_rtf) ? 1 : 0;
 }

@@ -40,6 +40,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "bench_util.h"
 #include "vafm/campaign.h"
 #include "vafm/integrator.h"
 #include "vafm/params.h"
@@ -57,26 +58,6 @@ static const double s_omega_dts[] = { S_PAPER_OMEGA_DT, 0.3, 0.6, 1.0, 1.5 };
 #define S_NDT ((int)(sizeof s_omega_dts / sizeof s_omega_dts[0]))
 
 /* ---- clocks ------------------------------------------------------------------------------------ */
-
-static double s_clock_s(clockid_t id)
-{
-    struct timespec ts;
-    clock_gettime(id, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-/* The 1-minute load average: other jobs on the machine slow the wall clock, not the CPU clock. */
-static double s_loadavg(void)
-{
-    double l = NAN;
-    FILE *f = fopen("/proc/loadavg", "r");
-    if (f) {
-        if (fscanf(f, "%lf", &l) != 1)
-            l = NAN;
-        fclose(f);
-    }
-    return l;
-}
 
 /* ---- rows -------------------------------------------------------------------------------------- */
 
@@ -182,7 +163,7 @@ static int s_on_curve(void *user, const vafm_campaign_curve *c)
     r->steps += res->steps;
     if (++col->done >= col->next_report) {
         fprintf(stderr, "    %llu / %llu curves, %.0f s\n", (unsigned long long)col->done,
-                (unsigned long long)r->N, s_clock_s(CLOCK_MONOTONIC) - col->t0);
+                (unsigned long long)r->N, bench_clock_s(CLOCK_MONOTONIC) - col->t0);
         col->next_report += r->N / 10 ? r->N / 10 : 1;
     }
     return 0;
@@ -234,11 +215,11 @@ static int s_run_row(s_row *r)
     memset(&spec, 0, sizeof spec);
     spec.curves_per_point = r->N;
     spec.threads = 0;
-    s_collect col = { r, s_F_jkr_N(&p), 0, r->N / 10 ? r->N / 10 : 1, s_clock_s(CLOCK_MONOTONIC) };
-    double c0 = s_clock_s(CLOCK_PROCESS_CPUTIME_ID), w0 = col.t0;
+    s_collect col = { r, s_F_jkr_N(&p), 0, r->N / 10 ? r->N / 10 : 1, bench_clock_s(CLOCK_MONOTONIC) };
+    double c0 = bench_clock_s(CLOCK_PROCESS_CPUTIME_ID), w0 = col.t0;
     int rc = vafm_campaign_run(&p, &spec, s_on_curve, &col, &err);
-    r->cpu_s = s_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
-    r->wall_s = s_clock_s(CLOCK_MONOTONIC) - w0;
+    r->cpu_s = bench_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
+    r->wall_s = bench_clock_s(CLOCK_MONOTONIC) - w0;
     if (rc) {
         fprintf(stderr, "bench_work_precision: campaign: %s\n", err.message);
         return -1;
@@ -633,16 +614,16 @@ int main(int argc, char **argv)
     int n = s_plan(rows, N, N_bd, groups), rc = 0;
     fprintf(stderr, "work-precision: %d rows, N = %llu (overdamped N = %llu)\n", n, (unsigned long long)N,
             (unsigned long long)N_bd);
-    double t0 = s_clock_s(CLOCK_MONOTONIC), load0 = s_loadavg();
+    double t0 = bench_clock_s(CLOCK_MONOTONIC), load0 = bench_loadavg();
     const s_row *ref = NULL;
     for (int i = 0; i < n && !rc; i++) {
         if (rows[i].is_ref)
             ref = &rows[i];
         rc = s_run_row(&rows[i]) || s_compare(&rows[i], ref);
     }
-    fprintf(stderr, "work-precision: %.0f s wall in all\n", s_clock_s(CLOCK_MONOTONIC) - t0);
+    fprintf(stderr, "work-precision: %.0f s wall in all\n", bench_clock_s(CLOCK_MONOTONIC) - t0);
     if (!rc)
-        rc = s_emit(dir, rows, n, N, N_bd, load0, s_loadavg());
+        rc = s_emit(dir, rows, n, N, N_bd, load0, bench_loadavg());
     for (int i = 0; i < n; i++)
         s_row_free(&rows[i]);
     return rc ? 1 : 0;
