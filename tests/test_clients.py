@@ -9,11 +9,9 @@ Runs: paper-fig4 in free_run (~0.1 s per curve).
 """
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 
 import numpy as np
@@ -23,7 +21,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 PYCLIENT = os.path.join(HERE, "..", "clients", "python")
 sys.path.insert(0, PYCLIENT)
 from vafm_client import (CHANNELS, Client, DaemonError, GapError, Stream,  # noqa: E402
-                         TransportError, load_h5)
+                         TransportError, load_h5, spawn)
 
 VAFMD = os.environ.get("VAFMD")
 VAFM_CLI = os.environ.get("VAFM_CLI")
@@ -35,23 +33,11 @@ CSV_HEADER = "time_s,height_m,deflection_m,force_N,tip_m,segment"
 pytestmark = pytest.mark.skipif(not VAFMD, reason="set VAFMD to the vafmd executable")
 
 
-class Daemon:
+class Daemon(spawn.Daemon):
+    """The package's own spawned daemon (vafm_client.spawn), plus the vafm CLI pointed at it."""
+
     def __init__(self, *args, curve=None):
-        self.dir = tempfile.mkdtemp(prefix="vafmd-clients-")
-        self.rep, self.pub = f"ipc://{self.dir}/rep", f"ipc://{self.dir}/pub"
-        self.proc = subprocess.Popen([VAFMD, "--rep", self.rep, "--pub", self.pub, *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        deadline = time.time() + 10
-        while True:  # the first hello may race the bind; the client reopens its socket after a timeout
-            self.client = Client(self.rep, timeout=0.5, curve=curve)
-            try:
-                self.client.hello()
-                break
-            except TransportError:
-                self.client.close()
-                assert self.proc.poll() is None, self.proc.communicate()
-                assert time.time() < deadline, "vafmd did not answer hello"
-        self.client.timeout = 20.0
+        super().__init__(VAFMD, *args, curve=curve)
 
     def ctl(self, *args, timeout=60, pre=()):
         return self.cli("ctl", *pre, *args, timeout=timeout)
@@ -62,22 +48,6 @@ class Daemon:
             pytest.skip("VAFM_CLI not set")
         return subprocess.run([VAFM_CLI, sub, "--endpoint", self.rep, "--pub", self.pub, *args],
                               capture_output=True, text=True, timeout=timeout)
-
-    def stop(self):
-        if self.proc.poll() is None:
-            try:
-                self.client.shutdown()
-            except TransportError:
-                pass
-        self.client.close()
-        try:
-            rc = self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            rc = self.proc.wait()
-        self.proc.communicate()
-        shutil.rmtree(self.dir, ignore_errors=True)
-        return rc
 
 
 @pytest.fixture
