@@ -13,13 +13,7 @@
 set -u
 
 VAFM=${1:?usage: test_cli.sh path/to/vafm}
-TMP=$(mktemp -d)
-trap 'rm -rf "$TMP"' EXIT
-pass=0
-fail=0
-
-ok() { echo "ok   - $1"; pass=$((pass + 1)); }
-bad() { echo "FAIL - $1${2:+ ($2)}"; fail=$((fail + 1)); }
+. "$(dirname "$0")/harness.sh"
 
 # Run vafm; stdout in $TMP/out, stderr in $TMP/err, exit status in $rc.
 run() { "$VAFM" "$@" >"$TMP/out" 2>"$TMP/err"; rc=$?; }
@@ -376,5 +370,4 @@ else
     echo "skip - $TH5 not built: the foreign-file checks need it"
 fi
 
-echo "$pass passed, $fail failed"
-[ "$fail" -eq 0 ]
+harness_done

@@ -20,22 +20,16 @@ set -u
 VAFM=${1:?usage: test_mpi.sh path/to/vafm [mpirun]}
 MPIRUN=${2:-mpirun}
 PY=/usr/bin/python3
-TMP=$(mktemp -d)
+. "$(dirname "$0")/harness.sh"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 export OMPI_MCA_btl_vader_single_copy_mechanism=none # containers often forbid CMA (ptrace)
 export OMPI_MCA_rmaps_base_oversubscribe=1
 export ASAN_OPTIONS="${ASAN_OPTIONS:+$ASAN_OPTIONS:}detect_leaks=0"
 MPI=("$MPIRUN" --oversubscribe --bind-to none)
 MPIPID=
-cleanup() {
+harness_cleanup() {
     [ -n "$MPIPID" ] && kill "$MPIPID" 2>/dev/null && sleep 1 # timeout passes TERM on to mpirun
-    rm -rf "$TMP"
 }
-trap cleanup EXIT
-pass=0
-fail=0
-ok() { echo "ok   - $1"; pass=$((pass + 1)); }
-bad() { echo "FAIL - $1${2:+ ($2)}"; fail=$((fail + 1)); }
 
 SCENE=(--preset paper-fig4 --v 1e-5,6.4e-5 --flush-interval 0)
 N=12
@@ -63,8 +57,7 @@ if [ "$MPIRUN" = --without-mpi ]; then
     else
         bad "without MPI, plain vafm campaign works"
     fi
-    echo "$pass passed, $fail failed"
-    [ "$fail" -eq 0 ]
+    harness_done
     exit
 fi
 
@@ -218,5 +211,4 @@ kill_rank() {
 kill_rank "kill a worker" 1 2 2
 kill_rank "kill the writer" 0 3 0
 
-echo "$pass passed, $fail failed"
-[ "$fail" -eq 0 ]
+harness_done

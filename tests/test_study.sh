@@ -18,12 +18,7 @@ set -u
 VAFM=${1:?usage: test_study.sh path/to/vafm [--asan]}
 ASAN=0
 [ "${2:-}" = "--asan" ] && ASAN=1
-TMP=$(mktemp -d)
-trap 'rm -rf "$TMP"' EXIT
-pass=0
-fail=0
-ok() { echo "ok   - $1"; pass=$((pass + 1)); }
-bad() { echo "FAIL - $1${2:+ ($2)}"; fail=$((fail + 1)); }
+. "$(dirname "$0")/harness.sh"
 check() { if eval "$2"; then ok "$1"; else bad "$1" "${3:-}"; fi; }
 
 HAVE_MPL=0
@@ -120,5 +115,4 @@ else
     echo "skip - distribution: not run under the sanitizers (paper-fig1 curves; the optimised build runs it)"
 fi
 
-echo "$pass passed, $fail failed"
-[ $fail -eq 0 ]
+harness_done
