@@ -157,7 +157,10 @@ def test_python_stream_detects_gaps():
             assert lost > 0, "no block lost: the test did not overflow the queue"
             assert s.gaps == lost
             c.wait_idle()
-            c.curve(index=1)  # a complete run after the loss: no new gap
+            # a complete run after the loss: no new gap. Paced at 1x (a 63 ms curve, 1 ms blocks): free-running,
+            # the core now outruns this Python reader with its 1-message receive queue
+            c.set(free_run=False)
+            c.curve(index=1)
             run = next(s.runs())
             assert run.complete and s.gaps == lost
         with Stream(d.pub, rcvhwm=1) as s:  # a strict run() of a run with lost blocks raises GapError

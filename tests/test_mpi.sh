@@ -161,11 +161,14 @@ fi
 # rank 0 reports 4 curves done, then resume under mpirun -np RESUME_NP (0: plain vafm, no MPI); the
 # result must equal an uninterrupted run. --flush-interval 0 makes every written curve durable, so the kill keeps some curves.
 LONGN=48
-timeout 120 "$VAFM" campaign "${SCENE[@]}" -n $LONGN -o "$TMP/long.h5" -q >/dev/null 2>&1 ||
+# plain integrator steps in contact (no exact well step): ~5x the cost per curve, so that the kill lands
+# mid-run rather than after the last curve
+KSCENE=("${SCENE[@]}" --well_exact=false)
+timeout 120 "$VAFM" campaign "${KSCENE[@]}" -n $LONGN -o "$TMP/long.h5" -q >/dev/null 2>&1 ||
     bad "plain campaign -n $LONGN"
 kill_rank() {
     local desc=$1 rank=$2 np=$3 rnp=$4 out="$TMP/kill$2.h5" pid= p t
-    timeout 120 "${MPI[@]}" -np "$np" "$VAFM" campaign "${SCENE[@]}" -n $LONGN -o "$out" --progress \
+    timeout 120 "${MPI[@]}" -np "$np" "$VAFM" campaign "${KSCENE[@]}" -n $LONGN -o "$out" --progress \
         >"$TMP/kill.out" 2>"$TMP/kill.err" &
     MPIPID=$!
     for t in $(seq 1 300); do # up to 30 s
@@ -193,7 +196,7 @@ kill_rank() {
         bad "$desc: mpirun reports the lost rank" "status 0"
     local launch=("${MPI[@]}" -np "$rnp")
     [ "$rnp" -eq 0 ] && launch=() # resume without MPI
-    if timeout 120 "${launch[@]}" "$VAFM" campaign "${SCENE[@]}" -n $LONGN -o "$out" --resume \
+    if timeout 120 "${launch[@]}" "$VAFM" campaign "${KSCENE[@]}" -n $LONGN -o "$out" --resume \
         >"$TMP/resume.out" 2>"$TMP/resume.err"; then
         local kept
         kept=$(sed -n 's/.* holds \([0-9]*\) of the campaign.s \([0-9]*\) curves.*/\1 \2/p' "$TMP/resume.err" | head -1)

@@ -75,7 +75,7 @@ typedef struct vafm_params {
     int free_exact;        /**< 1: propagate the free cantilever exactly (linear SDE), 0: plain steps */
     int contact_table;     /**< 1: tabulated JKR branch in the step (error < 1e-13), 0: Newton solve */
     int well_exact;        /**< 1: far from the instability, propagate the contact well exactly (linearised);
-                                used where a sample spans ≥ 256 integrator steps (cheaper there) */
+                                used where a sample spans ≥ 8 integrator steps (cheaper there) */
     uint64_t seed;         /**< random seed; (seed, curve index) reproduces a curve bit for bit */
     uint8_t reserved[32];
 } vafm_params;

@@ -25,9 +25,22 @@
 #include "core/well_exact.h"
 
 #define S_BLOCK 512
-#define S_WELL_MIN_STEPS 256 /* integrator steps per sample above which the exact well step pays */
+/* Integrator steps per sample from which the exact well step pays: it costs ~0.15-0.2 µs (closed-form
+ * transition, an equilibrium Newton update, three normals, one contact solve), an in-contact step ~35 ns
+ * (bench_step). */
+#define S_WELL_MIN_STEPS 8
 
 enum { S_SCENE_NONE = 0, S_SCENE_CURVE, S_SCENE_TUNE };
+
+/* The contact branch's equilibrium for one support position, with the branch's stiffness and curvature
+ * there (the exact well step's linearisation). */
+typedef struct s_weq {
+    double uspr;     /* support position it belongs to */
+    double t;        /* s − s_m at the equilibrium (contact_jkr.c's t-form) */
+    double ueq;      /* equilibrium indentation */
+    double dF, F2;   /* dF/du and d²F/du² of the contact force there */
+    int ok;
+} s_weq;
 enum { S_PH_APPROACH = 0, S_PH_DWELL, S_PH_RETRACT, S_PH_TUNE, S_PH_DONE };
 
 struct vafm_sim {
@@ -44,6 +57,7 @@ struct vafm_sim {
     int adaptive;       /* two step sizes: nm.dt near the instability, nm.dt_far elsewhere in contact */
     int well_ok;        /* the exact contact-well step may be used */
     double dt_cur;      /* the integrator step in use */
+    s_weq weq;          /* the last well equilibrium (the next interval starts where it ends); reset per curve */
     int need_prepare;   /* the integrator's cached force is stale */
     /* scene */
     int scene, phase;
@@ -123,8 +137,8 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
         vafm_free_ou_integrate(&s->ou, K);
     s->sigma_free = sqrt(rd->kT / rd->k);
     s->adaptive = s->nm.n_sub_far != s->nm.n_sub;
-    /* The exact well step costs about as much as a few hundred integrator steps (block exponential,
-     * two equilibrium solves): it is used only where an output sample spans more steps than that. */
+    /* The exact well step costs about as much as a few integrator steps: it is used only where an output
+     * sample spans more steps than that. */
     s->well_ok = p->well_exact && !s->it->overdamped && K->contact.type != vafm_contact_none &&
                  s->nm.n_sub >= S_WELL_MIN_STEPS;
     *out = s;
@@ -200,6 +214,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->t_retract0 = NAN;
     s->mode_free = 0;
     s->mode_well = 0;
+    s->weq.ok = 0; /* a curve never starts from another curve's warm start: (seed, index) alone decides it */
     s->need_prepare = 1;
 
     const double L = s->nm.sc.length_m;
@@ -323,6 +338,69 @@ static void s_event(vafm_sim *s)
 }
 
 
+/* The equilibrium on the contact branch for the support at uspr: k(uspr − u) = F(u). Newton in t
+ * (u = u_min + P(t), s = s_m + t) from the last equilibrium, which the pull has moved by a tiny fraction
+ * of a well width, so two or three iterations reach round-off; a cold start, or a Newton run that does not
+ * settle, takes the bracketing solver of theory.c instead. The derivatives come in closed form from the
+ * parametrisation u = s⁴ − c·s, F = (4/3)s⁶ − 2c·s³ (contact_jkr.c): with D = du/ds = 4s³ − c (written
+ * 4t(s² + s·s_m + s_m²) as there) and N = dF/ds = 2s²(4s³ − 3c), dF/du = N/D and d²F/du² = (N′D − N·D′)/D³.
+ * @return 1, or 0 if there is no equilibrium on the branch there (past the instability). */
+static int s_weq_solve(const vafm_sim *s, double uspr, double t_warm, s_weq *e)
+{
+    const vafm_kernel *K = &s->K;
+    const double s_m = K->contact.s_m, c = K->contact.c, k = K->k;
+    const double u_min = vafm_jkr_u_min(s_m), du_spr = uspr - u_min;
+    double t = t_warm;
+    int done = 0;
+    if (t > 0.0) {
+        for (int it = 0; it < 6 && !done; it++) {
+            const double sv = s_m + t, s2 = sv * sv, t2 = t * t;
+            const double P = t2 * (t2 + 4.0 * s_m * t + 6.0 * s_m * s_m);
+            const double dP = t * (4.0 * t2 + 12.0 * s_m * t + 12.0 * s_m * s_m);
+            const double g = k * (du_spr - P) - s2 * sv * ((4.0 / 3.0) * s2 * sv - 2.0 * c);
+            const double dg = -k * dP - 2.0 * s2 * (4.0 * s2 * sv - 3.0 * c);
+            const double d = g / dg;
+            if (!(dg < 0.0) || !(fabs(d) <= 0.25 * t))
+                break; /* not on the stable branch's monotone side, or far off: bracket instead */
+            t -= d;
+            /* quadratic convergence: after a step |d| ≤ 1e-12·t what is left is ~d²/t, far below an ulp */
+            done = fabs(d) <= 1e-12 * t;
+        }
+    }
+    if (!done) {
+        double ueq, Feq;
+        if (vafm_theory_equilibrium(K->contact.gamma, k, uspr, &ueq, &Feq) != 0)
+            return 0;
+        t = vafm_jkr_solve_t(s_m, ueq - u_min, 0.0);
+    }
+    if (!(t > 0.0))
+        return 0;
+    const double sv = s_m + t, s2 = sv * sv, s3 = s2 * sv, t2 = t * t;
+    const double D = 4.0 * t * (s2 + sv * s_m + s_m * s_m), N = 2.0 * s2 * (4.0 * s3 - 3.0 * c);
+    const double dN = 40.0 * s2 * s2 - 12.0 * c * sv, dD = 12.0 * s2;
+    e->uspr = uspr;
+    e->t = t;
+    e->ueq = u_min + t2 * (t2 + 4.0 * s_m * t + 6.0 * s_m * s_m);
+    e->dF = N / D;
+    e->F2 = (dN * D - N * dD) / (D * D * D);
+    e->ok = 1;
+    return 1;
+}
+
+/* The equilibrium at uspr through the one-entry memo (consecutive well intervals share their boundary
+ * support position bit for bit). */
+static int s_weq_at(vafm_sim *s, double uspr, s_weq *e)
+{
+    if (s->weq.ok && s->weq.uspr == uspr) {
+        *e = s->weq;
+        return 1;
+    }
+    if (!s_weq_solve(s, uspr, s->weq.ok ? s->weq.t : 0.0, e))
+        return 0;
+    s->weq = *e;
+    return 1;
+}
+
 /* The exact contact-well step over one sample interval, when it applies (see the file comment).
  * Linearised about the equilibrium u_eq0 at the interval start with stiffness K = k + dF/du there; the
  * equilibrium moves at r = (u_eq1 − u_eq0)/Ts and friction (relative to the support for the cantilever
@@ -332,13 +410,11 @@ static int s_well_interval(vafm_sim *s)
 {
     vafm_kernel *K = &s->K;
     const double Ts = s->nm.Ts, v = K->v_spr;
-    double ueq0, ueq1, Feq;
-    if (vafm_theory_equilibrium(K->contact.gamma, K->k, K->u_spr, &ueq0, &Feq) != 0 ||
-        vafm_theory_equilibrium(K->contact.gamma, K->k, K->u_spr + v * Ts, &ueq1, &Feq) != 0)
+    s_weq e0, e1;
+    if (!s_weq_at(s, K->u_spr, &e0) || !s_weq_at(s, K->u_spr + v * Ts, &e1))
         return 0;
-    double sq = 0.0, dF = 0.0;
-    K->cforce(&K->contact, ueq0, &sq, &dF);
-    const double Kt = K->k + dF;
+    const double ueq0 = e0.ueq, ueq1 = e1.ueq;
+    const double Kt = K->k + e0.dF;
     const double room = ueq0 - s->nm.u_soft; /* distance to where the branch's stiffness vanishes */
     if (!(Kt > 0.0) || !(room > 0.0))
         return 0;
@@ -346,12 +422,7 @@ static int s_well_interval(vafm_sim *s)
     const double sigma = sqrt(K->kT / Kt);
     /* curvature of the force: the leading anharmonic effect is the mean shift −F″kT/(2K²); it is
      * added to the centre line, and the scheme is used only while the next order is small */
-    double h2 = fmax(sigma, 1e-4 * room), dFp = 0.0, dFm = 0.0;
-    sq = 0.0;
-    K->cforce(&K->contact, ueq0 + h2, &sq, &dFp);
-    sq = 0.0;
-    K->cforce(&K->contact, ueq0 - h2, &sq, &dFm);
-    const double F2 = (dFp - dFm) / (2.0 * h2);
+    const double F2 = e0.F2;
     const double r = (ueq1 - ueq0) / Ts;
     const double xs = -m * (eta * r - v) / Kt - F2 * K->kT / (2.0 * Kt * Kt);
     const double X = K->u - (ueq0 + xs), V = K->w - r;
@@ -391,8 +462,9 @@ static int s_well_interval(vafm_sim *s)
     K->acc_u = c0 + 0.5 * r * Ts + nx[2] / Ts;
     K->acc_uspr = K->uspr0 + 0.5 * v * Ts;
     K->acc_n = 1;
-    K->s = 0.0;
-    K->Fc = K->cforce(&K->contact, K->u, &K->s, NULL);
+    K->s = K->contact.s_m + e1.t; /* warm start: the body is within a few σ of the new equilibrium */
+    K->Fc = K->jtab ? vafm_jkr_table_force(K->jtab, &K->contact, K->u, &K->s) /* as the integrator's steps */
+                    : K->cforce(&K->contact, K->u, &K->s, NULL);
     double fs = K->k * (K->u_spr - K->u);
     K->f = fs - K->Fc;
     if (fs < K->fs_min)

@@ -11,6 +11,8 @@
  * exponential on a sub-step small enough that a Taylor series converges to round-off with no
  * cancellation, then doubling: Φ(2h) = Φ(h)², Σ(2h) = Φ(h)Σ(h)Φ(h)ᵀ + Σ(h). One step then replaces
  * the thousands of integrator steps a well with ω·Ts ≫ 1 would need; sim.c decides where it holds.
+ * Where ω·h ≥ 1 the same transition has closed forms (well_exact.c), cheap enough to set up afresh for
+ * every output sample even at a few integrator steps per sample.
  */
 #ifndef VAFM_CORE_WELL_EXACT_H
 #define VAFM_CORE_WELL_EXACT_H
@@ -20,7 +22,10 @@ typedef struct vafm_well3 {
     double chol[3][3]; /* lower Cholesky factor of the covariance */
 } vafm_well3;
 
-/** Transition of the augmented well over h: ω² = K/m, friction rate eta, noise intensity q = 2ηkT/m. */
+/** Transition of the augmented well over h: ω² = K/m, friction rate eta, noise intensity q = 2ηkT/m.
+ *  Closed forms where they keep full precision (ω·h ≥ 1), else the series below. */
 void vafm_well3_setup(vafm_well3 *W, double omega2, double eta, double q, double h);
+/** The same through Van Loan's block exponential (any ω·h; ~30× the cost of the closed forms). */
+void vafm_well3_setup_vanloan(vafm_well3 *W, double omega2, double eta, double q, double h);
 
 #endif
