@@ -594,6 +594,56 @@ def test_campaign_abort_first_index_and_progress():
     assert d.stop() == 0
 
 
+def test_campaign_failed_curve_ends_campaign_with_error(tmp_path):
+    """A curve that fails at run time, after the control thread validated every grid point: the step dt_s
+    = 3.1e-7 s (16 steps a sample) is just inside the GJF stability limit at the stiffest contact the scene
+    predicts (~3.12e-7 s, paper-fig4), which holds at 300 K, but at 1e8 K the thermal motion drives the
+    tip into contact far stiffer than that and the runtime guard ends the curve with VAFM_EUNSTABLE
+    (field dt_s) within its first milliseconds (`vafm run --T_K 1e8 --dt_s 3.1e-7 --sample_rate_Hz
+    201612.9` fails for every index tried). Grid T = [300, 1e8] K, 2 curves a point: curves 0 and 1 end
+    ok, the first of the 1e8 K point fails. Expected (protocol/wire.md §3.3, §3.6): its run.end has status
+    "error" and the curve's error, then campaign.end "error" naming that curve, curves_done = the curves
+    before it; the daemon is idle and serves a new run; the log holds the curves that ended ok, bit for
+    bit, and counts the failed one as skipped."""
+    h5py = pytest.importorskip("h5py")
+    d = Daemon("--preset", "paper-fig4", "--free-run")
+    dt = 3.1e-7
+    assert d.cmd({"cmd": "set", "values": {"dt_s": dt, "sample_rate_Hz": 1 / (16 * dt)}})["status"] == "ok"
+    path = tmp_path / "campfail.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    r = d.cmd({"cmd": "campaign", "n": 2, "T_K": [300.0, 1e8], "client_run_id": "fail-1"})
+    assert r["status"] == "ok" and r["curves"] == 4, r  # every point's scene passed validation
+    runs, cend = collect_campaign(s, r["campaign_id"])
+    *ok_runs, (fstart, fblocks, _, fend) = runs
+    # both 300 K curves (point 0) ended ok, and so did any 1e8 K curve before the failed one
+    assert [st["campaign"]["point"] for st, _, _, _ in ok_runs][:2] == [0, 0], [e["status"] for *_, e in runs]
+    assert [e["status"] for _, _, _, e in ok_runs] == ["ok"] * len(ok_runs)
+    g = fstart["campaign"]["curve"]
+    assert fstart["campaign"]["point"] == 1 and fstart["index"] == g == len(ok_runs), fstart["campaign"]
+    assert fend["status"] == "error" and fend["campaign"]["curve"] == g, fend
+    assert fend["error"]["field"] == "dt_s" and "dt_s" in fend["error"]["message"], fend["error"]
+    assert fend["blocks"] == len(fblocks) and fend["samples"] == sum(h[7] for h, _ in fblocks)
+    assert cend["status"] == "error" and cend["client_run_id"] == "fail-1", cend
+    assert fend["samples"] < ok_runs[0][3]["samples"]  # cut short: what was computed before the failure
+    assert (cend["curves_done"], cend["curves"], cend["first_index"]) == (len(ok_runs), 4, 0), cend
+    msg = cend["error"]["message"]
+    assert f"curve {g} (run {fend['run_id']}) failed" in msg and fend["error"]["message"] in msg, msg
+    st = d.cmd({"cmd": "status"})
+    assert st["state"] == "idle" and st["campaign"]["running"] is False, st
+    assert st["campaign"]["curves_done"] == len(ok_runs) and st["runs_done"] == len(runs)
+    rt = d.cmd({"cmd": "tune", "duration_s": 0.01})  # serving: a new run is accepted and ends ok
+    assert rt["status"] == "ok" and collect_run(s, rt["run_id"])[3]["status"] == "ok"
+    log = d.cmd({"cmd": "log", "stop": True})["log"]
+    counts = (log["curves"], log["curves_skipped"], log["curves_dropped"], log["overflows"])
+    assert counts == (len(ok_runs), 1, 0, 0), log
+    with h5py.File(path, "r") as f:
+        assert_logged_equals_streams(f, ok_runs)
+    vafm_info_ok(path)
+    assert d.stop() == 0
+
+
 def test_next_run_accepted_on_run_end_and_last_flag_on_block_boundary(fig4):
     """A client that receives run.end may start the next run at once (no polling): the daemon is idle
     before run.end is published. And a run whose end falls exactly on a block boundary still flags its
@@ -765,6 +815,94 @@ def test_log_ring_overflow_drops_only_that_curve(tmp_path):
             assert f[str(i)].attrs["curve id"] == f"run {start['run_id']} index {start['index']}"
     vafm_info_ok(path)
     assert d.stop() == 0
+
+
+def assert_logged_equals_streams(f, runs):
+    """Curve group i of file f is run i: force, height and tip bit for bit, and the run in its curve id."""
+    assert sorted(f.keys(), key=int) == [str(i) for i in range(len(runs))]
+    for i, (start, blocks, _, end) in enumerate(runs):
+        c = h5_curve(f, i)
+        assert len(c["force"]) == end["samples"]
+        for chan, ds in (("force_N", "force"), ("height_m", "height (piezo)"), ("tip_m", "tip position")):
+            assert np.array_equal(c[ds].view(np.uint64), stream_channel(blocks, chan).view(np.uint64)), (i, chan)
+        assert f[str(i)].attrs["curve id"].startswith(f"run {start['run_id']} index {start['index']}")
+
+
+def test_log_pool_exhaustion_drops_only_that_curve(tmp_path):
+    """Test hooks: a log block pool of 16 blocks ($VAFMD_TEST_LOG_POOL; the ring keeps its 4096 items) and a
+    writer stalled while a file exists ($VAFMD_TEST_LOG_STALL). Against the stalled writer, curve 1 (b1 <= 16
+    blocks of 5 ms) takes b1 blocks, curve 2 the 16 - b1 left and then finds the pool empty: one overflow,
+    the curve marked broken (no more of its blocks queued), its end still queued, the ring far from full
+    (queued = 2 begin/end items each + 16 blocks = 20). Then, still stalled, 1 ms blocks: a new pool of 16
+    (the old one retired with all its blocks at the writer) and curve 3 (> 16 blocks) overflows once more.
+    After the stall the writer writes curve 1, drops 2 and 3; curves 0, 1 and 4 are in the file, each equal
+    to its stream bit for bit; the daemon exits 0 (under ASan: no leak, no use after free)."""
+    h5py = pytest.importorskip("h5py")
+    stall = tmp_path / "stall"
+    d = Daemon("--preset", "paper-fig4", "--free-run",
+               env={"VAFMD_TEST_LOG_POOL": "16", "VAFMD_TEST_LOG_STALL": str(stall)})
+    path = tmp_path / "pool.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    kept = [run_once(d, s, {"cmd": "curve", "index": 0})]
+    wait_log_curves(d, 1)
+    stall.touch()
+    time.sleep(0.2)  # the writer has seen the file (it looks every millisecond)
+    kept.append(run_once(d, s, {"cmd": "curve", "index": 1}))
+    b1 = kept[1][3]["blocks"]
+    assert b1 <= 16, b1  # the test's premise: curve 1 fits in the pool
+    lost = run_once(d, s, {"cmd": "curve", "index": 2})
+    assert lost[3]["status"] == "ok" and lost[3]["blocks"] > 16 - b1  # the stream itself lost nothing
+    st = d.cmd({"cmd": "status"})["log"]
+    assert (st["overflows"], st["curves"], st["queued"]) == (1, 1, 20), st
+    assert d.cmd({"cmd": "set", "values": {"block_s": 0.001}})["status"] == "ok"
+    lost2 = run_once(d, s, {"cmd": "curve", "index": 3})
+    assert lost2[3]["status"] == "ok" and lost2[3]["blocks"] > 16
+    st = d.cmd({"cmd": "status"})["log"]
+    assert (st["overflows"], st["curves"], st["queued"]) == (2, 1, 20 + 2 + 16), st
+    stall.unlink()
+    deadline = time.time() + 30
+    while d.cmd({"cmd": "status"})["log"]["queued"] and time.time() < deadline:  # the writer drains
+        time.sleep(0.01)
+    assert d.cmd({"cmd": "set", "values": {"block_s": 0.005}})["status"] == "ok"
+    kept.append(run_once(d, s, {"cmd": "curve", "index": 4}))
+    log = d.cmd({"cmd": "log", "stop": True})["log"]
+    assert (log["curves"], log["overflows"], log["curves_dropped"], log["error"]) == (3, 2, 2, None), log
+    with h5py.File(path, "r") as f:
+        assert_logged_equals_streams(f, kept)
+    vafm_info_ok(path)
+    run_once(d, s, {"cmd": "curve", "index": 5})  # logging off: the pool is released at this run's start
+    assert d.stop() == 0
+
+
+def test_log_pool_sigterm_with_blocks_at_the_writer(tmp_path):
+    """Lifetime at exit: SIGTERM while the stalled writer holds every block of two pools (the 5 ms pool of
+    curve 1, retired when 1 ms blocks replaced it, and the 1 ms pool of curve 2, which ran it empty). The
+    simulation thread leaves both to the writer thread, which writes what is complete (curve 1), drops
+    curve 2 and frees them: exit 0 (under ASan: no leak, no use after free), a valid file."""
+    h5py = pytest.importorskip("h5py")
+    stall = tmp_path / "stall"
+    d = Daemon("--preset", "paper-fig4", "--free-run",
+               env={"VAFMD_TEST_LOG_POOL": "16", "VAFMD_TEST_LOG_STALL": str(stall)})
+    path = tmp_path / "exit.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    stall.touch()
+    time.sleep(0.2)
+    kept = run_once(d, s, {"cmd": "curve", "index": 1})
+    assert kept[3]["blocks"] <= 16
+    assert d.cmd({"cmd": "set", "values": {"block_s": 0.001}})["status"] == "ok"
+    assert run_once(d, s, {"cmd": "curve", "index": 2})[3]["blocks"] > 16
+    st = d.cmd({"cmd": "status"})["log"]
+    assert (st["overflows"], st["queued"]) == (1, kept[3]["blocks"] + 2 + 16 + 2), st
+    d.proc.send_signal(signal.SIGTERM)
+    assert d.proc.wait(timeout=20) == 0, d.proc.stderr.read().decode()[-4000:]
+    d.ctx.destroy(0)
+    with h5py.File(path, "r") as f:
+        assert_logged_equals_streams(f, [kept])
+    vafm_info_ok(path)
 
 
 def test_log_kill9_loses_at_most_the_curve_in_progress(tmp_path):

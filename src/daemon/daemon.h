@@ -89,19 +89,33 @@ typedef struct vafmd_sim_cmd {
 } vafmd_sim_cmd;
 
 /* ---- HDF5 logging (log.c) ------------------------------------------------------------------------
- * The simulation thread copies each block of a logged curve into a heap block and pushes a pointer
- * through the log ring (SPSC, never waits: a full ring drops the block, counts an overflow and marks
- * the curve broken; a broken curve is not written). The writer thread assembles the curve and appends
- * it, with a flush, when its LOG_END arrives. */
+ * The simulation thread copies each released block of a logged curve into a log block taken from a
+ * preallocated pool and pushes a pointer through the log ring (SPSC, never waits: a full ring, or an
+ * empty pool, drops the block, counts an overflow and marks the curve broken; a broken curve is not
+ * written). The writer thread assembles the curve, appends it, with a flush, when its LOG_END arrives,
+ * and gives each block back through the free ring (a second SPSC ring, writer → simulation thread).
+ * The pool's design and lifetime: sim_thread.c, "The log block pool". */
 enum vafmd_log_item_type { VAFMD_LOG_BEGIN = 1, VAFMD_LOG_BLOCK = 2, VAFMD_LOG_END = 3 };
 #define VAFMD_LOG_RING_CAP 4096u /* blocks in flight: 20 s of samples at the default 5 ms blocks */
+#define VAFMD_LOG_POOL_MAX_BYTES (256u << 20) /* sample memory of the log block pool (sim_thread.c) */
 
+struct vafmd_log_pool;
 typedef struct vafmd_log_block {
-    size_t n;
-    double *time_s, *height_m, *force_N, *tip_m; /* point into data[] */
+    size_t n;                    /* samples in use */
+    double *time_s, *height_m, *force_N, *tip_m; /* point into its pool's sample memory */
     uint8_t *segment;
-    double data[]; /* 4 n doubles, then n bytes of segment */
+    struct vafmd_log_pool *pool; /* the pool it belongs to (and goes back to) */
 } vafmd_log_block;
+
+/* A pool of log blocks of block_cap samples: ONE allocation (this header, the block headers, the free
+ * stack, then the sample memory), so that free(pool) releases it whole. */
+typedef struct vafmd_log_pool {
+    struct vafmd_log_pool *next; /* simulation thread: retired pools; at its exit: the orphans list */
+    size_t n_blocks, block_cap;
+    size_t n_free;               /* blocks on the free stack (simulation thread only) */
+    vafmd_log_block **free;      /* the free stack (into this allocation) */
+    vafmd_log_block *blocks;     /* the n_blocks block headers (into this allocation) */
+} vafmd_log_pool;
 
 typedef struct vafmd_log_begin {
     vafm_params p;
@@ -113,14 +127,15 @@ typedef struct vafmd_log_begin {
 
 typedef struct vafmd_log_end {
     int ok;                   /* 1: the curve ran to its end (aborted and failed curves are not logged) */
-    int broken;               /* 1: a block of it was lost to a full ring */
+    int broken;               /* 1: a block of it was lost (full ring, empty pool) */
     vafm_curve_result result;
 } vafmd_log_end;
 
 typedef struct vafmd_log_item {
     int type;        /* enum vafmd_log_item_type */
     uint64_t run_id;
-    void *ptr;       /* vafmd_log_begin / vafmd_log_block / vafmd_log_end, ownership passes */
+    void *ptr;       /* vafmd_log_begin / vafmd_log_end: ownership passes (the writer frees it);
+                        vafmd_log_block: lent (the writer gives it back through the free ring) */
 } vafmd_log_item;
 
 enum vafmd_log_state { VAFMD_LOG_OFF = 0, VAFMD_LOG_ON = 1, VAFMD_LOG_STOPPING = 2 };
@@ -128,11 +143,18 @@ enum vafmd_log_state { VAFMD_LOG_OFF = 0, VAFMD_LOG_ON = 1, VAFMD_LOG_STOPPING =
 typedef struct vafmd_log {
     vafmd_ring ring;               /* simulation thread → writer thread */
     vafmd_log_item *ring_store;
+    vafmd_ring free_ring;          /* writer thread → simulation thread: log blocks to reuse (set up by the
+                                      simulation thread before its first log item) */
+    vafmd_log_block **free_store;  /* its slots; freed by the writer thread when it exits */
+    vafmd_log_pool *orphans;       /* pools the simulation thread left at its exit with blocks still at the
+                                      writer: freed by the writer thread when it exits (it exits after the
+                                      simulation thread, main.c joins them in that order) */
     atomic_int state;              /* enum vafmd_log_state; OFF→ON by control, ON→STOPPING by control,
                                       STOPPING→OFF by the writer thread once the file is closed */
     struct vafm_h5_writer *w;      /* owned by the writer thread while state != OFF */
     char path[4096];
-    atomic_uint_least64_t overflows;      /* blocks that found the ring full (simulation thread) */
+    atomic_uint_least64_t overflows;      /* blocks that found the ring full or the pool empty (simulation
+                                             thread) */
     atomic_uint_least64_t curves;         /* curves written by this log */
     atomic_uint_least64_t curves_dropped; /* logged curves not written: broken or a write error */
     atomic_uint_least64_t curves_skipped; /* aborted/failed curves, not written */

@@ -6,9 +6,10 @@
  * progress. The arrays in the file are copies of the very doubles that were streamed (bit for bit).
  *
  * The simulation thread never waits for this thread: the ring is bounded and a full ring costs the
- * curve (counted), not time. This thread polls the ring (1 ms naps when it is empty); the writer object
- * is handed over by the control thread through the atomic log state (OFF → ON) and handed back, closed,
- * by this thread (STOPPING → OFF).
+ * curve (counted), not time. The log blocks come from the simulation thread's preallocated pool and go
+ * back to it through the free ring (sim_thread.c, "The log block pool"). This thread polls the ring
+ * (1 ms naps when it is empty); the writer object is handed over by the control thread through the
+ * atomic log state (OFF → ON) and handed back, closed, by this thread (STOPPING → OFF).
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -110,6 +111,20 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
         atomic_fetch_add_explicit(&L->curves, 1, memory_order_relaxed);
 }
 
+/* An item is done with: a log block goes back to the simulation thread's pool through the free ring (it
+ * lives inside a pool allocation: never free()d one by one), begin and end items are freed here. The
+ * free ring holds every block that can be out at once (sim_thread.c sizes it), so the push does not
+ * fail; if it ever did, the block would only be lost to its pool until the pool is freed whole. */
+static void s_item_done(vafmd_log *L, vafmd_log_item *it)
+{
+    if (it->type == VAFMD_LOG_BLOCK) {
+        if (it->ptr)
+            vafmd_ring_push(&L->free_ring, &it->ptr);
+    } else
+        free(it->ptr);
+    it->ptr = NULL;
+}
+
 static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
 {
     switch (it->type) {
@@ -153,7 +168,7 @@ static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
     }
     default: break;
     }
-    free(it->ptr);
+    s_item_done(L, it);
 }
 
 void *vafmd_log_main(void *arg)
@@ -189,12 +204,21 @@ void *vafmd_log_main(void *arg)
         }
         if (st == VAFMD_LOG_OFF && atomic_load_explicit(&L->quit, memory_order_acquire)) {
             while (vafmd_ring_pop(&L->ring, &it))
-                free(it.ptr);
+                s_item_done(L, &it);
             break;
         }
         if (!got)
             nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
     }
     s_curve_free(&c);
+    /* last one out: the simulation thread has exited (main.c joins it before it sets quit), so the pools
+     * it left with blocks still in flight and the free ring's slots are this thread's to free */
+    while (L->orphans) {
+        vafmd_log_pool *p = L->orphans;
+        L->orphans = p->next;
+        free(p);
+    }
+    free(L->free_store);
+    L->free_store = NULL;
     return NULL;
 }

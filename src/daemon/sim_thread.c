@@ -17,7 +17,10 @@
  *
  * It never waits on anyone: commands arrive through the SPSC ring (polled between pieces), reports go
  * out through atomics, and the socket is used with ZMQ_DONTWAIT. A subscriber at its high-water mark
- * loses the message (counted), the others still get it.
+ * loses the message (counted), the others still get it. Nor does it call malloc/free per block for the
+ * log (a glibc allocator lock may be held by another thread): see "The log block pool" below. What
+ * still allocates per block is libzmq (zmq_send copies frames of more than 33 bytes into heap messages;
+ * no way around it with ZeroMQ) and jansson for the JSON events (a few per curve, not per block).
  */
 #include <errno.h>
 #include <inttypes.h>
@@ -62,7 +65,8 @@ typedef struct s_block {
     int n_rev;
     int64_t deadline;                  /* CLOCK_MONOTONIC ns */
     int64_t ready;                     /* when its computation ended */
-    vafmd_log_block *lb;               /* its samples for the writer thread (pushed at release), or NULL */
+    double *log_t;                     /* a logged run: its samples' times and segments (the logged */
+    uint8_t *log_seg;                  /* height, force and tip are ch[0], ch[2], ch[4]), else NULL */
 } s_block;
 
 typedef struct s_run {
@@ -81,17 +85,19 @@ typedef struct s_run {
     int64_t t_start;       /* CLOCK_MONOTONIC ns */
     int overrun_reported;
     vafmd_log *log;        /* non-NULL: the run is logged (a curve with logging on) */
-    vafmd_log_block *lb;   /* the block being filled for the writer thread, or NULL */
-    int log_broken;        /* a log item was lost to a full ring: the writer drops the curve */
+    double *lt;            /* log_t and log_seg of the block being filled (NULL: not logged) */
+    uint8_t *lseg;
+    int log_broken;        /* a log item was lost (full ring, empty pool): the writer drops the curve */
     /* detector chain (vafmd_settings): on, its noise stream, ADC step and code range, spring constant */
     int det;
     vafm_rng det_rng;
     double adc_q, code_min, code_max, k_N_per_m;
     int clipped;           /* a sample of the current block hit the ADC range */
     /* compute-ahead FIFO: qn complete blocks from q[qhead]; the block being filled (if filling) is
-     * q[(qhead + qn) % qcap]; ch[], fill, ev, lb above describe that block while it fills */
+     * q[(qhead + qn) % qcap]; ch[], lt, lseg, fill, ev above describe that block while it fills */
     s_block *q;
-    double *qstore;        /* the channel arrays of all slots (one allocation at run start) */
+    double *qstore;        /* the channel (and log time) arrays of all slots (one allocation at run start) */
+    uint8_t *qseg;         /* the log segment arrays of all slots (a logged run), or NULL */
     size_t qcap, qhead, qn;
     int filling;
     int src_rc;            /* the source's last return: 1 more to come, 0 ended, < 0 error */
@@ -105,6 +111,9 @@ typedef struct s_ctx {
     vafmd_campaign *camp;  /* the campaign in progress (owned), or NULL */
     int nodrop;            /* current ZMQ_XPUB_NODROP setting */
     int64_t t_boot;        /* CLOCK_MONOTONIC ns at thread start */
+    vafmd_log_pool *pool;  /* the log block pool of the current block size, or NULL */
+    vafmd_log_pool *retired; /* replaced pools with blocks still at the writer (freed once all are home) */
+    size_t pool_test_n;    /* $VAFMD_TEST_LOG_POOL (tests only): at most this many blocks a pool, 0: no limit */
 } s_ctx;
 
 static int64_t s_now(void)
@@ -217,12 +226,9 @@ static int s_sink(void *user, const vafm_samples *b)
             r->ch[1][k] = v * r->cmd.set.sensitivity_m_per_V;
             r->ch[2][k] = r->k_N_per_m * r->ch[1][k];
         }
-        if (r->lb) { /* the same doubles as the stream's: the file equals the stream bit for bit */
-            r->lb->time_s[k] = b->time_s[i];
-            r->lb->height_m[k] = b->height_m[i];
-            r->lb->force_N[k] = r->ch[2][k];
-            r->lb->tip_m[k] = b->tip_m[i];
-            r->lb->segment[k] = b->segment[i];
+        if (r->lt) { /* the log takes these and ch[0], ch[2], ch[4] at release: the stream's doubles */
+            r->lt[k] = b->time_s[i];
+            r->lseg[k] = b->segment[i];
         }
         int seg = b->segment[i];
         if (k == 0)
@@ -251,42 +257,191 @@ static int s_advance(s_run *r, size_t max)
     return vafm_sim_advance(r->cmd.sim, max, s_sink, r);
 }
 
-/* Hand one item to the writer thread without waiting: a full ring loses it (counted) and the curve. */
+/* ---- The log block pool ----------------------------------------------------------------------------
+ * The simulation thread calls no malloc/free per block (glibc's allocator may take a lock another thread
+ * holds): a logged run's block is copied, at its release, into a log block taken from a pool, and the
+ * writer thread gives each block back through the free ring (SPSC, writer → simulation thread) once it
+ * has copied it into its curve. An empty pool is handled exactly like a full log ring: the block is
+ * dropped, an overflow counted and the curve marked broken (not written); the other curves are intact.
+ *
+ * When: the pool is allocated at the start of a logged run, not when logging is switched on, because
+ * the block size (sample_rate_Hz · block_s) is known only then and may change between runs while
+ * logging stays on; run start already allocates (the compute-ahead FIFO, run.start), so nothing moves
+ * into the paced block loop. The pool is kept from run to run while the block size stays (a campaign, a
+ * series of curves), replaced when it changes, and released at the first run start after logging was
+ * switched off (or at exit).
+ * Size: the log ring's capacity + 1 blocks (what the ring and the writer's hand can hold, so that the
+ * pool runs empty only when the ring is full anyway), at most VAFMD_LOG_POOL_MAX_BYTES of samples (with
+ * large blocks the pool, not the ring, bounds the blocks in flight), at least 1; $VAFMD_TEST_LOG_POOL
+ * (tests only) makes it smaller. The lookahead FIFO stages its blocks' own copies (time and segment
+ * next to the channels), so the pool does not grow with the lookahead.
+ * Lifetime: a replaced pool with blocks still at the writer is retired; its blocks come home through
+ * the free ring (each block knows its pool) and it is freed at a run start once all are home. The free
+ * ring has room for 2 · (ring capacity + 1) blocks: when a pool is replaced at most a ring's worth + 1
+ * of blocks are out (this thread holds none between runs), plus the new pool's, so the writer's push
+ * never fails. At exit this thread frees the pools that are home and leaves the others to the writer
+ * thread (vafmd_log.orphans), which exits after it and frees them with the free ring's slots. */
+
+static size_t s_pool_stride(size_t cap) /* bytes of one block's samples, 64-byte aligned */
+{
+    return ((4 * sizeof(double) + 1) * cap + 63) & ~(size_t)63;
+}
+
+static size_t s_pool_head(size_t n) /* the pool header, block headers and free stack, 64-byte aligned */
+{
+    return (sizeof(vafmd_log_pool) + n * (sizeof(vafmd_log_block) + sizeof(vafmd_log_block *)) + 63) & ~(size_t)63;
+}
+
+/* Blocks of a pool for blocks of block_n samples (see above). */
+static size_t s_pool_size(const s_ctx *x, size_t block_n)
+{
+    size_t n = x->d->log.ring.cap + 1, most = VAFMD_LOG_POOL_MAX_BYTES / s_pool_stride(block_n);
+    if (n > most)
+        n = most;
+    if (x->pool_test_n && n > x->pool_test_n)
+        n = x->pool_test_n;
+    return n ? n : 1;
+}
+
+/* One allocation (free(p) releases it whole); the sample memory is not touched here (only the blocks
+ * in use get their pages). Block 0 is on top of the free stack, and the stack is LIFO, so a writer that
+ * keeps up makes the same few blocks go round. */
+static vafmd_log_pool *s_pool_new(size_t n, size_t cap)
+{
+    size_t head = s_pool_head(n), stride = s_pool_stride(cap);
+    if (stride && n > (SIZE_MAX - head) / stride)
+        return NULL;
+    unsigned char *m = malloc(head + n * stride);
+    if (!m)
+        return NULL;
+    vafmd_log_pool *p = (vafmd_log_pool *)m;
+    p->next = NULL;
+    p->n_blocks = n;
+    p->block_cap = cap;
+    p->blocks = (vafmd_log_block *)(m + sizeof *p);
+    p->free = (vafmd_log_block **)(p->blocks + n);
+    for (size_t k = 0; k < n; k++) {
+        vafmd_log_block *b = &p->blocks[k];
+        double *d = (double *)(m + head + k * stride);
+        b->n = 0;
+        b->time_s = d;
+        b->height_m = d + cap;
+        b->force_N = d + 2 * cap;
+        b->tip_m = d + 3 * cap;
+        b->segment = (uint8_t *)(d + 4 * cap);
+        b->pool = p;
+        p->free[n - 1 - k] = b;
+    }
+    p->n_free = n;
+    return p;
+}
+
+static void s_pool_put(vafmd_log_block *b)
+{
+    b->pool->free[b->pool->n_free++] = b;
+}
+
+/* Every block the writer gave back onto its pool's free stack: lock-free, bounded by the blocks of the
+ * live pools. */
+static void s_pool_reclaim(vafmd_log *L)
+{
+    vafmd_log_block *b;
+    while (L->free_store && vafmd_ring_pop(&L->free_ring, &b))
+        s_pool_put(b);
+}
+
+/* A free block of the current pool, or NULL (empty: the caller counts an overflow). No waiting. */
+static vafmd_log_block *s_pool_get(s_ctx *x)
+{
+    vafmd_log_pool *p = x->pool;
+    if (!p)
+        return NULL;
+    if (!p->n_free)
+        s_pool_reclaim(&x->d->log);
+    return p->n_free ? p->free[--p->n_free] : NULL;
+}
+
+static void s_pool_retire(s_ctx *x)
+{
+    if (x->pool) {
+        x->pool->next = x->retired;
+        x->retired = x->pool;
+        x->pool = NULL;
+    }
+}
+
+/* At run start (off the block loop): the pool this run needs; retired pools whose blocks are all home
+ * are freed. A pool that cannot be allocated costs the run's log (every block overflows), not the run. */
+static void s_pool_prepare(s_ctx *x, int logged, size_t block_n)
+{
+    vafmd_log *L = &x->d->log;
+    s_pool_reclaim(L);
+    if (logged) {
+        size_t n = s_pool_size(x, block_n);
+        if (x->pool && (x->pool->block_cap != block_n || x->pool->n_blocks != n))
+            s_pool_retire(x);
+        if (!x->pool && L->free_store)
+            x->pool = s_pool_new(n, block_n);
+    } else if (atomic_load_explicit(&L->state, memory_order_acquire) == VAFMD_LOG_OFF)
+        s_pool_retire(x);
+    for (vafmd_log_pool **pp = &x->retired; *pp;) {
+        vafmd_log_pool *p = *pp;
+        if (p->n_free == p->n_blocks) {
+            *pp = p->next;
+            free(p);
+        } else
+            pp = &p->next;
+    }
+}
+
+/* Hand one item to the writer thread without waiting: a full ring loses it (counted) and the curve. A
+ * lost block goes back to its pool, a lost begin/end item is freed (they are allocated once per run, at
+ * its start and end, not per block). */
 static void s_log_push(s_run *r, int type, void *ptr)
 {
     vafmd_log_item it = { type, r->cmd.run_id, ptr };
     if (!ptr || !vafmd_ring_push(&r->log->ring, &it)) {
-        free(ptr);
+        if (type == VAFMD_LOG_BLOCK && ptr)
+            s_pool_put(ptr);
+        else
+            free(ptr);
         r->log_broken = 1;
         atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
     }
 }
 
-static vafmd_log_block *s_log_block_new(size_t n)
+/* At release: the block's logged samples (the very doubles just streamed) into a pool block, to the
+ * writer. An empty pool counts as a full ring. */
+static void s_log_block(s_ctx *x, const s_block *b)
 {
-    vafmd_log_block *b = malloc(sizeof *b + 4 * n * sizeof(double) + n);
-    if (!b)
-        return NULL;
-    b->n = 0;
-    b->time_s = b->data;
-    b->height_m = b->data + n;
-    b->force_N = b->data + 2 * n;
-    b->tip_m = b->data + 3 * n;
-    b->segment = (uint8_t *)(b->data + 4 * n);
-    return b;
+    s_run *r = &x->run;
+    vafmd_log_block *lb = s_pool_get(x);
+    if (lb && (lb->pool->block_cap < b->n || !b->log_t || !b->ch[0] || !b->ch[2] || !b->ch[4])) {
+        s_pool_put(lb); /* cannot happen: the pool is made for the run's blocks, curves stream 0, 2 and 4 */
+        lb = NULL;
+    }
+    if (lb) {
+        memcpy(lb->time_s, b->log_t, b->n * sizeof(double));
+        memcpy(lb->height_m, b->ch[0], b->n * sizeof(double));
+        memcpy(lb->force_N, b->ch[2], b->n * sizeof(double));
+        memcpy(lb->tip_m, b->ch[4], b->n * sizeof(double));
+        memcpy(lb->segment, b->log_seg, b->n);
+        lb->n = b->n;
+    }
+    s_log_push(r, VAFMD_LOG_BLOCK, lb);
 }
 
 static void s_run_free(s_run *r, vafmd_shared *sh)
 {
-    free(r->lb);
-    r->lb = NULL;
-    /* unreleased blocks were never published: dropped (their log blocks too: the curve is not written) */
-    for (size_t i = 0; r->q && i < r->qn; i++)
-        free(r->q[(r->qhead + i) % r->qcap].lb);
+    /* unreleased blocks were never published: dropped (they hold no log block: those are taken at release) */
     free(r->q);
     r->q = NULL;
     free(r->qstore);
     r->qstore = NULL;
+    free(r->qseg);
+    r->qseg = NULL;
+    r->lt = NULL;
+    r->lseg = NULL;
     r->qn = 0;
     atomic_store_explicit(&sh->queued, 0, memory_order_relaxed);
     if (r->cmd.camp) /* a campaign's simulation belongs to the campaign (reused for a point's curves) */
@@ -323,10 +478,11 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
                                                : r->cmd.kind == VAFMD_RUN_REPLAY ? "replay"
                                                                                  : "curve"));
     json_object_set_new(j, "status", json_string(status));
+    const char *err_msg = NULL;
     if (err_code) {
         const vafm_error *e = vafm_sim_error(r->cmd.sim);
-        json_object_set_new(j, "error", json_pack("{s:s,s:s}", "message", e && e->message[0] ? e->message
-                                                  : vafm_strerror(err_code), "field", e ? e->field : ""));
+        err_msg = e && e->message[0] ? e->message : vafm_strerror(err_code);
+        json_object_set_new(j, "error", json_pack("{s:s,s:s}", "message", err_msg, "field", e ? e->field : ""));
     } else
         json_object_set_new(j, "error", json_null());
     json_object_set_new(j, "samples", json_integer((json_int_t)r->samples));
@@ -385,6 +541,12 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     if (cp && ok)
         atomic_store_explicit(&sh->camp_done, ++cp->done, memory_order_relaxed);
     int job_over = !cp || !ok || cp->next >= cp->total;
+    /* a failed curve ends its campaign: campaign.end says which curve and why (wire.md §3.6) */
+    int failed = !ok && strcmp(status, "aborted");
+    char msg[sizeof ((vafm_error *)0)->message + 96];
+    if (cp && failed)
+        snprintf(msg, sizeof msg, "curve %" PRIu64 " (run %" PRIu64 ") failed: %s", r->cmd.index, r->cmd.run_id,
+                 err_msg ? err_msg : status);
     char *text = json_dumps(j, JSON_COMPACT);
     json_decref(j);
     s_run_free(r, sh);
@@ -398,7 +560,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
         free(text);
     }
     if (cp && job_over)
-        s_camp_end(x, ok ? "ok" : !strcmp(status, "aborted") ? "aborted" : "error", NULL, 0);
+        s_camp_end(x, ok ? "ok" : failed ? "error" : "aborted", failed ? msg : NULL, 0);
 }
 
 /* Publish campaign.end and free the campaign. mark_done: the job is not yet reported done (no curve
@@ -442,6 +604,7 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     r->first_seq = atomic_load_explicit(&sh->seq, memory_order_relaxed);
     r->dropped_at_start = atomic_load(&sh->dropped);
     r->active = 1;
+    s_pool_prepare(x, c->log && c->kind == VAFMD_RUN_CURVE, r->block_n);
     r->det = p && vafmd_detector_on(&c->set); /* replays stream the recorded signals */
     if (r->det) {
         vafm_rng_init(&r->det_rng, p->seed ^ S_DETECTOR_KEY, c->index);
@@ -481,16 +644,17 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
 
 /* The compute-ahead FIFO of a run: 1 + ceil(lookahead_s · fs / block_n) slots (1, i.e. no lookahead:
  * compute a block, wait for its deadline, release it), fewer if the slots, their channel arrays and (a
- * logged run) their log blocks would pass VAFMD_LOOKAHEAD_MAX_BYTES; at least 1. Free run: 1 (blocks go
- * out as soon as they are computed). */
+ * logged run) their staged log times and segments would pass VAFMD_LOOKAHEAD_MAX_BYTES; at least 1. Free
+ * run: 1 (blocks go out as soon as they are computed). */
 static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs)
 {
     s_run *r = &x->run;
     size_t nch = 0;
     for (int i = 0; i <= VAFMD_CH_TIME; i++)
         nch += chmask >> i & 1;
+    size_t nlog = r->log ? 1 : 0; /* a logged run stages its samples' times (a double) and segments (a byte) */
     double per = (double)sizeof(s_block) + (double)(nch * r->block_n * sizeof(double)) +
-                 (r->log ? (double)(sizeof(vafmd_log_block) + r->block_n * (4 * sizeof(double) + 1)) : 0);
+                 (double)(nlog * r->block_n * (sizeof(double) + 1));
     double want = r->cmd.set.free_run ? 1 : 1 + ceil(r->cmd.set.lookahead_s * fs / (double)r->block_n);
     double most = floor((double)VAFMD_LOOKAHEAD_MAX_BYTES / per);
     if (!(want <= most))
@@ -499,16 +663,21 @@ static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs)
         want = 1;
     r->qcap = (size_t)want;
     r->q = calloc(r->qcap, sizeof *r->q);
-    r->qstore = malloc(r->qcap * (nch ? nch : 1) * r->block_n * sizeof(double));
-    if (!r->q || !r->qstore)
+    r->qstore = malloc(r->qcap * ((nch + nlog) ? nch + nlog : 1) * r->block_n * sizeof(double));
+    r->qseg = nlog ? malloc(r->qcap * r->block_n) : NULL;
+    if (!r->q || !r->qstore || (nlog && !r->qseg))
         return VAFM_ENOMEM;
     for (size_t k = 0; k < r->qcap; k++) {
-        double *p = r->qstore + k * nch * r->block_n;
+        double *p = r->qstore + k * (nch + nlog) * r->block_n;
         for (int i = 0; i <= VAFMD_CH_TIME; i++)
             if (chmask >> i & 1) {
                 r->q[k].ch[i] = p;
                 p += r->block_n;
             }
+        if (nlog) {
+            r->q[k].log_t = p;
+            r->q[k].log_seg = r->qseg + k * r->block_n;
+        }
     }
     atomic_store_explicit(&x->d->sh.lookahead_blocks, r->qcap, memory_order_relaxed);
     return 0;
@@ -534,10 +703,8 @@ static void s_compute(s_ctx *x)
         r->clipped = 0;
         for (int i = 0; i <= VAFMD_CH_TIME; i++)
             r->ch[i] = b->ch[i];
-        if (r->log && !r->log_broken && !(r->lb = s_log_block_new(r->block_n))) {
-            r->log_broken = 1;
-            atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
-        }
+        r->lt = b->log_t;
+        r->lseg = b->log_seg;
     }
     int64_t t0 = s_now(), t = t0, due = r->qn ? r->q[r->qhead].deadline : INT64_MAX;
     size_t piece = (r->block_n + 15) / 16;
@@ -565,11 +732,8 @@ static void s_compute(s_ctx *x)
     }
     r->filling = 0;
     r->src_rc = rc;
-    if (r->fill == 0) {
-        free(r->lb);
-        r->lb = NULL;
+    if (r->fill == 0)
         return;
-    }
     b->n = r->fill;
     b->flags = (rc != 1 ? VAFM_WIRE_FLAG_LAST : 0) | (r->seg_change ? VAFM_WIRE_FLAG_SEG_CHANGE : 0) |
                (r->clipped ? VAFM_WIRE_FLAG_CLIPPED : 0);
@@ -578,10 +742,6 @@ static void s_compute(s_ctx *x)
     memcpy(b->ev, r->ev, (size_t)r->n_ev * sizeof *r->ev);
     /* replay: the curves of the selection that began in this block */
     b->n_rev = r->cmd.replay ? vafmd_replay_take_events(r->cmd.replay, b->rev, VAFMD_REPLAY_MAX_EVENTS) : 0;
-    b->lb = r->lb;
-    r->lb = NULL;
-    if (b->lb)
-        b->lb->n = r->fill;
     uint64_t end = r->computed + r->fill;
     /* a replay is paced by its recorded times (replay.c), a simulation by its sample index */
     double t_end = r->cmd.replay ? vafmd_replay_clock_s(r->cmd.replay) : (double)end / s_run_fs(r);
@@ -644,11 +804,10 @@ static void s_release(s_ctx *x, int64_t now)
         }
     vafm_wire_header_encode(&h, hb);
     s_send(x, part, len, 2 + h.n_channels);
-    if (b->lb) { /* pushed at release: an unreleased (aborted) block never reaches the writer */
-        vafmd_log_block *lb = b->lb;
-        b->lb = NULL;
-        s_log_push(r, VAFMD_LOG_BLOCK, lb);
-    }
+    /* logged at release: an unreleased (aborted) block never reaches the writer; after a lost block no
+     * further block of the curve is queued (the writer drops it whole) */
+    if (r->log && !r->log_broken)
+        s_log_block(x, b);
     for (int i = 0; i < b->n_ev; i++)
         s_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:s,s:s}", "run_id", (json_int_t)r->cmd.run_id, "kind",
                                           "segment", "sample", (json_int_t)b->ev[i].sample, "from",
@@ -803,6 +962,17 @@ void *vafmd_sim_main(void *arg)
     x->d = arg;
     x->nodrop = -1;
     x->t_boot = s_now();
+    /* the log pool's free ring (before any log item is pushed: the log ring's release/acquire publishes
+     * it to the writer thread); without it no pool is made and every logged block overflows */
+    vafmd_log *L = &x->d->log;
+    size_t fcap = 1;
+    while (fcap < 2 * (L->ring.cap + 1))
+        fcap <<= 1;
+    if ((L->free_store = calloc(fcap, sizeof *L->free_store)) != NULL)
+        vafmd_ring_init(&L->free_ring, L->free_store, sizeof(vafmd_log_block *), fcap);
+    const char *env = getenv("VAFMD_TEST_LOG_POOL"); /* test hook (tests/test_daemon.py): a small pool */
+    if (env && env[0])
+        x->pool_test_n = (size_t)strtoul(env, NULL, 10);
     int64_t next_hb = x->t_boot;
     for (;;) {
         vafmd_sim_cmd c;
@@ -842,6 +1012,19 @@ void *vafmd_sim_main(void *arg)
             s_run_step(x);
         else
             s_sleep_until(now + 1000000); /* idle: look at the ring every millisecond */
+    }
+    /* the pools: free those whose blocks are all home, leave the others to the writer thread */
+    s_pool_reclaim(L);
+    s_pool_retire(x);
+    while (x->retired) {
+        vafmd_log_pool *p = x->retired;
+        x->retired = p->next;
+        if (p->n_free == p->n_blocks)
+            free(p);
+        else {
+            p->next = L->orphans;
+            L->orphans = p;
+        }
     }
     free(x);
     return NULL;

@@ -3,8 +3,10 @@
  * A bounded single-producer single-consumer ring of fixed-size items (C11 atomics).
  *
  * The control thread pushes commands, the simulation thread pops them without ever blocking: the
- * simulation's pacing must not depend on how busy the control thread is. Each index is written by one
- * side only; acquire/release pairs publish the item bytes together with the index.
+ * simulation's pacing must not depend on how busy the control thread is. The same ring carries the log
+ * items (simulation → writer thread) and the log pool's free blocks back (writer → simulation thread).
+ * Each index is written by one side only; acquire/release pairs publish the item bytes together with
+ * the index.
  */
 #ifndef VAFMD_SPSC_RING_H
 #define VAFMD_SPSC_RING_H
