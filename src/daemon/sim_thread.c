@@ -9,8 +9,9 @@
  * (the `lookahead_s` setting: seconds of samples, preallocated at run start, ≤ VAFMD_LOOKAHEAD_MAX_BYTES)
  * and released from it at their deadlines. The loop: release every queued block whose deadline has
  * passed; else compute a piece of the next block if there is room; else sleep until the head's deadline
- * (at most 1 ms, to keep looking at the command ring). A block is computed in pieces (1/16 block, at most
- * S_PIECE_NS of work before the loop looks again) so that a due block waits at most one piece. Release
+ * (at most 1 ms, to keep looking at the command ring). A block is computed in pieces (~20 µs of work each,
+ * sized from the measured cost per sample; at most S_PIECE_NS of work before the loop looks again) so
+ * that a due block waits at most one piece. Release
  * does exactly what publication did before compute-ahead (header, events, log block, counters), so the
  * stream and the log file do not depend on the lookahead; unreleased blocks were never published and are
  * dropped by abort/shutdown.
@@ -29,6 +30,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#ifdef __linux__
+#include <sys/prctl.h>
+#endif
 #include <jansson.h>
 #include <zmq.h>
 #include "daemon/daemon.h"
@@ -47,6 +51,9 @@
 #define S_DETECTOR_KEY UINT64_C(0x0044455445435452)
 #define S_MAX_EVENTS 16
 #define S_PIECE_NS 500000LL /* compute at most this long (plus one piece) before releasing or polling */
+/* a piece of computation: the longest a due block can wait for its release (measured release lateness
+ * with pieces of 1/16 block: p50 ~50 µs, p99 ~0.2–0.4 ms for paper-fig4 curves) */
+#define S_PIECE_TARGET_NS 20000.0
 
 typedef struct s_event {
     uint64_t sample;
@@ -68,6 +75,13 @@ typedef struct s_block {
     double *log_t;                     /* a logged run: its samples' times and segments (the logged */
     uint8_t *log_seg;                  /* height, force and tip are ch[0], ch[2], ch[4]), else NULL */
 } s_block;
+
+/* Release lateness of the paced blocks of a run (send time − deadline), for run.end's percentiles: a
+ * fixed histogram, so recording costs a clock read and an increment (no allocation, no sort). 1 µs bins
+ * below 1 ms (the target scale), 100 µs bins to ~105 ms, then one overflow bin; quantiles report a bin's
+ * upper edge (capped by the exact maximum). */
+#define S_REL_FINE 1000
+#define S_REL_BINS 2048
 
 typedef struct s_run {
     int active;
@@ -102,8 +116,40 @@ typedef struct s_run {
     int filling;
     int src_rc;            /* the source's last return: 1 more to come, 0 ended, < 0 error */
     uint64_t computed;     /* samples in complete blocks (queued or published) */
-    double piece_ns;       /* estimated compute time of one piece (fast attack, slow decay) */
+    double sample_ns;      /* estimated compute time of one sample (fast attack, slow decay) */
+    double piece_ns;       /* of one piece at that cost */
+    uint32_t rel_hist[S_REL_BINS]; /* release lateness histogram (paced runs) */
+    uint64_t rel_n;
+    int64_t rel_max_ns;
 } s_run;
+
+static void s_rel_add(s_run *r, int64_t late_ns)
+{
+    if (late_ns < 0)
+        late_ns = 0;
+    uint64_t i = (uint64_t)late_ns < S_REL_FINE * 1000u ? (uint64_t)late_ns / 1000u
+                                                         : S_REL_FINE + ((uint64_t)late_ns - S_REL_FINE * 1000u) / 100000u;
+    r->rel_hist[i < S_REL_BINS ? i : S_REL_BINS - 1]++;
+    r->rel_n++;
+    if (late_ns > r->rel_max_ns)
+        r->rel_max_ns = late_ns;
+}
+
+/* The q-quantile of the release lateness, ns: the upper edge of the bin holding it (≤ the maximum). */
+static int64_t s_rel_quantile(const s_run *r, double q)
+{
+    uint64_t want = (uint64_t)ceil(q * (double)r->rel_n), cum = 0;
+    if (want < 1)
+        want = 1;
+    for (int i = 0; i < S_REL_BINS; i++) {
+        cum += r->rel_hist[i];
+        if (cum >= want) {
+            int64_t edge = i < S_REL_FINE ? (int64_t)(i + 1) * 1000 : S_REL_FINE * 1000 + (int64_t)(i - S_REL_FINE + 1) * 100000;
+            return edge < r->rel_max_ns ? edge : r->rel_max_ns;
+        }
+    }
+    return r->rel_max_ns;
+}
 
 typedef struct s_ctx {
     vafmd *d;
@@ -492,6 +538,11 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     json_object_set_new(j, "last_seq", r->block_index ? json_integer((json_int_t)(seq - 1)) : json_null());
     json_object_set_new(j, "late_blocks", json_integer((json_int_t)r->late_blocks));
     json_object_set_new(j, "worst_late_ns", json_integer((json_int_t)r->worst_late_ns));
+    json_object_set_new(j, "release_lateness_ns",
+                        r->rel_n ? json_pack("{s:I,s:I,s:I,s:I}", "blocks", (json_int_t)r->rel_n, "p50",
+                                             (json_int_t)s_rel_quantile(r, 0.5), "p99", (json_int_t)s_rel_quantile(r, 0.99),
+                                             "max", (json_int_t)r->rel_max_ns)
+                                 : json_null());
     json_object_set_new(j, "dropped", json_integer((json_int_t)(atomic_load(&sh->dropped) - r->dropped_at_start)));
     json_object_set_new(j, "wall_s", json_real((double)(s_now() - r->t_start) / 1e9));
     vafmd_campaign *cp = r->cmd.camp;
@@ -688,6 +739,17 @@ static double s_run_fs(const s_run *r)
     return r->cmd.replay ? vafmd_replay_rate_Hz(r->cmd.replay) : vafm_sim_params(r->cmd.sim)->sample_rate_Hz;
 }
 
+/* The FIFO is far enough ahead that idling until the head's release costs no lateness later: at least
+ * half full, or its last block due S_AHEAD_NS or more from now (a short run computed far ahead never
+ * fills half of a FIFO sized for lookahead_s). */
+#define S_AHEAD_NS 50000000LL
+static int s_fifo_ahead(const s_run *r, int64_t now)
+{
+    if (2 * r->qn >= r->qcap)
+        return 1;
+    return r->qn > 0 && r->q[(r->qhead + r->qn - 1) % r->qcap].deadline - now >= S_AHEAD_NS;
+}
+
 /* Compute into the FIFO's free slot: from its start or where the last call stopped, until the block is
  * full or the run ends, or S_PIECE_NS of work has passed, or the head block falls due (then the loop
  * releases it and comes back). A complete block is queued with its deadline. */
@@ -707,27 +769,31 @@ static void s_compute(s_ctx *x)
         r->lseg = b->log_seg;
     }
     int64_t t0 = s_now(), t = t0, due = r->qn ? r->q[r->qhead].deadline : INT64_MAX;
-    size_t piece = (r->block_n + 15) / 16;
     int rc = 1;
     while (r->fill < r->block_n) {
+        /* a piece: about S_PIECE_TARGET_NS of work at the current cost per sample */
+        double sns = r->sample_ns > 0.0 ? r->sample_ns : 1000.0;
+        double want = (double)S_PIECE_TARGET_NS / sns;
+        size_t piece = want < 1.0 ? 1 : want > (double)r->block_n ? r->block_n : (size_t)want;
         size_t m = r->block_n - r->fill;
         if (m > piece)
             m = piece;
         size_t fill0 = r->fill;
         rc = s_advance(r, m);
         int64_t t1 = s_now();
-        if (r->fill > fill0) { /* a piece's cost, from this one (scaled to a whole piece) */
-            double c = (double)(t1 - t) * (double)piece / (double)(r->fill - fill0);
-            r->piece_ns = c > r->piece_ns ? c : 0.9 * r->piece_ns + 0.1 * c;
+        if (r->fill > fill0) { /* the cost per sample, from this piece (fast attack, slow decay) */
+            double c = (double)(t1 - t) / (double)(r->fill - fill0);
+            r->sample_ns = c > r->sample_ns ? c : 0.9 * r->sample_ns + 0.1 * c;
+            r->piece_ns = (double)piece * r->sample_ns;
         }
         t = t1;
         if (rc != 1)
             break;
         /* stop when the head is due, or before a piece that would end after its deadline if the FIFO
-         * is at least half full (then waiting for the release costs no lateness; below half, every
+         * holds enough (then waiting for the release costs no lateness; with little queued, every
          * moment of computation counts more than a piece of release jitter) */
         if (r->fill < r->block_n &&
-            (t >= due || (2 * r->qn >= r->qcap && t + (int64_t)r->piece_ns >= due) || t - t0 >= S_PIECE_NS))
+            (t >= due || (s_fifo_ahead(r, t) && t + (int64_t)r->piece_ns >= due) || t - t0 >= S_PIECE_NS))
             return; /* go on later */
     }
     r->filling = 0;
@@ -803,6 +869,8 @@ static void s_release(s_ctx *x, int64_t now)
             len[2 + h.n_channels++] = b->n * sizeof(double);
         }
     vafm_wire_header_encode(&h, hb);
+    if (!r->cmd.set.free_run) /* the release lateness: the clock read just before the send */
+        s_rel_add(r, s_now() - b->deadline);
     s_send(x, part, len, 2 + h.n_channels);
     /* logged at release: an unreleased (aborted) block never reaches the writer; after a lost block no
      * further block of the curve is queued (the writer drops it whole) */
@@ -848,9 +916,9 @@ static void s_run_step(s_ctx *x)
         return;
     }
     int64_t t = r->qn ? r->q[r->qhead].deadline : INT64_MAX;
-    /* room: compute, unless the FIFO is at least half full and the head falls due before a piece
-     * would be done (a piece would delay its release; s_compute) */
-    if (r->src_rc == 1 && r->qn < r->qcap && (2 * r->qn < r->qcap || now + (int64_t)r->piece_ns < t)) {
+    /* room: compute, unless the FIFO holds enough and the head falls due before a piece would be done
+     * (a piece would delay its release; s_compute) */
+    if (r->src_rc == 1 && r->qn < r->qcap && (!s_fifo_ahead(r, now) || now + (int64_t)r->piece_ns < t)) {
         s_compute(x);
         return;
     }
@@ -962,6 +1030,11 @@ void *vafmd_sim_main(void *arg)
     x->d = arg;
     x->nodrop = -1;
     x->t_boot = s_now();
+#ifdef PR_SET_TIMERSLACK
+    /* Linux lets a normal thread's timed sleeps end up to 50 µs late (timer slack, to batch wake-ups);
+     * this thread's sleeps are release deadlines: 1 ns slack (measured: release lateness p50 ~80 µs → a few) */
+    prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+#endif
     /* the log pool's free ring (before any log item is pushed: the log ring's release/acquire publishes
      * it to the writer thread); without it no pool is made and every logged block overflows */
     vafmd_log *L = &x->d->log;
