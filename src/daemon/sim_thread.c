@@ -740,14 +740,12 @@ static double s_run_fs(const s_run *r)
 }
 
 /* The FIFO is far enough ahead that idling until the head's release costs no lateness later: at least
- * half full, or its last block due S_AHEAD_NS or more from now (a short run computed far ahead never
- * fills half of a FIFO sized for lookahead_s). */
-#define S_AHEAD_NS 50000000LL
-static int s_fifo_ahead(const s_run *r, int64_t now)
+ * half full. (Not "its last block is due ≥ 50 ms from now": that idled up to a piece per block all
+ * through the default scene's near zone, where compute is scarcest, and made 2 kS/s late: 127 late
+ * blocks, worst 0.4 s.) */
+static int s_fifo_ahead(const s_run *r)
 {
-    if (2 * r->qn >= r->qcap)
-        return 1;
-    return r->qn > 0 && r->q[(r->qhead + r->qn - 1) % r->qcap].deadline - now >= S_AHEAD_NS;
+    return 2 * r->qn >= r->qcap;
 }
 
 /* Compute into the FIFO's free slot: from its start or where the last call stopped, until the block is
@@ -790,10 +788,10 @@ static void s_compute(s_ctx *x)
         if (rc != 1)
             break;
         /* stop when the head is due, or before a piece that would end after its deadline if the FIFO
-         * holds enough (then waiting for the release costs no lateness; with little queued, every
+         * is at least half full (then waiting for the release costs no lateness; below half, every
          * moment of computation counts more than a piece of release jitter) */
         if (r->fill < r->block_n &&
-            (t >= due || (s_fifo_ahead(r, t) && t + (int64_t)r->piece_ns >= due) || t - t0 >= S_PIECE_NS))
+            (t >= due || (s_fifo_ahead(r) && t + (int64_t)r->piece_ns >= due) || t - t0 >= S_PIECE_NS))
             return; /* go on later */
     }
     r->filling = 0;
@@ -918,7 +916,7 @@ static void s_run_step(s_ctx *x)
     int64_t t = r->qn ? r->q[r->qhead].deadline : INT64_MAX;
     /* room: compute, unless the FIFO holds enough and the head falls due before a piece would be done
      * (a piece would delay its release; s_compute) */
-    if (r->src_rc == 1 && r->qn < r->qcap && (!s_fifo_ahead(r, now) || now + (int64_t)r->piece_ns < t)) {
+    if (r->src_rc == 1 && r->qn < r->qcap && (!s_fifo_ahead(r) || now + (int64_t)r->piece_ns < t)) {
         s_compute(x);
         return;
     }
