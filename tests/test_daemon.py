@@ -811,7 +811,9 @@ def test_log_ring_overflow_drops_only_that_curve(tmp_path):
     it are written and equal their streams."""
     h5py = pytest.importorskip("h5py")
     stall = tmp_path / "stall"
-    d = Daemon("--preset", "paper-fig4", "--free-run",
+    # paced (1x: a block every 5 ms): free-running, the core can outrun the writer through a ring of 8
+    # items on a loaded machine, and then the unstalled curves would overflow too
+    d = Daemon("--preset", "paper-fig4",
                env={"VAFMD_TEST_LOG_RING": "8", "VAFMD_TEST_LOG_STALL": str(stall)})
     path = tmp_path / "ovf.h5"
     assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
@@ -865,7 +867,8 @@ def test_log_pool_exhaustion_drops_only_that_curve(tmp_path):
     to its stream bit for bit; the daemon exits 0 (under ASan: no leak, no use after free)."""
     h5py = pytest.importorskip("h5py")
     stall = tmp_path / "stall"
-    d = Daemon("--preset", "paper-fig4", "--free-run",
+    # paced, as above: the unstalled curves must not outrun the writer through a pool of 16
+    d = Daemon("--preset", "paper-fig4",
                env={"VAFMD_TEST_LOG_POOL": "16", "VAFMD_TEST_LOG_STALL": str(stall)})
     path = tmp_path / "pool.h5"
     assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"

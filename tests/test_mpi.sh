@@ -178,13 +178,13 @@ kill_rank() {
                     pid=$p
                 fi
             done
-            break
+            [ -n "$pid" ] && break # else look again (a loaded machine: the rank's /proc entry not read yet)
         fi
         kill -0 "$MPIPID" 2>/dev/null || break
         sleep 0.1
     done
     if [ -z "$pid" ]; then
-        bad "$desc: rank $rank found mid-run" "$(tr '\r' '\n' <"$TMP/kill.err" | tail -3)"
+        bad "$desc: rank $rank found mid-run" "mpirun $(kill -0 "$MPIPID" 2>/dev/null && echo alive || echo ended); $(tr '\r' '\n' <"$TMP/kill.err" | tail -3)"
         wait "$MPIPID"; MPIPID=
         return
     fi
