@@ -38,29 +38,13 @@ void vafm_well_ou_setup(vafm_free_ou *o, double m, double stiff, double eta, dou
         o->l21 = o->l22 = 0.0;
         return;
     }
-    const double w2 = stiff / m;         /* ω0² */
-    const double lam = -0.5 * eta;       /* mean of the eigenvalues */
-    const double mu2 = 0.25 * eta * eta - w2;
-    double eC, eS; /* e^{λ̄h}·cosh(μh) and e^{λ̄h}·sinh(μh)/μ (or cos/sin for μ² < 0) */
-    if (fabs(mu2) * h * h < 1e-8) {
-        double x = mu2 * h * h;
-        eC = exp(lam * h) * (1.0 + x / 2.0 + x * x / 24.0);
-        eS = exp(lam * h) * h * (1.0 + x / 6.0 + x * x / 120.0);
-    } else if (mu2 > 0) {
-        double mu = sqrt(mu2);
-        double ep = exp((lam + mu) * h), em = exp((lam - mu) * h);
-        eC = 0.5 * (ep + em);
-        eS = 0.5 * (ep - em) / mu;
-    } else {
-        double om = sqrt(-mu2);
-        double e = exp(lam * h);
-        eC = e * cos(om * h);
-        eS = e * sin(om * h) / om;
-    }
-    o->e11 = eC + eS * 0.5 * eta;
-    o->e12 = eS;
-    o->e21 = -eS * w2;
-    o->e22 = eC - eS * 0.5 * eta;
+    const double w2 = stiff / m; /* ω0² */
+    double E[2][2];
+    vafm_osc2_propagator(w2, eta, h, E);
+    o->e11 = E[0][0];
+    o->e12 = E[0][1];
+    o->e21 = E[1][0];
+    o->e22 = E[1][1];
     const double s1 = kT / stiff, s2 = kT / m;
     double q11 = s1 - (o->e11 * o->e11 * s1 + o->e12 * o->e12 * s2);
     double q12 = -(o->e11 * o->e21 * s1 + o->e12 * o->e22 * s2);

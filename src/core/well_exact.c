@@ -111,6 +111,30 @@ void vafm_well3_setup_vanloan(vafm_well3 *W, double omega2, double eta, double q
     s_chol3(W, sig);
 }
 
+void vafm_osc2_propagator(double w2, double eta, double h, double E[2][2])
+{
+    const double lam = -0.5 * eta, mu2 = 0.25 * eta * eta - w2;
+    double eC, eS; /* e^{λ̄h}·cosh(μh), e^{λ̄h}·sinh(μh)/μ (cos/sin for μ² < 0; series at μ² ≈ 0) */
+    if (fabs(mu2) * h * h < 1e-8) {
+        double x = mu2 * h * h;
+        eC = exp(lam * h) * (1.0 + x / 2.0 + x * x / 24.0);
+        eS = exp(lam * h) * h * (1.0 + x / 6.0 + x * x / 120.0);
+    } else if (mu2 > 0) {
+        double mu = sqrt(mu2);
+        double ep = exp((lam + mu) * h), em = exp((lam - mu) * h);
+        eC = 0.5 * (ep + em);
+        eS = 0.5 * (ep - em) / mu;
+    } else {
+        double om = sqrt(-mu2), e = exp(lam * h);
+        eC = e * cos(om * h);
+        eS = e * sin(om * h) / om;
+    }
+    E[0][0] = eC + eS * 0.5 * eta;
+    E[0][1] = eS;
+    E[1][0] = -eS * w2;
+    E[1][1] = eC - eS * 0.5 * eta;
+}
+
 /* Closed forms, where they keep (measured against 80-digit arithmetic) a relative error below ~1e-13:
  * ω·h ≥ 1, η·h ≥ 0.01 and, overdamped, a slow rate ω²/η with ω²h/η ≥ 0.5. Outside, the differences
  * below lose digits (1 − e^{−ηh} for the variances, (1 − Φ₁₁)/ω² for I) and the series above is used. (X, V) is the 2×2 oscillator of free_ou.c:
@@ -129,23 +153,9 @@ static int s_setup_closed(vafm_well3 *W, double w2, double eta, double q, double
     if (!(w2 > 0.0) || !(eta > 0.0) || !(q >= 0.0) || !(w2 * h * h >= S_CLOSED_MIN_WH * S_CLOSED_MIN_WH) ||
         !(eta * h >= S_CLOSED_MIN_EH) || !(w2 * h >= S_CLOSED_MIN_SLOW * eta))
         return 0;
-    const double lam = -0.5 * eta, mu2 = 0.25 * eta * eta - w2;
-    double eC, eS; /* e^{λ̄h}·cosh(μh), e^{λ̄h}·sinh(μh)/μ (cos/sin for μ² < 0; series at μ² ≈ 0) */
-    if (fabs(mu2) * h * h < 1e-8) {
-        double x = mu2 * h * h;
-        eC = exp(lam * h) * (1.0 + x / 2.0 + x * x / 24.0);
-        eS = exp(lam * h) * h * (1.0 + x / 6.0 + x * x / 120.0);
-    } else if (mu2 > 0) {
-        double mu = sqrt(mu2);
-        double ep = exp((lam + mu) * h), em = exp((lam - mu) * h);
-        eC = 0.5 * (ep + em);
-        eS = 0.5 * (ep - em) / mu;
-    } else {
-        double om = sqrt(-mu2), e = exp(lam * h);
-        eC = e * cos(om * h);
-        eS = e * sin(om * h) / om;
-    }
-    const double e11 = eC + eS * 0.5 * eta, e12 = eS, e21 = -eS * w2, e22 = eC - eS * 0.5 * eta;
+    double E[2][2];
+    vafm_osc2_propagator(w2, eta, h, E);
+    const double e11 = E[0][0], e12 = E[0][1], e21 = E[1][0], e22 = E[1][1];
     const double s2 = q / (2.0 * eta), s1 = s2 / w2, sq = sqrt(q);
     /* covariance of (X₁, V₁, W) */
     const double cxx = s1 - (e11 * e11 * s1 + e12 * e12 * s2);

@@ -22,6 +22,9 @@ typedef struct vafm_well3 {
     double chol[3][3]; /* lower Cholesky factor of the covariance */
 } vafm_well3;
 
+/** Mean propagator over h of X″ + ηX′ + ω²X = 0 for (X, X′): E = exp(A·h), A = [[0, 1], [−ω², −η]]
+ *  (under-, over- and critically damped alike). */
+void vafm_osc2_propagator(double omega2, double eta, double h, double E[2][2]);
 /** Transition of the augmented well over h: ω² = K/m, friction rate eta, noise intensity q = 2ηkT/m.
  *  Closed forms where they keep full precision (ω·h ≥ 1), else the series below. */
 void vafm_well3_setup(vafm_well3 *W, double omega2, double eta, double q, double h);
