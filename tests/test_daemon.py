@@ -803,6 +803,24 @@ def wait_log_curves(d, n, timeout=30):
     raise AssertionError("the writer did not write the curve")
 
 
+def logged_then_stalled(tmp_path, hooks, name):
+    """A paper-fig4 daemon with the given test hooks logging to tmp_path/name, one curve (index 0) run and
+    written, then the writer stalled ($VAFMD_TEST_LOG_STALL): (daemon, subscriber, stall file, path, that
+    curve's run). Paced at 1x (a block every 5 ms): free-running, the core can outrun the writer through
+    a small ring or pool on a loaded machine, and then the unstalled curves would overflow too."""
+    stall = tmp_path / "stall"
+    d = Daemon("--preset", "paper-fig4", env={**hooks, "VAFMD_TEST_LOG_STALL": str(stall)})
+    path = tmp_path / name
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    first = run_once(d, s, {"cmd": "curve", "index": 0})
+    wait_log_curves(d, 1)
+    stall.touch()
+    time.sleep(0.2)  # the writer has seen the file (it looks every millisecond)
+    return d, s, stall, path, first
+
+
 def test_log_ring_overflow_drops_only_that_curve(tmp_path):
     """Test hooks: a log ring of 8 items ($VAFMD_TEST_LOG_RING) and a writer that takes nothing while a
     file exists ($VAFMD_TEST_LOG_STALL). A curve of >= 8 blocks run against the stalled writer fills the
@@ -810,19 +828,8 @@ def test_log_ring_overflow_drops_only_that_curve(tmp_path):
     its blocks are queued), its end overflows too (2). That curve is dropped; the curves before and after
     it are written and equal their streams."""
     h5py = pytest.importorskip("h5py")
-    stall = tmp_path / "stall"
-    # paced (1x: a block every 5 ms): free-running, the core can outrun the writer through a ring of 8
-    # items on a loaded machine, and then the unstalled curves would overflow too
-    d = Daemon("--preset", "paper-fig4",
-               env={"VAFMD_TEST_LOG_RING": "8", "VAFMD_TEST_LOG_STALL": str(stall)})
-    path = tmp_path / "ovf.h5"
-    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
-    s = d.sub()
-    settle(d, s)
-    runs = [run_once(d, s, {"cmd": "curve", "index": 0})]
-    wait_log_curves(d, 1)
-    stall.touch()
-    time.sleep(0.2)  # the writer has seen the file (it looks every millisecond)
+    d, s, stall, path, first = logged_then_stalled(tmp_path, {"VAFMD_TEST_LOG_RING": "8"}, "ovf.h5")
+    runs = [first]
     lost = run_once(d, s, {"cmd": "curve", "index": 1})
     assert lost[3]["blocks"] >= 8 and lost[3]["status"] == "ok"  # the stream itself lost nothing
     st = d.cmd({"cmd": "status"})["log"]
@@ -866,18 +873,8 @@ def test_log_pool_exhaustion_drops_only_that_curve(tmp_path):
     After the stall the writer writes curve 1, drops 2 and 3; curves 0, 1 and 4 are in the file, each equal
     to its stream bit for bit; the daemon exits 0 (under ASan: no leak, no use after free)."""
     h5py = pytest.importorskip("h5py")
-    stall = tmp_path / "stall"
-    # paced, as above: the unstalled curves must not outrun the writer through a pool of 16
-    d = Daemon("--preset", "paper-fig4",
-               env={"VAFMD_TEST_LOG_POOL": "16", "VAFMD_TEST_LOG_STALL": str(stall)})
-    path = tmp_path / "pool.h5"
-    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
-    s = d.sub()
-    settle(d, s)
-    kept = [run_once(d, s, {"cmd": "curve", "index": 0})]
-    wait_log_curves(d, 1)
-    stall.touch()
-    time.sleep(0.2)  # the writer has seen the file (it looks every millisecond)
+    d, s, stall, path, first = logged_then_stalled(tmp_path, {"VAFMD_TEST_LOG_POOL": "16"}, "pool.h5")
+    kept = [first]
     kept.append(run_once(d, s, {"cmd": "curve", "index": 1}))
     b1 = kept[1][3]["blocks"]
     assert b1 <= 16, b1  # the test's premise: curve 1 fits in the pool
