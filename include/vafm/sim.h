@@ -94,6 +94,16 @@ VAFM_API int vafm_sim_tune_begin(vafm_sim *s, uint64_t index);
  *  Never allocates. @return 1 while the scene goes on, 0 when it ended, or a negative VAFM_E* code. */
 VAFM_API int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user);
 
+/** vafm_sim_advance() that also returns after at most max_steps integrator steps (an exact free step or
+ *  an exact well step counts as one; a sample of those is finished once started), if need be inside an
+ *  output sample: the next call (of either function) goes on
+ *  from there, and the samples are the same bit for bit however the work is split. For callers that
+ *  must come back within a bounded time (vafmd releases blocks between pieces of work: one output sample
+ *  can span ~25 000 steps, ~1 ms). max_steps = 0 returns at once. Since API 0.3. @return as
+ *  vafm_sim_advance(). */
+VAFM_API int vafm_sim_advance_steps(vafm_sim *s, size_t max_samples, uint64_t max_steps, vafm_sample_fn fn,
+                                    void *user);
+
 /** Detail of the error that ended the last scene (field and message), or NULL if it did not fail. */
 VAFM_API const vafm_error *vafm_sim_error(const vafm_sim *s);
 

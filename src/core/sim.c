@@ -58,6 +58,8 @@ struct vafm_sim {
     int well_ok;        /* the exact contact-well step may be used */
     double dt_cur;      /* the integrator step in use */
     s_weq weq;          /* the last well equilibrium (the next interval starts where it ends); reset per curve */
+    long sub_left;      /* integrator steps left in the current sample interval (> 0 only while one runs, or
+                         * when a step budget paused it: the next call goes on from there) */
     int need_prepare;   /* the integrator's cached force is stale */
     /* scene */
     int scene, phase;
@@ -215,6 +217,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->mode_free = 0;
     s->mode_well = 0;
     s->weq.ok = 0; /* a curve never starts from another curve's warm start: (seed, index) alone decides it */
+    s->sub_left = 0;
     s->need_prepare = 1;
 
     const double L = s->nm.sc.length_m;
@@ -487,52 +490,84 @@ static int s_well_interval(vafm_sim *s)
     return 1;
 }
 
-static int s_step_interval(vafm_sim *s)
+static void s_budget_take(uint64_t *budget, uint64_t n)
+{
+    if (budget)
+        *budget = *budget > n ? *budget - n : 0;
+}
+
+/* The integrator steps left in the sample interval (s->sub_left), within *budget (NULL: none). An
+ * integrator run split in pieces steps exactly as one run (the state round-trips through the kernel;
+ * contact events split runs anyway). @return 1 if the budget ran out first, else 0. */
+static int s_integrate(vafm_sim *s, uint64_t *budget)
 {
     vafm_kernel *K = &s->K;
-    K->acc_u = K->acc_uspr = 0.0;
-    K->acc_n = 0;
-    /* far from the instability: in contact, not yet near u_spr* on the retract */
-    const int far = K->in_contact && (s->phase != S_PH_RETRACT || !(K->u_spr - s->nm.u_spr_star <= s->nm.y_near));
-    if (s_free_safe(s)) {
-        if (!s->mode_free) {
-            s_kernel_phase(K, K->v_spr);
-            K->dt = s->ou.h;
-            s->mode_free = 1;
-            s->mode_well = 0;
+    while (s->sub_left > 0) {
+        long want = s->sub_left;
+        if (budget) {
+            if (*budget == 0)
+                return 1;
+            if ((uint64_t)want > *budget)
+                want = (long)*budget;
         }
-        for (long i = 0; i < s->n_free; i++)
-            vafm_free_ou_step(K, &s->ou);
-    } else if (far && s->well_ok && s_well_interval(s)) {
-        s->mode_well = 1;
-        s->mode_free = 0;
-        s->need_prepare = 1;
-    } else {
-        /* the larger step far from the instability (adaptive), the fine one near it */
-        const int big = s->adaptive && far;
-        double dt_want = big ? s->nm.dt_far : s->nm.dt;
-        if (s->mode_free || s->mode_well || dt_want != s->dt_cur) {
-            s_kernel_phase(K, K->v_spr);
-            if (dt_want != s->dt_cur)
-                vafm_kernel_set_dt(K, dt_want);
-            K->dt = dt_want;
-            s->dt_cur = dt_want;
+        long d = s->it->run(K, want);
+        s->sub_left -= d;
+        if (budget)
+            *budget -= (uint64_t)d;
+        if (K->event)
+            s_event(s);
+    }
+    return 0;
+}
+
+/* One sample interval; *budget (integrator steps, NULL: none) may pause it inside its integrator run,
+ * and the next call then goes on from there. @return 0 done, 2 paused, or a negative VAFM_E* code. */
+static int s_step_interval(vafm_sim *s, uint64_t *budget)
+{
+    vafm_kernel *K = &s->K;
+    if (s->sub_left == 0) {
+        K->acc_u = K->acc_uspr = 0.0;
+        K->acc_n = 0;
+        /* far from the instability: in contact, not yet near u_spr* on the retract */
+        const int far = K->in_contact && (s->phase != S_PH_RETRACT || !(K->u_spr - s->nm.u_spr_star <= s->nm.y_near));
+        if (s_free_safe(s)) {
+            if (!s->mode_free) {
+                s_kernel_phase(K, K->v_spr);
+                K->dt = s->ou.h;
+                s->mode_free = 1;
+                s->mode_well = 0;
+            }
+            for (long i = 0; i < s->n_free; i++)
+                vafm_free_ou_step(K, &s->ou);
+            s_budget_take(budget, (uint64_t)s->n_free);
+        } else if (far && s->well_ok && s_well_interval(s)) {
+            s->mode_well = 1;
             s->mode_free = 0;
-            s->mode_well = 0;
             s->need_prepare = 1;
-        }
-        if (s->need_prepare) {
-            s->it->prepare(K);
-            s->need_prepare = 0;
-        }
-        long left = big ? s->nm.n_sub_far : s->nm.n_sub;
-        while (left > 0) {
-            long d = s->it->run(K, left);
-            left -= d;
-            if (K->event)
-                s_event(s);
+            s_budget_take(budget, 1);
+        } else {
+            /* the larger step far from the instability (adaptive), the fine one near it */
+            const int big = s->adaptive && far;
+            double dt_want = big ? s->nm.dt_far : s->nm.dt;
+            if (s->mode_free || s->mode_well || dt_want != s->dt_cur) {
+                s_kernel_phase(K, K->v_spr);
+                if (dt_want != s->dt_cur)
+                    vafm_kernel_set_dt(K, dt_want);
+                K->dt = dt_want;
+                s->dt_cur = dt_want;
+                s->mode_free = 0;
+                s->mode_well = 0;
+                s->need_prepare = 1;
+            }
+            if (s->need_prepare) {
+                s->it->prepare(K);
+                s->need_prepare = 0;
+            }
+            s->sub_left = big ? s->nm.n_sub_far : s->nm.n_sub;
         }
     }
+    if (s_integrate(s, budget))
+        return 2;
     if (!isfinite(K->u) || !isfinite(K->w)) {
         vafm_err_set(&s->err, VAFM_EUNSTABLE, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
                      "curve %llu: the state became non-finite at t = %.6g s: the step %.6g s is unstable for the "
@@ -637,7 +672,19 @@ static void s_phase_logic(vafm_sim *s, double force)
     }
 }
 
+static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sample_fn fn, void *user);
+
 int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user)
+{
+    return s_advance(s, max_samples, NULL, fn, user);
+}
+
+int vafm_sim_advance_steps(vafm_sim *s, size_t max_samples, uint64_t max_steps, vafm_sample_fn fn, void *user)
+{
+    return s_advance(s, max_samples, &max_steps, fn, user);
+}
+
+static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sample_fn fn, void *user)
 {
     if (!s)
         return VAFM_EINVAL;
@@ -647,6 +694,8 @@ int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *u
     const vafm_scale *sc = &s->nm.sc;
     int stop = 0;
     for (size_t i = 0; i < max_samples && s->phase != S_PH_DONE && !stop; i++) {
+        if (budget && *budget == 0 && s->sub_left == 0)
+            break; /* the step budget is spent: stop at this sample boundary */
         if (s->phase == S_PH_TUNE && s->sample_index >= s->tune_samples) {
             s->phase = S_PH_DONE;
             break;
@@ -655,7 +704,16 @@ int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *u
                   : s->phase == S_PH_DWELL  ? VAFM_SEG_DWELL
                   : s->phase == S_PH_TUNE   ? VAFM_SEG_TUNE
                                             : VAFM_SEG_RETRACT;
-        int r = s_step_interval(s);
+        int r = s_step_interval(s, budget);
+        if (r == 2) { /* the step budget ran out inside this sample: hand over the complete ones */
+            s_flush(s, fn, user, &stop);
+            if (stop) {
+                s->phase = S_PH_DONE;
+                s->sub_left = 0;
+                return VAFM_EABORT;
+            }
+            return 1;
+        }
         if (r) {
             s_flush(s, fn, user, &stop);
             s->phase = S_PH_DONE;

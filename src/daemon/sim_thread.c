@@ -9,8 +9,9 @@
  * (the `lookahead_s` setting: seconds of samples, preallocated at run start, ≤ VAFMD_LOOKAHEAD_MAX_BYTES)
  * and released from it at their deadlines. The loop: release every queued block whose deadline has
  * passed; else compute a piece of the next block if there is room; else sleep until the head's deadline
- * (at most 1 ms, to keep looking at the command ring). A block is computed in pieces (~20 µs of work each,
- * sized from the measured cost per sample; at most S_PIECE_NS of work before the loop looks again) so
+ * (at most 1 ms, to keep looking at the command ring). A block is computed in pieces (~20 µs of work each:
+ * sized from the measured cost per sample, and at most S_PIECE_STEPS integrator steps, inside a sample if
+ * need be, through vafm_sim_advance_steps; at most S_PIECE_NS of work before the loop looks again) so
  * that a due block waits at most one piece. Release
  * does exactly what publication did before compute-ahead (header, events, log block, counters), so the
  * stream and the log file do not depend on the lookahead; unreleased blocks were never published and are
@@ -54,6 +55,7 @@
 /* a piece of computation: the longest a due block can wait for its release (measured release lateness
  * with pieces of 1/16 block: p50 ~50 µs, p99 ~0.2–0.4 ms for paper-fig4 curves) */
 #define S_PIECE_TARGET_NS 20000.0
+#define S_PIECE_STEPS 512 /* integrator steps a piece at most (~18 µs at ~35 ns a step in contact) */
 
 typedef struct s_event {
     uint64_t sample;
@@ -117,7 +119,7 @@ typedef struct s_run {
     int src_rc;            /* the source's last return: 1 more to come, 0 ended, < 0 error */
     uint64_t computed;     /* samples in complete blocks (queued or published) */
     double sample_ns;      /* estimated compute time of one sample (fast attack, slow decay) */
-    double piece_ns;       /* of one piece at that cost */
+    double piece_ns;       /* estimated compute time of one piece (a call of the source) */
     uint32_t rel_hist[S_REL_BINS]; /* release lateness histogram (paced runs) */
     uint64_t rel_n;
     int64_t rel_max_ns;
@@ -300,7 +302,9 @@ static int s_advance(s_run *r, size_t max)
     /* replay: a VAFMD_RUN_REPLAY run takes its samples from the replay source here (src/daemon/replay.c) */
     if (r->cmd.replay)
         return vafmd_replay_advance(r->cmd.replay, max, s_sink, r, &r->sens);
-    return vafm_sim_advance(r->cmd.sim, max, s_sink, r);
+    /* at most S_PIECE_STEPS integrator steps a call, inside a sample if need be: a near-zone sample of the
+     * default scene at 2 kS/s spans 25 000 steps (~0.9 ms), which would otherwise be the smallest piece */
+    return vafm_sim_advance_steps(r->cmd.sim, max, S_PIECE_STEPS, s_sink, r);
 }
 
 /* ---- The log block pool ----------------------------------------------------------------------------
@@ -779,10 +783,13 @@ static void s_compute(s_ctx *x)
         size_t fill0 = r->fill;
         rc = s_advance(r, m);
         int64_t t1 = s_now();
-        if (r->fill > fill0) { /* the cost per sample, from this piece (fast attack, slow decay) */
-            double c = (double)(t1 - t) / (double)(r->fill - fill0);
+        /* the cost of a piece (a call: bounded by its samples and by S_PIECE_STEPS) and of a sample, fast
+         * attack, slow decay */
+        const double c_call = (double)(t1 - t);
+        r->piece_ns = c_call > r->piece_ns ? c_call : 0.9 * r->piece_ns + 0.1 * c_call;
+        if (r->fill > fill0) {
+            double c = c_call / (double)(r->fill - fill0);
             r->sample_ns = c > r->sample_ns ? c : 0.9 * r->sample_ns + 0.1 * c;
-            r->piece_ns = (double)piece * r->sample_ns;
         }
         t = t1;
         if (rc != 1)
