@@ -171,6 +171,17 @@ static void test_two_sims(void)
     t_trace_free(&b);
 }
 
+/* A new sim object with curve `index` begun and an empty trace for it. */
+static vafm_sim *t_begin(const vafm_params *p, uint64_t index, t_trace *t)
+{
+    vafm_sim *s = NULL;
+    ENSURE(vafm_sim_new(&s, p, NULL) == 0);
+    ENSURE(s && vafm_sim_curve_begin(s, index) == 0);
+    memset(t, 0, sizeof *t);
+    t->order_ok = 1;
+    return s;
+}
+
 /* Pulling the curve in blocks of 7 samples (or 1, or 1000) gives the same bytes as one go. */
 static void test_blocks(void)
 {
@@ -181,12 +192,8 @@ static void test_blocks(void)
     ENSURE(t_run(&p, 11, &whole, &rw) == 0);
     const size_t sizes[] = {7, 1, 1000};
     for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
-        vafm_sim *s = NULL;
-        ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-        ENSURE(vafm_sim_curve_begin(s, 11) == 0);
         t_trace t;
-        memset(&t, 0, sizeof t);
-        t.order_ok = 1;
+        vafm_sim *s = t_begin(&p, 11, &t);
         int r, calls = 0;
         while ((r = vafm_sim_advance(s, sizes[k], t_collect, &t)) == 1)
             calls++;
@@ -235,12 +242,8 @@ static void test_step_budget(void)
         for (size_t b = 0; b < sizeof budgets / sizeof budgets[0]; b++) {
             if (LONG_OR(0, 1) && budgets[b][0] == 1)
                 continue; /* sanitizer build: one step a call is slow, 7 covers the same paths */
-            vafm_sim *s = NULL;
-            ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-            ENSURE(vafm_sim_curve_begin(s, 5) == 0);
             t_trace t;
-            memset(&t, 0, sizeof t);
-            t.order_ok = 1;
+            vafm_sim *s = t_begin(&p, 5, &t);
             int r;
             uint64_t calls = 0;
             while ((r = vafm_sim_advance_steps(s, b == 3 ? 5 : 1u << 20, budgets[b][calls % 3], t_collect, &t)) == 1)
