@@ -28,6 +28,43 @@ static inline double vafm_jkr_u_min(double s_m)
     return -3.0 * (s2 * s2);
 }
 
+/* The t-form of the branch (s = s_m + t, c = 4s_m³): u − u_min = P(t), the force F(t), D = du/ds. */
+static inline double vafm_jkr_P(double s_m, double t)
+{
+    double t2 = t * t;
+    return t2 * (t2 + 4.0 * s_m * t + 6.0 * s_m * s_m);
+}
+
+static inline double vafm_jkr_F_t(double s_m, double c, double t)
+{
+    double s = s_m + t, s3 = s * s * s;
+    return s3 * ((4.0 / 3.0) * s3 - 2.0 * c);
+}
+
+static inline double vafm_jkr_D(double s_m, double t)
+{
+    double s = s_m + t;
+    return 4.0 * t * (s * s + s * s_m + s_m * s_m); /* = 4s³ − c without the cancellation at t → 0 */
+}
+
+/* dF/du, d²F/du² and d³F/du³ at t > 0 (any output may be NULL), in closed form: with N = dF/ds =
+ * 2s²(4s³ − 3c), dF/du = N/D, d²F/du² = (N′D − N·D′)/D³ (N′ = 40s⁴ − 12cs, D′ = 12s²) and
+ * d³F/du³ = [(N″D − N·D″)/D³ − 3(N′D − N·D′)D′/D⁴]/D (N″ = 160s³ − 12c, D″ = 24s). */
+static inline void vafm_jkr_derivs(double s_m, double c, double t, double *dF, double *F2, double *F3)
+{
+    const double s = s_m + t, s2 = s * s, D = vafm_jkr_D(s_m, t);
+    const double N = 2.0 * s2 * (4.0 * s2 * s - 3.0 * c);
+    const double dN = 40.0 * s2 * s2 - 12.0 * c * s, dD = 12.0 * s2;
+    if (dF)
+        *dF = N / D;
+    if (F2)
+        *F2 = (dN * D - N * dD) / (D * D * D);
+    if (F3) {
+        const double d2N = 160.0 * (s2 * s) - 12.0 * c, d2D = 24.0 * s;
+        *F3 = ((d2N * D - N * d2D) / (D * D * D) - 3.0 * (dN * D - N * dD) * dD / (D * D * D * D)) / D;
+    }
+}
+
 /* The cold start t₀ = min[Δu^{1/4}, √(Δu/6)/s_m] ≥ root (s_m > 0, du > 0). */
 static inline double vafm_jkr_t_cold(double s_m, double du)
 {

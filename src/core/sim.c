@@ -32,6 +32,8 @@
 
 enum { S_SCENE_NONE = 0, S_SCENE_CURVE, S_SCENE_TUNE };
 
+enum { S_PH_APPROACH = 0, S_PH_DWELL, S_PH_RETRACT, S_PH_TUNE, S_PH_DONE };
+
 /* The contact branch's equilibrium for one support position, with the branch's stiffness and curvature
  * there (the exact well step's linearisation). */
 typedef struct s_weq {
@@ -41,7 +43,6 @@ typedef struct s_weq {
     double dF, F2, F3; /* dF/du, d²F/du² and d³F/du³ of the contact force there */
     int ok;
 } s_weq;
-enum { S_PH_APPROACH = 0, S_PH_DWELL, S_PH_RETRACT, S_PH_TUNE, S_PH_DONE };
 
 struct vafm_sim {
     vafm_params p;
@@ -344,9 +345,8 @@ static void s_event(vafm_sim *s)
 /* The equilibrium on the contact branch for the support at uspr: k(uspr − u) = F(u). Newton in t
  * (u = u_min + P(t), s = s_m + t) from the last equilibrium, which the pull has moved by a tiny fraction
  * of a well width, so two or three iterations reach round-off; a cold start, or a Newton run that does not
- * settle, takes the bracketing solver of theory.c instead. The derivatives come in closed form from the
- * parametrisation u = s⁴ − c·s, F = (4/3)s⁶ − 2c·s³ (contact_jkr.c): with D = du/ds = 4s³ − c (written
- * 4t(s² + s·s_m + s_m²) as there) and N = dF/ds = 2s²(4s³ − 3c), dF/du = N/D and d²F/du² = (N′D − N·D′)/D³.
+ * settle, takes the bracketing solver of theory.c instead. The derivatives come in closed form
+ * (vafm_jkr_derivs, jkr_inline.h).
  * @return 1, or 0 if there is no equilibrium on the branch there (past the instability). */
 static int s_weq_solve(const vafm_sim *s, double uspr, double t_warm, s_weq *e)
 {
@@ -358,10 +358,11 @@ static int s_weq_solve(const vafm_sim *s, double uspr, double t_warm, s_weq *e)
     if (t > 0.0) {
         for (int it = 0; it < 6 && !done; it++) {
             const double sv = s_m + t, s2 = sv * sv, t2 = t * t;
-            const double P = t2 * (t2 + 4.0 * s_m * t + 6.0 * s_m * s_m);
+            /* g = k(Δu_spr − P) − F, F = s³((4/3)s³ − 2c) with s³ rounded as s²·s here (the warm-started
+             * Newton's own rounding, which the pinned curves depend on) */
+            const double g = k * (du_spr - vafm_jkr_P(s_m, t)) - s2 * sv * ((4.0 / 3.0) * s2 * sv - 2.0 * c);
             const double dP = t * (4.0 * t2 + 12.0 * s_m * t + 12.0 * s_m * s_m);
-            const double g = k * (du_spr - P) - s2 * sv * ((4.0 / 3.0) * s2 * sv - 2.0 * c);
-            const double dg = -k * dP - 2.0 * s2 * (4.0 * s2 * sv - 3.0 * c);
+            const double dg = -k * dP - 2.0 * s2 * (4.0 * s2 * sv - 3.0 * c); /* −k·dP/dt − dF/ds */
             const double d = g / dg;
             if (!(dg < 0.0) || !(fabs(d) <= 0.25 * t))
                 break; /* not on the stable branch's monotone side, or far off: bracket instead */
@@ -378,17 +379,10 @@ static int s_weq_solve(const vafm_sim *s, double uspr, double t_warm, s_weq *e)
     }
     if (!(t > 0.0))
         return 0;
-    const double sv = s_m + t, s2 = sv * sv, s3 = s2 * sv, t2 = t * t;
-    const double D = 4.0 * t * (s2 + sv * s_m + s_m * s_m), N = 2.0 * s2 * (4.0 * s3 - 3.0 * c);
-    const double dN = 40.0 * s2 * s2 - 12.0 * c * sv, dD = 12.0 * s2;
     e->uspr = uspr;
     e->t = t;
-    e->ueq = u_min + t2 * (t2 + 4.0 * s_m * t + 6.0 * s_m * s_m);
-    e->dF = N / D;
-    e->F2 = (dN * D - N * dD) / (D * D * D);
-    /* d³F/du³ = (d/ds of the above)/D, with N″ = 160s³ − 12c and D″ = 24s */
-    const double d2N = 160.0 * s3 - 12.0 * c, d2D = 24.0 * sv;
-    e->F3 = ((d2N * D - N * d2D) / (D * D * D) - 3.0 * (dN * D - N * dD) * dD / (D * D * D * D)) / D;
+    e->ueq = u_min + vafm_jkr_P(s_m, t);
+    vafm_jkr_derivs(s_m, c, t, &e->dF, &e->F2, &e->F3);
     e->ok = 1;
     return 1;
 }

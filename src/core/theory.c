@@ -10,6 +10,7 @@
  *   dF/du = N/D,  N = 2s²(4s³ − 3c),  D = du/ds = 4s³ − c = 4t(s² + s·s_m + s_m²).
  */
 #include "vafm/theory.h"
+#include "core/jkr_inline.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -32,20 +33,17 @@ static void s_jkr_set(s_jkr *j, double gamma)
 
 static double s_P(const s_jkr *j, double t)
 {
-    double t2 = t * t;
-    return t2 * (t2 + 4.0 * j->s_m * t + 6.0 * j->s_m * j->s_m);
+    return vafm_jkr_P(j->s_m, t);
 }
 
 static double s_F(const s_jkr *j, double t)
 {
-    double s = j->s_m + t, s3 = s * s * s;
-    return s3 * ((4.0 / 3.0) * s3 - 2.0 * j->c);
+    return vafm_jkr_F_t(j->s_m, j->c, t);
 }
 
 static double s_D(const s_jkr *j, double t)
 {
-    double s = j->s_m + t;
-    return 4.0 * t * (s * s + s * j->s_m + j->s_m * j->s_m);
+    return vafm_jkr_D(j->s_m, t);
 }
 
 /* Instability: dF/du = −k on the unstable part s ∈ (s_m, (3c/4)^{1/3}). Multiplied by D > 0 this is
@@ -95,11 +93,6 @@ VAFM_API int vafm_theory_quasistatic(double gamma, double k, vafm_quasistatic *o
     const double P = s_P(&j, t);
     const double F = s_F(&j, t); /* < 0: tensile */
 
-    /* d²F/du² = (d/ds dF/du)/(du/ds) = (N'D − N·D')/D³, N' = 40s⁴ − 12cs, D' = 12s² */
-    const double s = j.s_m + t, s2 = s * s;
-    const double N = 2.0 * s2 * (4.0 * s2 * s - 3.0 * j.c);
-    const double dN = 40.0 * s2 * s2 - 12.0 * j.c * s;
-    const double D = s_D(&j, t), dD = 12.0 * s2;
 
     vafm_quasistatic q;
     q.u_min = j.u_min;
@@ -108,7 +101,7 @@ VAFM_API int vafm_theory_quasistatic(double gamma, double k, vafm_quasistatic *o
     q.F_star = -F;
     q.u_spr_star = q.u_star + F / k;
     q.F_det = q.F_star - k * P; /* = −k(u_spr* − u_min), without the cancellation */
-    q.F2 = (dN * D - N * dD) / (D * D * D);
+    vafm_jkr_derivs(j.s_m, j.c, t, NULL, &q.F2, NULL); /* d²F/du² at the instability */
     *out = q;
     return VAFM_OK;
 }

@@ -52,8 +52,9 @@
 #define S_DETECTOR_KEY UINT64_C(0x0044455445435452)
 #define S_MAX_EVENTS 16
 #define S_PIECE_NS 500000LL /* compute at most this long (plus one piece) before releasing or polling */
-/* a piece of computation: the longest a due block can wait for its release (measured release lateness
- * with pieces of 1/16 block: p50 ~50 µs, p99 ~0.2–0.4 ms for paper-fig4 curves) */
+/* a piece of computation bounds how long a due block can wait for its release: ~20 µs of work, sized
+ * from the measured cost per sample and capped in integrator steps (with pieces of 1/16 block the
+ * release lateness was p99 ~0.2–0.4 ms for paper-fig4 curves, 0.9 ms for the default scene at 2 kS/s) */
 #define S_PIECE_TARGET_NS 20000.0
 #define S_PIECE_STEPS 512 /* integrator steps a piece at most (~18 µs at ~35 ns a step in contact) */
 
@@ -1037,7 +1038,8 @@ void *vafmd_sim_main(void *arg)
     x->t_boot = s_now();
 #ifdef PR_SET_TIMERSLACK
     /* Linux lets a normal thread's timed sleeps end up to 50 µs late (timer slack, to batch wake-ups);
-     * this thread's sleeps are release deadlines: 1 ns slack (measured: release lateness p50 ~80 µs → a few) */
+     * this thread's sleeps are release deadlines: 1 ns slack (measured on the project's VM, a bare
+     * clock_nanosleep: p50 89 → 49 µs late; the OS wake-up itself is the rest) */
     prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
 #endif
     /* the log pool's free ring (before any log item is pushed: the log ring's release/acquire publishes
