@@ -575,7 +575,7 @@ def test_campaign_equals_cli_campaign_and_is_logged(fig4, tmp_path):
             assert c["T_K"] == grid["T_K"][point // 2] and c["k_N_per_m"] == grid["k_N_per_m"][point % 2]
             assert start["index"] == g and start["scene"]["k_N_per_m"] == c["k_N_per_m"]
             assert start["scene"]["T_K"] == c["T_K"] and end["status"] == "ok" and end["result"]["index"] == g
-            assert fr[str(g)].attrs["curve id"] == str(g)  # the CLI's curve id is its index
+            assert fr[str(g)].attrs["curve id"] == f"index {g}"  # the CLI's curve id: its random stream index
             for chan, ds in (("force_N", "force"), ("height_m", "height (piezo)"), ("tip_m", "tip position")):
                 got = stream_channel(blocks, chan).view(np.uint64)
                 assert np.array_equal(fr[str(g)][ds][:].view(np.uint64), got), (g, chan)

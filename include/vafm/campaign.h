@@ -53,6 +53,13 @@ VAFM_API size_t vafm_campaign_points(const vafm_campaign_spec *spec);
 VAFM_API int vafm_campaign_point_params(const vafm_params *base, const vafm_campaign_spec *spec,
                                         size_t point, vafm_params *out);
 
+/** Validate the scene of every grid point (vafm_params_validate), in point order, before anything is
+ *  run or written. @param bad_point receives the first invalid point (may be NULL)
+ *  @return 0, or the first point's error with err->message "grid point P (T = …, v = …, k = …): why"
+ *  and err->field the parameter. */
+VAFM_API int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *spec, size_t *bad_point,
+                                    vafm_error *err);
+
 /** Run a campaign. Every point's scene is validated before any curve runs (err names the point).
  *  @return 0, VAFM_EABORT, or another negative VAFM_E* code. */
 VAFM_API int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec *spec,

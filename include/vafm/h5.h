@@ -172,6 +172,10 @@ VAFM_API int vafm_h5_writer_flush(vafm_h5_writer *w, vafm_error *err);
 /** @return the number of curves in the file (kept on resume + appended). */
 VAFM_API uint64_t vafm_h5_writer_count(const vafm_h5_writer *w);
 
+/** Ground truth of curve group `curve` as the writer holds it (rows kept on resume and appended).
+ *  @return 0, VAFM_EINVAL, or VAFM_ENOTFOUND (no row: a file without provenance, or beyond the count). */
+VAFM_API int vafm_h5_writer_truth(const vafm_h5_writer *w, uint64_t curve, vafm_h5_truth *out);
+
 /** Merge the ground-truth rows into the single root attribute "vafm ground truth", flush and close.
  *  *w is destroyed and set to NULL even on error. NULL-safe. @return 0 or VAFM_EIO. */
 VAFM_API int vafm_h5_writer_close(vafm_h5_writer **w, vafm_error *err);

@@ -26,6 +26,7 @@
 #include "cli/scene_json.h"
 #include "vafm/client.h"
 #include "vafm/h5.h"
+#include "vafm/record.h"
 #include "vafm/params.h"
 
 enum { S_OK = 0, S_RUNTIME = 1, S_USAGE = 2 };
@@ -581,8 +582,7 @@ typedef struct s_listen {
     const char *out;
     int h5;
     FILE *csv;
-    vafm_h5_writer *w;
-    int have_prov;
+    vafm_recorder *w;
     uint64_t runs_done, runs_bad, curves_written, tunes_skipped;
 } s_listen;
 
@@ -655,35 +655,21 @@ static int s_write_h5(s_listen *L, const s_run *r, json_t *end)
         s_err(L->x, "run %" PRId64 ": its scene does not load: %s", r->run_id, e.message);
         return S_RUNTIME;
     }
-    if (!L->have_prov) { /* the file's provenance: the scene of its first curve, as vafmd's log does */
-        if ((rc = vafm_h5_writer_set_provenance(L->w, &p, NULL, &e)) != 0) {
-            s_err(L->x, "%s: %s", L->out, e.message);
-            return S_RUNTIME;
-        }
-        L->have_prov = 1;
-    }
     vafm_curve_result res;
     s_result_from_json(json_object_get(end, "result"), &res);
     vafm_samples s = {.n = r->n, .first = 0, .time_s = r->time_s, .height_m = r->col[0],
                       .deflection_m = r->col[1], .force_N = r->col[2], .tip_m = r->col[4], .segment = r->seg};
-    vafm_h5_curve hc;
-    vafm_h5_curve_from_sim(&hc, &s, &p, &res);
-    char sid[48], cid[200];
-    const char *crid = json_string_value(json_object_get(r->start, "client_run_id"));
-    snprintf(sid, sizeof sid, "vafmd seed %" PRIu64, p.seed);
-    snprintf(cid, sizeof cid, "run %" PRId64 " index %" PRIu64 "%s%s", r->run_id,
-             s_ju64(r->start, "index"), crid ? " client " : "", crid ? crid : "");
-    hc.meta.session_id = sid;
-    hc.meta.curve_id = cid;
-    hc.meta.sensitivity_m_per_V = s_jnum(r->start, "sensitivity_m_per_V");
     /* with the detector signals on, force is the measured (noisy) one: no tip position = height + force/k
-     * column then (hdf5.md L14), as in vafmd's own log (wire.md §3.1.1) */
-    if (json_is_true(json_object_get(json_object_get(r->start, "detector"), "on")))
-        hc.tip_position_m = NULL;
-    vafm_h5_truth t; /* point: a campaign's grid point, else 0 */
-    vafm_h5_truth_from_sim(&t, s_ju64(json_object_get(r->start, "campaign"), "point"), &p, &res);
-    t.result.index = vafm_h5_writer_count(L->w); /* the group number; the stream index is in curve id */
-    if ((rc = vafm_h5_writer_append(L->w, &hc, &t, &e)) != 0 || (rc = vafm_h5_writer_flush(L->w, &e)) != 0) {
+     * column then (hdf5.md L14), as in vafmd's own log (wire.md §3.1.1); the file's provenance is the
+     * scene of its first curve, as vafmd's log does */
+    vafm_record_curve rec = { .samples = &s, .params = &p, .result = &res,
+                              .point = s_ju64(json_object_get(r->start, "campaign"), "point"),
+                              .run_id = (uint64_t)r->run_id,
+                              .client_run_id = json_string_value(json_object_get(r->start, "client_run_id")),
+                              .sensitivity_m_per_V = s_jnum(r->start, "sensitivity_m_per_V"),
+                              .measured_force = json_is_true(json_object_get(json_object_get(r->start, "detector"), "on")) };
+    res.index = s_ju64(r->start, "index");
+    if ((rc = vafm_recorder_append(L->w, &rec, &e)) != 0) {
         s_err(L->x, "%s: run %" PRId64 ": %s%s%s", L->out, r->run_id, e.message, e.field[0] ? " at " : "",
               e.field);
         return S_RUNTIME;
@@ -875,11 +861,11 @@ int vafm_cli_listen(int argc, char **argv)
 
     /* the output first: a bad path fails before anything is started */
     if (L.h5) {
-        vafm_h5_writer_opts wo;
-        vafm_h5_writer_opts_default(&wo);
-        wo.overwrite = overwrite;
+        vafm_recorder_opts ro;
+        vafm_recorder_opts_default(&ro);
+        ro.mode = overwrite ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE; /* durable after every curve */
         vafm_error e = {0};
-        if (vafm_h5_writer_open(&L.w, L.out, &wo, &e)) {
+        if (vafm_recorder_open(&L.w, L.out, &ro, NULL, NULL, &e)) {
             s_err(&x, "%s", e.message);
             return S_RUNTIME;
         }
@@ -973,7 +959,7 @@ int vafm_cli_listen(int argc, char **argv)
     sigaction(SIGTERM, &old_term, NULL);
     if (L.w) {
         vafm_error e = {0};
-        if (vafm_h5_writer_close(&L.w, &e)) {
+        if (vafm_recorder_close(&L.w, NULL, &e)) {
             s_err(&x, "closing %s: %s", L.out, e.message);
             rc = S_RUNTIME;
         }

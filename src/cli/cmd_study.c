@@ -30,6 +30,8 @@
 #include "cli/study_fit.h"
 #include "vafm/campaign.h"
 #include "vafm/h5.h"
+#include "vafm/record.h"
+#include "vafm/stats.h"
 #include "vafm/integrator.h"
 #include "vafm/theory.h"
 #include "vafm/units.h"
@@ -64,9 +66,8 @@ typedef struct s_run {
     /* results, by global index */
     vafm_h5_truth *truth;
     uint64_t total;
-    /* writer state */
-    vafm_h5_writer *w;
-    double last_flush;
+    /* recorder state */
+    vafm_recorder *rec;
     int werr;
     vafm_error e;
 } s_run;
@@ -105,50 +106,19 @@ static int s_cb(void *user, const vafm_campaign_curve *c)
         snprintf(r->e.message, sizeof r->e.message, "curve %" PRIu64 " failed: %s", c->index, vafm_strerror(r->werr));
         return 1;
     }
-    vafm_h5_curve hc;
-    vafm_h5_curve_from_sim(&hc, &c->samples, c->params, &c->result);
-    vafm_h5_truth t;
-    vafm_h5_truth_from_sim(&t, c->point, c->params, &c->result);
-    int rc = vafm_h5_writer_append(r->w, &hc, &t, &r->e);
-    if (rc) {
-        r->werr = rc;
+    vafm_record_curve rc = { .samples = &c->samples, .params = c->params, .result = &c->result,
+                             .point = c->point, .sensitivity_m_per_V = NAN };
+    int e = vafm_recorder_append(r->rec, &rc, &r->e);
+    if (e || (e = vafm_recorder_truth(r->rec, c->index, &r->truth[c->index])) != 0) {
+        r->werr = e;
         return 1;
     }
-    r->truth[c->index] = t;
     if (r->samples_csv) {
         const vafm_samples *s = &c->samples;
         for (size_t i = 0; i < s->n; ++i)
             fprintf(r->samples_csv, "%.9g,%.9g,%.9g,%.9g,%d\n", s->time_s[i], s->height_m[i], s->force_N[i],
                     s->tip_m[i], s->segment[i]);
     }
-    double now = s_now();
-    if (now - r->last_flush > 1.0) { /* durable about once a second, as `vafm campaign` */
-        if ((rc = vafm_h5_writer_flush(r->w, &r->e)) != 0) {
-            r->werr = rc;
-            return 1;
-        }
-        r->last_flush = now;
-    }
-    return 0;
-}
-
-/* Read the ground truth of the complete curves of an existing file (resume). */
-static int s_read_truth(s_run *r, uint64_t n)
-{
-    vafm_h5_reader *rd = NULL;
-    vafm_error e;
-    memset(&e, 0, sizeof e);
-    if (vafm_h5_reader_open(&rd, r->file, &e)) {
-        fprintf(stderr, "vafm study: %s\n", e.message);
-        return 1;
-    }
-    for (uint64_t i = 0; i < n; ++i)
-        if (vafm_h5_reader_truth(rd, i, &r->truth[i])) {
-            fprintf(stderr, "vafm study: %s: no ground truth for curve %" PRIu64 "\n", r->file, i);
-            vafm_h5_reader_destroy(&rd);
-            return 1;
-        }
-    vafm_h5_reader_destroy(&rd);
     return 0;
 }
 
@@ -162,58 +132,39 @@ static int s_campaign(s_ctx *ctx, s_run *r)
         return 1;
     vafm_error e;
     memset(&e, 0, sizeof e);
-    for (size_t i = 0; i < vafm_campaign_points(&sp); ++i) {
-        vafm_params p;
-        vafm_campaign_point_params(&r->base, &sp, i, &p);
-        if (vafm_params_validate(&p, &e)) {
-            fprintf(stderr, "vafm study: %s, grid point %zu: %s\n", r->file, i, e.message);
-            return 1;
-        }
+    if (vafm_campaign_validate(&r->base, &sp, NULL, &e)) {
+        fprintf(stderr, "vafm study: %s, %s\n", r->file, e.message);
+        return 1;
     }
-    vafm_h5_writer_opts o;
-    vafm_h5_writer_opts_default(&o);
-    o.gzip_level = 1; /* the paper-fig1 curves hold ~0.5 MB of samples each; deflate costs ~1% of a curve */
+    vafm_recorder_opts o;
+    vafm_recorder_opts_default(&o);
+    o.gzip_level = 1;         /* the paper-fig1 curves hold ~0.5 MB of samples each; deflate costs ~1% of a curve */
+    o.flush_interval_s = 1.0; /* durable about once a second, as `vafm campaign` */
     struct stat st;
-    int exists = stat(r->file, &st) == 0;
-    uint64_t have = 0;
-    if (ctx->resume && exists && !r->samples_csv) {
-        /* open for resume (drops an incomplete tail), close cleanly, read what is there, reopen */
-        o.resume = 1;
-        if (vafm_h5_writer_open(&r->w, r->file, &o, &e) || vafm_h5_writer_set_provenance(r->w, &r->base, &sp, &e)) {
-            fprintf(stderr, "vafm study: %s: %s\n", r->file, e.message);
-            vafm_h5_writer_destroy(&r->w);
-            return 1;
-        }
-        have = vafm_h5_writer_count(r->w);
-        if (have > r->total)
-            have = r->total;
-        if (vafm_h5_writer_close(&r->w, &e) || s_read_truth(r, have))
-            return 1;
-        ctx->curves_kept += have;
-        if (have == r->total) {
-            if (!ctx->quiet)
-                fprintf(stderr, "vafm study: %s: %" PRIu64 " curves (0 run)\n", r->file, r->total);
-            return 0;
-        }
-        if (vafm_h5_writer_open(&r->w, r->file, &o, &e) || vafm_h5_writer_set_provenance(r->w, &r->base, &sp, &e)) {
-            fprintf(stderr, "vafm study: %s: %s\n", r->file, e.message);
-            vafm_h5_writer_destroy(&r->w);
-            return 1;
-        }
-    } else {
-        o.overwrite = 1; /* a study's directory holds its own outputs: a rerun replaces them */
-        if (vafm_h5_writer_open(&r->w, r->file, &o, &e) || vafm_h5_writer_set_provenance(r->w, &r->base, &sp, &e)) {
-            fprintf(stderr, "vafm study: %s: %s\n", r->file, e.message);
-            vafm_h5_writer_destroy(&r->w);
-            return 1;
-        }
+    /* a study's directory holds its own outputs: a rerun replaces them, --resume continues them */
+    o.mode = ctx->resume && stat(r->file, &st) == 0 && !r->samples_csv ? VAFM_RECORD_RESUME : VAFM_RECORD_OVERWRITE;
+    if (vafm_recorder_open(&r->rec, r->file, &o, &r->base, &sp, &e)) {
+        fprintf(stderr, "vafm study: %s: %s\n", r->file, e.message);
+        return 1;
     }
-    sp.first_curve = have;
-    sp.threads = ctx->threads;
-    sp.keep_samples = 1;
-    r->last_flush = s_now();
-    int rc = vafm_campaign_run(&r->base, &sp, s_cb, r, &e);
-    int cr = vafm_h5_writer_close(&r->w, r->werr ? NULL : &r->e);
+    uint64_t have = vafm_recorder_count(r->rec);
+    if (have > r->total)
+        have = r->total;
+    for (uint64_t i = 0; i < have; ++i)
+        if (vafm_recorder_truth(r->rec, i, &r->truth[i])) {
+            fprintf(stderr, "vafm study: %s: no ground truth for curve %" PRIu64 "\n", r->file, i);
+            vafm_recorder_close(&r->rec, NULL, NULL);
+            return 1;
+        }
+    ctx->curves_kept += have;
+    int rc = 0;
+    if (have < r->total) {
+        sp.first_curve = have;
+        sp.threads = ctx->threads;
+        sp.keep_samples = 1;
+        rc = vafm_campaign_run(&r->base, &sp, s_cb, r, &e);
+    }
+    int cr = vafm_recorder_close(&r->rec, NULL, r->werr ? NULL : &r->e);
     if (r->werr || (rc && rc != VAFM_EABORT) || cr) {
         fprintf(stderr, "vafm study: %s: %s\n", r->file,
                 r->e.message[0] ? r->e.message : e.message[0] ? e.message : vafm_strerror(rc ? rc : cr));
@@ -257,28 +208,14 @@ static s_stat s_stats(const double *x, size_t n)
     return s;
 }
 
-/* which observable of a curve result, as a tensile magnitude in N (or piezo height in m) */
-enum { OBS_SAMPLED, OBS_SPRING, OBS_DETACH, OBS_DETACH_EQ, OBS_HEIGHT };
-
-static double s_obs(const vafm_curve_result *r, int which)
-{
-    switch (which) {
-    case OBS_SAMPLED: return r->pulloff_sampled_N;
-    case OBS_SPRING: return r->pulloff_spring_N;
-    case OBS_DETACH: return r->detach_force_N;
-    case OBS_DETACH_EQ: return r->detach_eq_force_N;
-    default: return r->detach_height_m;
-    }
-}
-
 /* Values of one observable for grid point `pt` (curves with a clean pull-off: flags 0), scaled. */
 static size_t s_collect(const s_run *r, size_t pt, int which, double scale, double *out)
 {
     size_t n = 0;
     for (uint64_t i = pt * r->N; i < (pt + 1) * r->N; ++i) {
         const vafm_h5_truth *t = &r->truth[i];
-        double x = s_obs(&t->result, which);
-        if (!t->status && !(t->result.flags & ~VAFM_CURVE_RECONTACT) && isfinite(x))
+        double x = vafm_stats_value(&t->result, which);
+        if (vafm_stats_is_pulloff(t->status, &t->result) && isfinite(x))
             out[n++] = x * scale;
     }
     return n;
@@ -288,7 +225,7 @@ static size_t s_flagged(const s_run *r, size_t pt)
 {
     size_t n = 0;
     for (uint64_t i = pt * r->N; i < (pt + 1) * r->N; ++i)
-        n += r->truth[i].result.flags & ~VAFM_CURVE_RECONTACT ? 1 : 0;
+        n += r->truth[i].status || (r->truth[i].result.flags & VAFM_STATS_EXCLUDING_FLAGS) ? 1 : 0;
     return n;
 }
 
@@ -313,7 +250,7 @@ static void s_fig4_scene(vafm_params *p, int brownian, double v_red)
 
 static double s_kT_to_K(const vafm_params *p, double kT_red)
 {
-    return kT_red * vafm_units_scale(p).energy_J / 1.380649e-23;
+    return kT_red * vafm_units_scale(p).energy_J / VAFM_KB_J_PER_K;
 }
 
 /* ---- figures --------------------------------------------------------------------------------------- */
@@ -417,8 +354,8 @@ static int s_distribution(s_ctx *ctx)
     double mean_ref = NAN, sd_ref = NAN, mT[8], sT[8], aT[8];
     for (size_t pt = 0; pt < nT; ++pt) {
         double kT = red.kT * mult[pt];
-        size_t n = s_collect(&r, pt, OBS_SPRING, 1e9, x);
-        size_t ny = s_collect(&r, pt, OBS_SAMPLED, 1e9, y), nz = s_collect(&r, pt, OBS_DETACH, 1e9, z);
+        size_t n = s_collect(&r, pt, VAFM_OBS_PULLOFF_SPRING, 1e9, x);
+        size_t ny = s_collect(&r, pt, VAFM_OBS_PULLOFF_SAMPLED, 1e9, y), nz = s_collect(&r, pt, VAFM_OBS_DETACH_FORCE, 1e9, z);
         if (ny < n)
             n = ny;
         if (nz < n)
@@ -503,7 +440,7 @@ static int s_distribution(s_ctx *ctx)
         double yd = vafm_theory_dhs_mean_y(&q, red.k, kT, v_red, zeta);
         int ok = vafm_theory_mfpt_pull(red.gamma, red.k, kT, zeta, red.m, 0.0, &v_red, 1, &tp) == 0;
         double *zz = malloc(r.N * sizeof *zz);
-        size_t n = s_collect(&r, pt, OBS_DETACH, 1e9, zz);
+        size_t n = s_collect(&r, pt, VAFM_OBS_DETACH_FORCE, 1e9, zz);
         s_stat s = s_stats(zz, n);
         free(zz);
         fprintf(o, "| %.1f | %.4f | %.4f ± %.4f | %.4f ± %.4f |\n", r.T[pt],
@@ -836,10 +773,10 @@ static int s_velocity_thermal(s_ctx *ctx)
             double F0s = r0.truth[0].result.pulloff_spring_N / FJ, F0d = r0.truth[0].result.detach_force_N / FJ;
             double *x = malloc(N * sizeof *x);
             for (size_t it = 0; it < nT; ++it) {
-                size_t n = s_collect(&r, it, OBS_SPRING, 1.0 / FJ, x);
+                size_t n = s_collect(&r, it, VAFM_OBS_PULLOFF_SPRING, 1.0 / FJ, x);
                 s_stat s2 = s_stats(x, n);
-                s_stat s3 = s_stats(x, s_collect(&r, it, OBS_DETACH, 1.0 / FJ, x));
-                n = s_collect(&r, it, OBS_HEIGHT, 1.0 / sc.length_m, x);
+                s_stat s3 = s_stats(x, s_collect(&r, it, VAFM_OBS_DETACH_FORCE, 1.0 / FJ, x));
+                n = s_collect(&r, it, VAFM_OBS_DETACH_HEIGHT, 1.0 / sc.length_m, x);
                 for (size_t i = 0; i < n; ++i)
                     x[i] = -x[i] - q.u_spr_star; /* y = u_spr − u_spr*, u_spr = −height */
                 s_stat sy = s_stats(x, n);

@@ -26,6 +26,8 @@
 #include "vafm/common.h"
 #include "vafm/contact.h"
 #include "vafm/h5.h"
+#include "vafm/record.h"
+#include "vafm/stats.h"
 #include "vafm/integrator.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
@@ -453,11 +455,6 @@ static int s_new_sim(const vafm_params *p, vafm_sim **sim)
 
 /* ---- formatting ------------------------------------------------------------------------------- */
 
-static double s_f_jkr(const vafm_params *p)
-{
-    return 1.5 * M_PI * p->gamma_J_per_m2 * p->R_m;
-}
-
 /* "   1.04921 nN        0.972268 F_JKR": SI value and the same in a reference unit (n/a where undefined). */
 static void s_fmt_pair(char *buf, size_t len, double v, double si_scale, const char *si_unit, double ref,
                        const char *ref_unit)
@@ -470,18 +467,6 @@ static void s_fmt_pair(char *buf, size_t len, double v, double si_scale, const c
         snprintf(buf, len, "%12.6g %-2s    %12s %-5s", v * si_scale, si_unit, "n/a", "");
 }
 
-static const struct {
-    int flag;
-    const char *word;
-} s_flag_words[] = {
-    { VAFM_CURVE_NO_CONTACT, "no-contact (the tip never touched)" },
-    { VAFM_CURVE_EARLY_DETACH, "early-detach (contact lost before the retract began)" },
-    { VAFM_CURVE_NO_DETACH, "no-detach (still in contact at the retract travel limit)" },
-    { VAFM_CURVE_NO_TRIGGER, "no-trigger (the approach reached z_range_m without the trigger)" },
-    { VAFM_CURVE_RECONTACT, "recontact (touched again after detaching)" },
-};
-#define S_NFLAGS ((int)(sizeof s_flag_words / sizeof s_flag_words[0]))
-
 static void s_print_flags(FILE *o, int flags)
 {
     if (!flags) {
@@ -489,9 +474,11 @@ static void s_print_flags(FILE *o, int flags)
         return;
     }
     const char *sep = "";
-    for (int i = 0; i < S_NFLAGS; i++)
-        if (flags & s_flag_words[i].flag) {
-            fprintf(o, "%s%s", sep, s_flag_words[i].word);
+    for (int i = 0; i < VAFM_STATS_NFLAGS; i++)
+        if (flags & (1 << i)) {
+            const char *doc;
+            const char *word = vafm_stats_flag_word(i, &doc);
+            fprintf(o, "%s%s (%s)", sep, word, doc);
             sep = "; ";
         }
     fputc('\n', o);
@@ -537,44 +524,19 @@ static void s_print_scene_reduced(FILE *o, const vafm_params *p, double dt_s)
     fprintf(o, "time step    dt = %.6g s (%.6g /eta)\n", dt_s, dt_s / u.time_s);
 }
 
-static const struct {
-    const char *name;
-    size_t offset;
-    int is_force;
-    const char *doc;
-} s_observables[] = {
-    { "pulloff_sampled_N", offsetof(vafm_curve_result, pulloff_sampled_N), 1,
-      "most tensile output sample of the retract (what an AFM user reads)" },
-    { "pulloff_spring_N", offsetof(vafm_curve_result, pulloff_spring_N), 1,
-      "most tensile spring force of any step of the retract" },
-    { "detach_force_N", offsetof(vafm_curve_result, detach_force_N), 1,
-      "spring force when the body passed u_min (ground truth)" },
-    { "detach_height_m", offsetof(vafm_curve_result, detach_height_m), 0,
-      "piezo height above the contact point then" },
-    { "detach_eq_force_N", offsetof(vafm_curve_result, detach_eq_force_N), 1,
-      "noise-free equilibrium spring force at that height" },
-};
-#define S_NOBS ((int)(sizeof s_observables / sizeof s_observables[0]))
-
-static double s_obs_value(const vafm_curve_result *r, int i)
-{
-    double v;
-    memcpy(&v, (const char *)r + s_observables[i].offset, sizeof v);
-    return v;
-}
-
 static void s_print_observables(FILE *o, const vafm_params *p, const vafm_curve_result *res)
 {
-    double F_jkr = s_f_jkr(p);
+    double F_jkr = vafm_stats_f_jkr_N(p);
     char buf[96];
     fprintf(o, "pull-off     (F_JKR = 3*pi*gamma*R/2 = %.6g nN)\n", F_jkr * 1e9);
-    for (int i = 0; i < S_NOBS; i++) {
-        double v = s_obs_value(res, i);
-        if (s_observables[i].is_force)
+    for (int i = 0; i < VAFM_OBS_COUNT; i++) {
+        const vafm_observable_info *ob = vafm_stats_observable(i);
+        double v = vafm_stats_value(res, i);
+        if (ob->is_force)
             s_fmt_pair(buf, sizeof buf, v, 1e9, "nN", F_jkr, "F_JKR");
         else
             s_fmt_pair(buf, sizeof buf, v, 1e9, "nm", p->R_m, "R");
-        fprintf(o, "  %-19s %s   %s\n", s_observables[i].name, buf, s_observables[i].doc);
+        fprintf(o, "  %-19s %s   %s\n", ob->name, buf, ob->doc);
     }
 }
 
@@ -587,7 +549,7 @@ static void s_print_quasistatic(FILE *o, const vafm_params *p, const vafm_curve_
         fprintf(o, "quasi-static n/a (no adhesion)\n");
         return;
     }
-    double F_jkr = s_f_jkr(p);
+    double F_jkr = vafm_stats_f_jkr_N(p);
     fprintf(o, "quasi-static athermal v -> 0 reference (vafm_theory_quasistatic)\n");
     fprintf(o, "  %-19s %12.6g nN    %12.8f F_JKR   contact force at the spring instability\n", "F*",
             q.F_star / q.F_jkr * F_jkr * 1e9, q.F_star / q.F_jkr);
@@ -732,57 +694,14 @@ static int s_cmd_samples(const s_args *a)
 
 /* ---- vafm curves: statistics ------------------------------------------------------------------ */
 
-/* Running central moments (Welford / Pébay), so any N fits in constant memory. */
-typedef struct s_moments {
-    uint64_t n;
-    double mean, m2, m3;
-} s_moments;
-
-static void s_moments_add(s_moments *m, double x)
-{
-    double n1 = (double)m->n, n = n1 + 1.0;
-    double d = x - m->mean, dn = d / n, t = d * dn * n1;
-    m->mean += dn;
-    m->m3 += t * dn * (n - 2.0) - 3.0 * dn * m->m2;
-    m->m2 += t;
-    m->n++;
-}
-
-typedef struct s_point_stats {
-    uint64_t curves, used;
-    uint64_t flag_count[S_NFLAGS];
-    s_moments obs[S_NOBS];
-} s_point_stats;
-
-/* Curves without a pull-off event (never touched, or never let go) have no observables to average. */
-#define S_NO_PULLOFF (VAFM_CURVE_NO_CONTACT | VAFM_CURVE_NO_DETACH)
-
-static void s_stats_add(s_point_stats *st, const vafm_curve_result *r)
-{
-    st->curves++;
-    for (int i = 0; i < S_NFLAGS; i++)
-        st->flag_count[i] += (r->flags & s_flag_words[i].flag) != 0;
-    if (r->flags & S_NO_PULLOFF)
-        return;
-    st->used++;
-    for (int i = 0; i < S_NOBS; i++) {
-        double v = s_obs_value(r, i);
-        if (isfinite(v))
-            s_moments_add(&st->obs[i], v);
-    }
-}
-
-static void s_print_moments_row(FILE *o, const char *name, const s_moments *m, double scale, const char *unit,
+static void s_print_moments_row(FILE *o, const char *name, const vafm_moments *m, double scale, const char *unit,
                                 double ref, const char *ref_unit)
 {
     if (m->n == 0) {
         fprintf(o, "  %-19s %6d %13s\n", name, 0, "n/a");
         return;
     }
-    double n = (double)m->n;
-    double sd = m->n > 1 ? sqrt(m->m2 / (n - 1.0)) : NAN;
-    double skew = m->n > 2 && m->m2 > 0 ? sqrt(n) * m->m3 / pow(m->m2, 1.5) : NAN;
-    double sem = sd / sqrt(n);
+    double sd = vafm_moments_sd(m), sem = vafm_moments_sem(m), skew = vafm_moments_skewness(m);
     fprintf(o, "  %-19s %6" PRIu64 " %13.6g %12.5g %12.5g %8.3f %-4s", name, m->n, m->mean * scale, sd * scale,
             sem * scale, skew, unit);
     if (ref > 0)
@@ -790,27 +709,27 @@ static void s_print_moments_row(FILE *o, const char *name, const s_moments *m, d
     fputc('\n', o);
 }
 
-static void s_print_point(FILE *o, size_t point, const vafm_params *p, const s_point_stats *st)
+static void s_print_point(FILE *o, size_t point, const vafm_params *p, const vafm_point_stats *st)
 {
-    double F_jkr = s_f_jkr(p);
+    double F_jkr = vafm_stats_f_jkr_N(p);
     fprintf(o, "\npoint %zu: T = %.6g K, v = %.6g m/s, k = %.6g N/m, F_JKR = %.6g nN\n", point, p->T_K,
             p->v_retract_m_per_s, p->k_N_per_m, F_jkr * 1e9);
     fprintf(o, "  curves %" PRIu64 ", with a pull-off %" PRIu64 "; flagged:", st->curves, st->used);
     int any = 0;
-    for (int i = 0; i < S_NFLAGS; i++)
+    for (int i = 0; i < VAFM_STATS_NFLAGS; i++)
         if (st->flag_count[i]) {
-            fprintf(o, " %.*s %" PRIu64, (int)strcspn(s_flag_words[i].word, " "), s_flag_words[i].word,
-                    st->flag_count[i]);
+            fprintf(o, " %s %" PRIu64, vafm_stats_flag_word(i, NULL), st->flag_count[i]);
             any = 1;
         }
     fputs(any ? "\n" : " none\n", o);
     fprintf(o, "  %-19s %6s %13s %12s %12s %8s %-4s | %11s %11s %11s\n", "observable", "n", "mean", "sd", "sem",
             "skew", "unit", "mean", "sd", "sem");
-    for (int i = 0; i < S_NOBS; i++) {
-        if (s_observables[i].is_force)
-            s_print_moments_row(o, s_observables[i].name, &st->obs[i], 1e9, "nN", F_jkr, "F_JKR");
+    for (int i = 0; i < VAFM_OBS_COUNT; i++) {
+        const vafm_observable_info *ob = vafm_stats_observable(i);
+        if (ob->is_force)
+            s_print_moments_row(o, ob->name, &st->obs[i], 1e9, "nN", F_jkr, "F_JKR");
         else
-            s_print_moments_row(o, s_observables[i].name, &st->obs[i], 1e9, "nm", p->R_m, "R");
+            s_print_moments_row(o, ob->name, &st->obs[i], 1e9, "nm", p->R_m, "R");
     }
 }
 
@@ -818,7 +737,7 @@ static void s_print_point(FILE *o, size_t point, const vafm_params *p, const s_p
 
 typedef struct s_curves {
     FILE *csv;
-    s_point_stats *stats;
+    vafm_point_stats *stats;
     s_progress pg;
     uint64_t done, total;
     int fail_status, io_error;
@@ -873,7 +792,7 @@ static int s_on_curve(void *user, const vafm_campaign_curve *c)
         cv->io_error = 1;
         return 1;
     }
-    s_stats_add(&cv->stats[c->point], &c->result);
+    vafm_point_stats_add(&cv->stats[c->point], 0, &c->result);
     cv->done++;
     s_curves_progress(cv);
     return 0;
@@ -927,7 +846,7 @@ static int s_grid_parse(const s_args *a, s_grid *g)
 
 /* The per-point statistics of a campaign (vafm curves, vafm campaign, vafm info). */
 static void s_print_statistics(FILE *o, const vafm_params *base, const vafm_campaign_spec *spec,
-                               const s_point_stats *stats)
+                               const vafm_point_stats *stats)
 {
     fprintf(o, "statistics   over curves with a pull-off (no-contact and no-detach curves left out); "
                "sd sample, sem = sd/sqrt(n), skew g1\n");
@@ -1040,7 +959,7 @@ static double s_file_mb(const char *path)
 
 /* Per-point statistics of every curve of a vafm file, from its ground truth, in curve order (so a
  * resumed campaign prints the same numbers as an uninterrupted one). @return curves without a row. */
-static uint64_t s_truth_stats(const vafm_h5_reader *r, size_t np, s_point_stats *stats)
+static uint64_t s_truth_stats(const vafm_h5_reader *r, size_t np, vafm_point_stats *stats)
 {
     uint64_t missing = 0;
     size_t n = vafm_h5_reader_count(r);
@@ -1049,7 +968,7 @@ static uint64_t s_truth_stats(const vafm_h5_reader *r, size_t np, s_point_stats 
         if (vafm_h5_reader_truth(r, i, &t) || t.point >= np)
             missing++;
         else
-            s_stats_add(&stats[t.point], &t.result);
+            vafm_point_stats_add(&stats[t.point], t.status, &t.result);
     }
     return missing;
 }
@@ -1058,83 +977,20 @@ static uint64_t s_truth_stats(const vafm_h5_reader *r, size_t np, s_point_stats 
 
 /*
  * The curves reach s_camp_curve in index order, one at a time, from whichever worker finished the next
- * one, and go into the file at once (vafm_h5_writer_append). They become durable only with a flush,
- * which rewrites the file's metadata: flushing after every curve cost 7.7% of a paper-fig4 campaign's
- * wall time, so a flusher thread flushes by time instead, --flush-interval seconds after the previous
- * flush whenever curves wait (a curve never waits longer, even when the next one is slow to come), and
- * the close at the end flushes the rest. A kill -9 at any moment loses at most the curves of the last
- * interval; --resume recomputes exactly those. One mutex serialises every call into the writer: the
- * HDF5 library is not thread-safe.
+ * one, and go into the file at once through the recorder (vafm/record.h), which flushes on a timer
+ * (--flush-interval) from its own thread: a kill -9 at any moment loses at most the curves of the last
+ * interval; --resume recomputes exactly those.
  */
 
-#define S_MAX_FLUSH_INTERVAL_S 86400.0
-
 typedef struct s_camp {
-    vafm_h5_writer *w;
-    pthread_mutex_t mu;  /* the writer and the fields up to werr */
-    pthread_cond_t wake; /* the flusher: curves pending, or stop */
-    double interval;     /* seconds between flushes */
-    double last_flush;   /* s_now() at the end of the last flush */
-    uint64_t pending;    /* curves appended since */
-    uint64_t flushes;
-    double writer_s;     /* wall time spent inside the writer (open, append, flush, close) */
-    int stop;            /* the flusher ends */
-    int werr_code;       /* the first writer error */
+    vafm_recorder *rec;
+    int werr_code; /* the first recorder error */
     vafm_error werr;
-    char session_id[48]; /* "seed S": with the curve id (its index) it reproduces the curve */
-    s_progress pg;       /* the fields below belong to the delivering worker */
+    s_progress pg; /* the fields below belong to the delivering worker */
     uint64_t done, total;
     int fail_status;
     uint64_t fail_index;
 } s_camp;
-
-static void s_camp_werr(s_camp *cp, int code, const vafm_error *e)
-{
-    if (!cp->werr_code) {
-        cp->werr_code = code;
-        cp->werr = *e;
-    }
-}
-
-/* With the lock held. */
-static void s_camp_flush(s_camp *cp)
-{
-    vafm_error e;
-    memset(&e, 0, sizeof e);
-    double t0 = s_now();
-    int r = vafm_h5_writer_flush(cp->w, &e);
-    double t1 = s_now();
-    cp->writer_s += t1 - t0;
-    cp->last_flush = t1;
-    cp->pending = 0;
-    cp->flushes++;
-    if (r)
-        s_camp_werr(cp, r, &e);
-}
-
-static void *s_camp_flusher(void *arg)
-{
-    s_camp *cp = arg;
-    pthread_mutex_lock(&cp->mu);
-    while (!cp->stop) {
-        if (!cp->pending || cp->werr_code) {
-            pthread_cond_wait(&cp->wake, &cp->mu);
-            continue;
-        }
-        double due = cp->last_flush + cp->interval;
-        if (s_now() >= due) {
-            s_camp_flush(cp);
-            continue;
-        }
-        struct timespec ts;
-        ts.tv_sec = (time_t)due;
-        ts.tv_nsec = (long)((due - (double)ts.tv_sec) * 1e9);
-        pthread_cond_timedwait(&cp->wake, &cp->mu, &ts);
-    }
-    pthread_mutex_unlock(&cp->mu);
-    return NULL;
-}
-
 
 /* Called in index order, one at a time. A failed curve stops the campaign, as in vafm curves. */
 static int s_camp_curve(void *user, const vafm_campaign_curve *c)
@@ -1145,28 +1001,13 @@ static int s_camp_curve(void *user, const vafm_campaign_curve *c)
         cp->fail_index = c->index;
         return 1;
     }
-    vafm_h5_curve hc;
-    vafm_h5_curve_from_sim(&hc, &c->samples, c->params, &c->result);
-    char cid[24];
-    snprintf(cid, sizeof cid, "%" PRIu64, c->index);
-    hc.meta.session_id = cp->session_id;
-    hc.meta.curve_id = cid;
-    vafm_h5_truth t;
-    vafm_h5_truth_from_sim(&t, c->point, c->params, &c->result);
-    vafm_error e;
-    memset(&e, 0, sizeof e);
-    pthread_mutex_lock(&cp->mu);
-    double t0 = s_now();
-    int r = vafm_h5_writer_append(cp->w, &hc, &t, &e);
-    cp->writer_s += s_now() - t0;
-    if (r)
-        s_camp_werr(cp, r, &e);
-    else if (cp->pending++ == 0)
-        pthread_cond_signal(&cp->wake);
-    int stop = cp->werr_code != 0;
-    pthread_mutex_unlock(&cp->mu);
-    if (stop)
+    vafm_record_curve rc = { .samples = &c->samples, .params = c->params, .result = &c->result,
+                             .point = c->point, .sensitivity_m_per_V = NAN };
+    int r = vafm_recorder_append(cp->rec, &rc, &cp->werr);
+    if (r) {
+        cp->werr_code = r;
         return 1;
+    }
     cp->done++;
     s_progress_curves(&cp->pg, cp->done, cp->total);
     return 0;
@@ -1177,15 +1018,10 @@ static int s_check_points(const vafm_params *base, const vafm_campaign_spec *spe
 {
     vafm_error err;
     memset(&err, 0, sizeof err);
-    for (size_t i = 0; i < vafm_campaign_points(spec); i++) {
-        vafm_params p;
-        vafm_campaign_point_params(base, spec, i, &p);
-        int r = vafm_params_validate(&p, &err);
-        if (r) {
-            s_error("grid point %zu (T = %g K, v = %g m/s, k = %g N/m): %s", i, p.T_K, p.v_retract_m_per_s,
-                    p.k_N_per_m, err.message[0] ? err.message : vafm_strerror(r));
-            return s_exit_of(r);
-        }
+    int r = vafm_campaign_validate(base, spec, NULL, &err);
+    if (r) {
+        s_error("%s", err.message[0] ? err.message : vafm_strerror(r));
+        return s_exit_of(r);
     }
     return 0;
 }
@@ -1206,8 +1042,8 @@ static int s_camp_parse(const s_args *a, s_camp_opts *o)
     o->interval = 1.0;
     uint64_t gz = 0;
     int rc = 0;
-    if ((a->val[O_FLUSH] &&
-         (rc = s_parse_real("--flush-interval", a->val[O_FLUSH], 0.0, S_MAX_FLUSH_INTERVAL_S, "s", &o->interval))) ||
+    if ((a->val[O_FLUSH] && (rc = s_parse_real("--flush-interval", a->val[O_FLUSH], 0.0,
+                                               VAFM_RECORD_MAX_FLUSH_INTERVAL_S, "s", &o->interval))) ||
         (a->val[O_GZIP] && (rc = s_parse_u64("--gzip", a->val[O_GZIP], 0, 9, &gz))))
         return rc;
     o->gzip = (int)gz;
@@ -1236,25 +1072,21 @@ static int s_camp_parse(const s_args *a, s_camp_opts *o)
 /* Open (create or resume) the file and record or compare the provenance. */
 static int s_camp_open(s_camp *cp, const s_camp_opts *o, const s_scene *sc, const vafm_campaign_spec *spec)
 {
-    vafm_h5_writer_opts wo;
-    vafm_h5_writer_opts_default(&wo);
-    wo.resume = o->resume;
-    wo.overwrite = o->overwrite;
-    wo.gzip_level = o->gzip;
+    vafm_recorder_opts ro;
+    vafm_recorder_opts_default(&ro);
+    ro.mode = o->resume ? VAFM_RECORD_RESUME : o->overwrite ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE;
+    ro.gzip_level = o->gzip;
+    /* a flush rewrites the file's metadata: a 0 s interval still flushes from the flusher thread, as
+     * soon as a curve waits, so the workers never wait on it */
+    ro.flush_interval_s = o->interval > 0 ? o->interval : 1e-9;
     vafm_error err;
     memset(&err, 0, sizeof err);
-    double t0 = s_now();
-    int r = vafm_h5_writer_open(&cp->w, o->out, &wo, &err);
-    if (!r && (r = vafm_h5_writer_set_provenance(cp->w, &sc->p, spec, &err)) != 0) {
-        vafm_error ignored;
-        vafm_h5_writer_close(&cp->w, &ignored);
-    }
-    cp->writer_s += s_now() - t0;
+    int r = vafm_recorder_open(&cp->rec, o->out, &ro, &sc->p, spec, &err);
     return r ? s_report(&err, r) : 0;
 }
 
 static void s_camp_summary(FILE *o, const s_scene *sc, const vafm_campaign_spec *spec, const s_camp_opts *co,
-                           const s_camp *cp, uint64_t first, double wall)
+                           const s_camp *cp, const vafm_recorder_report *rep, uint64_t first, double wall)
 {
     uint64_t in_file = first + cp->done;
     double mb = s_file_mb(co->out);
@@ -1265,14 +1097,14 @@ static void s_camp_summary(FILE *o, const s_scene *sc, const vafm_campaign_spec 
     s_print_campaign_line(o, spec, cp->done, wall);
     fprintf(o, "writer       %.3f s in open, append, flush and close = %.2f%% of the wall time; %" PRIu64
                " flush(es) (every %g s and at the end), %.4g MB/s\n",
-            cp->writer_s, wall > 0 ? 100.0 * cp->writer_s / wall : 0.0, cp->flushes + 1, co->interval,
+            rep->writer_s, wall > 0 ? 100.0 * rep->writer_s / wall : 0.0, rep->flushes, co->interval,
             wall > 0 ? (mb - co->mb_before) / wall : 0.0);
     /* The statistics cover every curve of the file, from its ground truth. */
     vafm_h5_reader *r = NULL;
     vafm_error err;
     memset(&err, 0, sizeof err);
     size_t np = vafm_campaign_points(spec);
-    s_point_stats *stats = calloc(np, sizeof *stats);
+    vafm_point_stats *stats = calloc(np, sizeof *stats);
     if (stats && !vafm_h5_reader_open(&r, co->out, &err)) {
         s_truth_stats(r, np, stats);
         s_print_statistics(o, &sc->p, spec, stats);
@@ -1310,20 +1142,16 @@ static int s_campaign(const s_args *a, vafm_cli_mpi *mpi)
     }
     s_camp cp;
     memset(&cp, 0, sizeof cp);
-    cp.interval = co.interval;
-    snprintf(cp.session_id, sizeof cp.session_id, "seed %" PRIu64, sc.p.seed);
     s_progress_init(&cp.pg, a);
     double t_start = cp.pg.t0;
     rc = s_camp_open(&cp, &co, &sc, &g.spec);
-    if (mpi && (rc = vafm_cli_mpi_agree(mpi, rc, NULL, NULL)) != 0 && cp.w) {
-        vafm_error ignored;
-        vafm_h5_writer_close(&cp.w, &ignored);
-    }
+    if (mpi && (rc = vafm_cli_mpi_agree(mpi, rc, NULL, NULL)) != 0 && cp.rec)
+        vafm_recorder_close(&cp.rec, NULL, NULL);
     if (rc) {
         s_grid_free(&g);
         return rc;
     }
-    uint64_t first = vafm_h5_writer_count(cp.w);
+    uint64_t first = vafm_recorder_count(cp.rec);
     uint64_t total = g.spec.curves_per_point * (uint64_t)vafm_campaign_points(&g.spec);
     g.spec.first_curve = first < total ? first : total;
     g.spec.keep_samples = 1;
@@ -1332,41 +1160,18 @@ static int s_campaign(const s_args *a, vafm_cli_mpi *mpi)
         fprintf(stderr, "vafm: %s holds %" PRIu64 " of the campaign's %" PRIu64 " curves; running the rest\n", co.out,
                 first, total);
 
-    pthread_condattr_t ca;
-    pthread_condattr_init(&ca);
-    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC); /* the flusher's deadlines are s_now() times */
-    pthread_cond_init(&cp.wake, &ca);
-    pthread_condattr_destroy(&ca);
-    pthread_mutex_init(&cp.mu, NULL);
-    cp.last_flush = s_now();
-    pthread_t flusher;
-    int started = pthread_create(&flusher, NULL, s_camp_flusher, &cp) == 0;
     vafm_error err;
     memset(&err, 0, sizeof err);
-    int r = !started ? VAFM_ENOMEM
-            : mpi    ? vafm_cli_mpi_run(mpi, &sc.p, &g.spec, s_camp_curve, &cp, &err)
-                     : vafm_campaign_run(&sc.p, &g.spec, s_camp_curve, &cp, &err);
-    if (started) {
-        pthread_mutex_lock(&cp.mu);
-        cp.stop = 1;
-        pthread_cond_signal(&cp.wake);
-        pthread_mutex_unlock(&cp.mu);
-        pthread_join(flusher, NULL);
-    } else {
-        snprintf(err.message, sizeof err.message, "cannot start the flusher thread");
-    }
-    pthread_mutex_destroy(&cp.mu);
-    pthread_cond_destroy(&cp.wake);
+    int r = mpi ? vafm_cli_mpi_run(mpi, &sc.p, &g.spec, s_camp_curve, &cp, &err)
+                : vafm_campaign_run(&sc.p, &g.spec, s_camp_curve, &cp, &err);
     s_progress_end(&cp.pg);
 
     /* A clean close merges the ground truth into one table; the file holds every curve delivered. */
     vafm_error cerr;
     memset(&cerr, 0, sizeof cerr);
-    double t0 = s_now();
-    int cr = vafm_h5_writer_close(&cp.w, &cerr);
-    double t1 = s_now();
-    cp.writer_s += t1 - t0;
-    double wall = t1 - t_start;
+    vafm_recorder_report rep;
+    int cr = vafm_recorder_close(&cp.rec, &rep, &cerr);
+    double wall = s_now() - t_start;
 
     if (cp.fail_status) {
         s_error("curve %" PRIu64 " failed: %s; %s holds the %" PRIu64 " curve(s) before it", cp.fail_index,
@@ -1382,7 +1187,7 @@ static int s_campaign(const s_args *a, vafm_cli_mpi *mpi)
         rc = S_EXIT_RUNTIME;
     }
     if (!rc) {
-        s_camp_summary(stdout, &sc, &g.spec, &co, &cp, first, wall);
+        s_camp_summary(stdout, &sc, &g.spec, &co, &cp, &rep, first, wall);
         vafm_cli_mpi_describe(mpi, stdout);
     }
     s_grid_free(&g);
@@ -1570,7 +1375,7 @@ static int s_cmd_info(const s_args *a)
     }
     if (pv.is_vafm && ip.scene_ok && ip.grid_ok && n) {
         size_t np = vafm_campaign_points(&ip.spec);
-        s_point_stats *stats = calloc(np, sizeof *stats);
+        vafm_point_stats *stats = calloc(np, sizeof *stats);
         if (stats) {
             uint64_t missing = s_truth_stats(r, np, stats);
             s_print_statistics(stdout, &ip.p, &ip.spec, stats);

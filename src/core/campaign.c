@@ -224,6 +224,33 @@ static void *s_worker(void *arg)
     return NULL;
 }
 
+int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *spec, size_t *bad_point,
+                           vafm_error *err)
+{
+    if (!base || !spec) {
+        vafm_err_set(err, VAFM_EINVAL, "", "vafm_campaign_validate: no scene or no spec");
+        return VAFM_EINVAL;
+    }
+    size_t np = vafm_campaign_points(spec);
+    for (size_t i = 0; i < np; i++) {
+        vafm_params p;
+        vafm_campaign_point_params(base, spec, i, &p);
+        int r = vafm_params_validate(&p, err);
+        if (r) {
+            if (bad_point)
+                *bad_point = i;
+            if (err) {
+                char msg[sizeof err->message + 128];
+                snprintf(msg, sizeof msg, "grid point %zu (T = %g K, v = %g m/s, k = %g N/m): %s", i, p.T_K,
+                         p.v_retract_m_per_s, p.k_N_per_m, err->message[0] ? err->message : vafm_strerror(r));
+                snprintf(err->message, sizeof err->message, "%.*s", (int)(sizeof err->message - 1), msg);
+            }
+            return r;
+        }
+    }
+    return 0;
+}
+
 int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec *spec, vafm_campaign_fn fn, void *user,
                       vafm_error *err)
 {
@@ -263,20 +290,13 @@ int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *
     sh.point_params = calloc(np, sizeof *sh.point_params);
     if (!sh.point_params)
         return VAFM_ENOMEM;
-    for (size_t i = 0; i < np; i++) {
+    for (size_t i = 0; i < np; i++)
         vafm_campaign_point_params(base, spec, i, &sh.point_params[i]);
-        int r = vafm_params_validate(&sh.point_params[i], err);
-        if (r) {
-            if (err) {
-                char msg[sizeof err->message + 128];
-                snprintf(msg, sizeof msg, "grid point %zu (T = %g K, v = %g m/s, k = %g N/m): %s", i,
-                         sh.point_params[i].T_K, sh.point_params[i].v_retract_m_per_s,
-                         sh.point_params[i].k_N_per_m, err->message);
-                snprintf(err->message, sizeof err->message, "%.*s", (int)(sizeof err->message - 1), msg);
-            }
-            free(sh.point_params);
-            return r;
-        }
+    size_t bad;
+    int vr = vafm_campaign_validate(base, spec, &bad, err);
+    if (vr) {
+        free(sh.point_params);
+        return vr;
     }
     int threads = spec->threads > 0 ? spec->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
     if (threads < 1)

@@ -98,18 +98,6 @@ static const s_field s_fields[] = {
 
 #define S_NFIELDS ((int)(sizeof s_fields / sizeof s_fields[0]))
 
-void vafm_err_set(vafm_error *err, int code, const char *field, const char *fmt, ...)
-{
-    if (!err)
-        return;
-    err->code = code;
-    snprintf(err->field, sizeof err->field, "%s", field ? field : "");
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
-    va_end(ap);
-}
-
 /* ---- presets ---------------------------------------------------------------------------------- */
 
 typedef struct s_preset {

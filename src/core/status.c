@@ -1,5 +1,8 @@
 /* SPDX-License-Identifier: MIT */
+#include <stdarg.h>
+#include <stdio.h>
 #include "vafm/common.h"
+#include "core/internal.h"
 #include "vafm/version.h"
 
 const char *vafm_strerror(int code)
@@ -30,4 +33,16 @@ const char *vafm_version(void)
 unsigned vafm_version_api(void)
 {
     return (VAFM_API_VERSION_MAJOR << 16) | (VAFM_API_VERSION_MINOR << 8) | VAFM_API_VERSION_PATCH;
+}
+
+void vafm_err_set(vafm_error *err, int code, const char *field, const char *fmt, ...)
+{
+    if (!err)
+        return;
+    err->code = code;
+    snprintf(err->field, sizeof err->field, "%s", field ? field : "");
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    va_end(ap);
 }

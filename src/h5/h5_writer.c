@@ -864,3 +864,13 @@ void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params 
     t->k_N_per_m = p->k_N_per_m;
     t->result = *r;
 }
+
+int vafm_h5_writer_truth(const vafm_h5_writer *w, uint64_t curve, vafm_h5_truth *out)
+{
+    if (!w || !out)
+        return VAFM_EINVAL;
+    if (curve >= w->nrows || w->rows[curve].curve != curve)
+        return VAFM_ENOTFOUND;
+    vafm_h5i_truth_from_row(out, &w->rows[curve]);
+    return 0;
+}

@@ -1,0 +1,120 @@
+/* SPDX-License-Identifier: MIT */
+/**
+ * @file record.h
+ * The recorder: finished force curves into an HDF5 file of protocol/hdf5.md, for every program that
+ * records (`vafm campaign`, `vafm study`, `vafm listen`, vafmd's log). It opens the file (create,
+ * resume or overwrite: the lock rules are the writer's, vafm/h5.h), records the provenance once,
+ * appends each curve with its ground-truth row, ids and calibration by one rule, and makes curves
+ * durable either after every curve or on a timer from its own flusher thread (a kill -9 at any moment
+ * loses at most the curves of the last interval; resume recomputes exactly those).
+ *
+ * Ids, one rule for every program: "session id" is "seed S" (S the scene's seed); "curve id" is
+ * "index I" (I the curve's random stream index), preceded by "run R " for a daemon run and followed by
+ * " client C" for a client's run id. (seed, index) reproduces the curve.
+ *
+ * Thread safety: one recorder may be used from several threads; its calls are serialised inside.
+ * The library never prints; errors are VAFM_E* codes with a vafm_error naming the file and the cause.
+ */
+#ifndef VAFM_RECORD_H
+#define VAFM_RECORD_H
+
+#include "vafm/campaign.h"
+#include "vafm/common.h"
+#include "vafm/h5.h"
+#include "vafm/params.h"
+#include "vafm/sim.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct vafm_recorder vafm_recorder;
+
+/** How the file is opened. */
+typedef enum vafm_record_mode {
+    VAFM_RECORD_CREATE = 0,    /**< a new file; an existing one is refused */
+    VAFM_RECORD_RESUME = 1,    /**< continue an existing vafm file with the same scene and grid */
+    VAFM_RECORD_OVERWRITE = 2, /**< replace an existing file (never one another process writes) */
+} vafm_record_mode;
+
+/** The longest flush interval accepted, s. */
+#define VAFM_RECORD_MAX_FLUSH_INTERVAL_S 86400.0
+
+/** Recorder options. */
+typedef struct vafm_recorder_opts {
+    int mode;                /**< vafm_record_mode (default VAFM_RECORD_CREATE) */
+    int gzip_level;          /**< 0: no compression (default); 1–9 shuffle + deflate */
+    double flush_interval_s; /**< 0 (default): durable after every curve; (0, 86400]: a flusher thread
+                                  flushes this long after the previous flush whenever curves wait */
+    /** Called from the thread that made them durable, after each successful flush, with the number of
+     *  curves now durable in the file (NULL: none). Must not call back into the recorder. */
+    void (*on_durable)(void *user, uint64_t curves);
+    void *user;              /**< for on_durable */
+    uint8_t reserved[32];
+} vafm_recorder_opts;
+
+/** Fill o with the defaults. */
+VAFM_API void vafm_recorder_opts_default(vafm_recorder_opts *o);
+
+/**
+ * Open a file and record (new file) or compare (resume) the provenance.
+ * @param scene the base scene, or NULL to take the first appended curve's scene as the file's
+ * @param grid  the campaign grid, or NULL for single curves
+ * @return 0, VAFM_EINVAL (options, or on resume a scene or grid other than the file's), VAFM_EIO,
+ *         VAFM_EFORMAT, VAFM_ESTATE (the file is in use by another writer), VAFM_ENOMEM.
+ */
+VAFM_API int vafm_recorder_open(vafm_recorder **out, const char *path, const vafm_recorder_opts *opts,
+                                const vafm_params *scene, const vafm_campaign_spec *grid, vafm_error *err);
+
+/** One finished curve to record. */
+typedef struct vafm_record_curve {
+    const vafm_samples *samples;    /**< its samples (n ≥ 1) */
+    const vafm_params *params;      /**< its scene */
+    const vafm_curve_result *result;/**< its observables; result->index is its random stream index */
+    uint64_t point;                 /**< its campaign grid point (0 for single curves) */
+    uint64_t run_id;                /**< a daemon's run number, 0: none */
+    const char *client_run_id;      /**< a client's name for the run, NULL: none */
+    double sensitivity_m_per_V;     /**< deflection sensitivity (InvOLS), m/V; NaN: not recorded */
+    int measured_force;             /**< 1: force is a measured (noisy, quantised) signal, so the file gets
+                                         no "tip position" = height + force/k column (hdf5.md L14) */
+} vafm_record_curve;
+
+/** Append one curve as the next group, with its ground truth; durable after the call when the flush
+ *  interval is 0. A flusher's earlier error is returned here (and every call after it).
+ *  @return 0, VAFM_EINVAL (the curve breaks the layout), VAFM_EIO, VAFM_ENOMEM. */
+VAFM_API int vafm_recorder_append(vafm_recorder *r, const vafm_record_curve *c, vafm_error *err);
+
+/** Make every appended curve durable now. @return 0 or VAFM_EIO. */
+VAFM_API int vafm_recorder_flush(vafm_recorder *r, vafm_error *err);
+
+/** @return curves in the file: kept on resume + appended. */
+VAFM_API uint64_t vafm_recorder_count(vafm_recorder *r);
+
+/** Ground-truth row of curve group i (kept on resume or appended). @return 0 or VAFM_ENOTFOUND. */
+VAFM_API int vafm_recorder_truth(vafm_recorder *r, uint64_t i, vafm_h5_truth *out);
+
+/** What the recorder did (for summaries). */
+typedef struct vafm_recorder_report {
+    uint64_t kept;     /**< curves found in the file on resume */
+    uint64_t appended; /**< curves appended */
+    uint64_t flushes;  /**< flushes made, the one at close included */
+    double writer_s;   /**< wall time spent inside the HDF5 writer (open, append, flush, close), s */
+} vafm_recorder_report;
+
+/** @return the report so far (safe at any time). */
+VAFM_API void vafm_recorder_report_get(vafm_recorder *r, vafm_recorder_report *out);
+
+/** Stop the flusher, merge the ground truth, flush and close. *r is destroyed and set to NULL even on
+ *  error; NULL-safe. rep (may be NULL) receives the final report. @return 0, or the first error of the
+ *  recorder's life that was not returned yet, or the close's. */
+VAFM_API int vafm_recorder_close(vafm_recorder **r, vafm_recorder_report *rep, vafm_error *err);
+
+/** The ids of protocol/hdf5.md's rule into buffers: session "seed S", curve "[run R ]index I[ client C]".
+ *  run_id 0 and client NULL or "" leave those parts out. */
+VAFM_API void vafm_record_ids(uint64_t seed, uint64_t index, uint64_t run_id, const char *client,
+                              char *session, size_t session_len, char *curve, size_t curve_len);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
