@@ -12,6 +12,7 @@
 #include "vafm/campaign.h"
 #include "vafm/h5.h"
 #include "vafm/record.h"
+#include "vafm/scene.h"
 #include "vafm/stats.h"
 
 static void test_moments(void)
@@ -244,8 +245,67 @@ static void test_campaign_validate(void)
     ENSURE(vafm_campaign_validate(&p, &sp, &bad, &e) == 0);
 }
 
+/* One set of JSON rules for scenes: strict types, preset first, errors naming the key. */
+static void test_scene_json(void)
+{
+    vafm_params p, q;
+    vafm_error e;
+    vafm_params_default(&p);
+    ENSURE(vafm_scene_parse(&p, "{\"k_N_per_m\": 0.2, \"preset\": \"paper-fig4\", \"seed\": \"18446744073709551615\"}",
+                            "t", &e) == 0);
+    vafm_params_preset(&q, "paper-fig4", NULL);
+    ENSURE(p.k_N_per_m == 0.2 && p.seed == UINT64_MAX && p.R_m == q.R_m);
+    /* the stricter rules: booleans are true/false, seeds non-negative whole numbers, choices strings */
+    static const char *bad[] = { "{\"free_exact\": 1}", "{\"seed\": -1}", "{\"seed\": 1.5}", "{\"seed\": \"12a\"}",
+                                 "{\"integrator\": 3}", "{\"k_N_per_m\": \"0.2\"}", "[1]", "{\"k_N_per_m\": 1e400}" };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        memset(&e, 0, sizeof e);
+        vafm_params_default(&p);
+        int rc = vafm_scene_parse(&p, bad[i], "t", &e);
+        ENSURE_MSG(rc != 0 && e.message[0], "%s accepted", bad[i]);
+    }
+    memset(&e, 0, sizeof e);
+    ENSURE(vafm_scene_parse(&p, "{\"free_exact\": 1}", "t", &e) == VAFM_EINVAL && !strcmp(e.field, "free_exact"));
+    ENSURE(strstr(e.message, "true or false") != NULL);
+    ENSURE(vafm_scene_parse(&p, "{\"nope\": 1}", "t", &e) == VAFM_ENOTFOUND && !strcmp(e.field, "nope"));
+    /* params → JSON → params is exact */
+    vafm_params_preset(&q, "paper-fig1", NULL);
+    q.k_N_per_m = 0.1 + 0.2; /* not a short decimal */
+    static char js[16384];
+    vafm_params_default(&p);
+    ENSURE(vafm_params_to_json(&q, js, sizeof js) > 0);
+    ENSURE(vafm_scene_parse(&p, js, "t", &e) == 0 && p.k_N_per_m == q.k_N_per_m && p.T_K == q.T_K);
+    /* a scene file that is not a regular file is refused at once (a FIFO would block) */
+    ENSURE(vafm_scene_load_file(&p, ".", NULL, 0, &e) == VAFM_EIO);
+}
+
+/* The scene and grid a file was written with come back through vafm_scene_from_h5. */
+static void test_scene_from_h5(void)
+{
+    const char *path = "t_record_scene.h5";
+    unlink(path);
+    s_rec_run a;
+    memset(&a, 0, sizeof a);
+    ENSURE(s_run_campaign(path, VAFM_RECORD_CREATE, 0.0, 2, 0, &a) == 0);
+    vafm_h5_reader *r = NULL;
+    vafm_error e;
+    ENSURE(vafm_h5_reader_open(&r, path, &e) == 0);
+    vafm_params p, want;
+    vafm_scene_grid g;
+    s_scene(&want);
+    ENSURE(vafm_scene_from_h5(r, path, &p, &g, &e) == 0);
+    ENSURE(p.k_N_per_m == want.k_N_per_m && p.v_retract_m_per_s == want.v_retract_m_per_s && p.T_K == want.T_K);
+    ENSURE(g.n_T == 2 && g.T_K && g.T_K[1] == 1e5 && g.curves_per_point == 2);
+    vafm_scene_grid_free(&g);
+    vafm_h5_reader_destroy(&r);
+    unlink(path);
+    ENSURE(vafm_scene_from_h5(NULL, path, &p, NULL, &e) == VAFM_ENOTFOUND);
+}
+
 int main(void)
 {
+    RUN_TEST(test_scene_json);
+    RUN_TEST(test_scene_from_h5);
     RUN_TEST(test_moments);
     RUN_TEST(test_pulloff_rule);
     RUN_TEST(test_ids);

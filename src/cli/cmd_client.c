@@ -23,7 +23,7 @@
 
 #include "cli/cli_ext.h"
 #include "cli/cmd_client.h"
-#include "cli/scene_json.h"
+#include "vafm/scene.h"
 #include "vafm/client.h"
 #include "vafm/h5.h"
 #include "vafm/record.h"
@@ -649,7 +649,7 @@ static int s_write_h5(s_listen *L, const s_run *r, json_t *end)
     vafm_params_default(&p);
     vafm_error e = {0};
     char *scene = json_dumps(json_object_get(r->start, "scene"), JSON_COMPACT);
-    int rc = scene ? vafm_cli_scene_parse(&p, scene, "run.start scene", &e) : VAFM_EFORMAT;
+    int rc = scene ? vafm_scene_parse(&p, scene, "run.start scene", &e) : VAFM_EFORMAT;
     free(scene);
     if (rc) {
         s_err(L->x, "run %" PRId64 ": its scene does not load: %s", r->run_id, e.message);

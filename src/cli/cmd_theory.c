@@ -11,7 +11,7 @@
 #include <string.h>
 
 #include "cli/study.h"
-#include "cli/scene_json.h"
+#include "vafm/scene.h"
 #include "vafm/integrator.h"
 #include "vafm/theory.h"
 #include "vafm/units.h"
@@ -29,7 +29,7 @@ int vafm_study_scene_arg(int argc, char **argv, int *i, vafm_params *p, char *de
         }
         const char *val = argv[++*i];
         int r = !strcmp(a, "--preset") ? vafm_params_preset(p, val, &err)
-                                       : vafm_cli_scene_load(p, val, NULL, 0, &err);
+                                       : vafm_scene_load_file(p, val, NULL, 0, &err);
         if (r) {
             fprintf(stderr, "vafm %s: %s\n", argv[0], err.message);
             return 2;

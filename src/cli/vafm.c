@@ -36,7 +36,7 @@
 #include "cli/cli_ext.h"
 #include "vafm/units.h"
 #include "vafm/version.h"
-#include "cli/scene_json.h"
+#include "vafm/scene.h"
 
 enum { S_EXIT_OK = 0, S_EXIT_RUNTIME = 1, S_EXIT_USAGE = 2 };
 
@@ -352,7 +352,7 @@ static int s_resolve_scene(const s_args *a, s_scene *sc, int validate)
     if (a->val[O_SCENE]) {
         char file_preset[64];
         sc->file = a->val[O_SCENE];
-        r = vafm_cli_scene_load(&sc->p, sc->file, file_preset, sizeof file_preset, &err);
+        r = vafm_scene_load_file(&sc->p, sc->file, file_preset, sizeof file_preset, &err);
         if (r) {
             s_error("%s", err.message);
             return S_EXIT_USAGE;
@@ -1252,7 +1252,7 @@ static void s_print_list(FILE *o, const char *name, const double *v, size_t n, c
 typedef struct s_info_prov {
     int scene_ok, grid_ok;
     vafm_params p;
-    vafm_cli_grid grid;
+    vafm_scene_grid grid;
     vafm_campaign_spec spec;
 } s_info_prov;
 
@@ -1271,7 +1271,7 @@ static void s_info_provenance(FILE *o, const char *path, const vafm_h5_provenanc
     memset(&err, 0, sizeof err);
     if (pv->grid_json) {
         snprintf(origin, sizeof origin, "%s: root attribute 'vafm grid'", path);
-        ip->grid_ok = !vafm_cli_grid_parse(pv->grid_json, origin, &ip->grid, &err);
+        ip->grid_ok = !vafm_scene_grid_parse(pv->grid_json, origin, &ip->grid, &err);
         if (ip->grid_ok) {
             vafm_campaign_spec *sp = &ip->spec;
             sp->T_K = ip->grid.T_K;
@@ -1301,7 +1301,7 @@ static void s_info_provenance(FILE *o, const char *path, const vafm_h5_provenanc
     }
     snprintf(origin, sizeof origin, "%s: root attribute 'vafm scene'", path);
     vafm_params_default(&ip->p);
-    ip->scene_ok = !vafm_cli_scene_parse(&ip->p, pv->scene_json, origin, &err);
+    ip->scene_ok = !vafm_scene_parse(&ip->p, pv->scene_json, origin, &err);
     if (ip->scene_ok) {
         fprintf(o, "scene        as stored in the file (vafm info --json prints all of it as a --scene file)\n");
         s_print_scene_si(o, &ip->p);
@@ -1384,7 +1384,7 @@ static int s_cmd_info(const s_args *a)
             free(stats);
         }
     }
-    vafm_cli_grid_free(&ip.grid);
+    vafm_scene_grid_free(&ip.grid);
     vafm_h5_reader_destroy(&r);
     vafm_error cerr;
     memset(&cerr, 0, sizeof cerr);

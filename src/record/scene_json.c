@@ -3,10 +3,12 @@
  * JSON scene files: parse with jansson, then hand every value to vafm_params_set as text, so that the
  * library stays the only judge of names, ranges and choices. Values are turned into text without loss
  * (%.17g for reals), which is what makes `vafm params --json` → --scene an exact round trip.
- * JSON types are checked per parameter kind first: a string where a number belongs is an error here,
- * not a silent conversion.
+ * JSON types are checked per parameter kind first, by one rule for every program (the CLI's scene
+ * files, vafmd's commands, the scenes in files and streams): a string where a number belongs, an
+ * integer where a boolean belongs, a negative or fractional seed are errors, not silent conversions.
  * The same code reads the scene and the campaign grid that vafm stores in its HDF5 files (vafm info).
  */
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -14,9 +16,10 @@
 
 #include <jansson.h>
 
-#include "cli/scene_json.h"
+#include "record/scene_value.h"
+#include "vafm/scene.h"
 
-void vafm_cli_param_allowed(const vafm_param_info *info, char *buf, size_t len)
+void vafm_scene_param_allowed(const vafm_param_info *info, char *buf, size_t len)
 {
     switch (info->kind) {
     case VAFM_PARAM_REAL:
@@ -57,41 +60,46 @@ static void s_fail(vafm_error *err, int code, const char *field, const char *pat
         err->message[0] = '\0';
 }
 
-/* The text form of a JSON value for a parameter of kind `kind`, or NULL if the JSON type is wrong. */
-static const char *s_value_text(const json_t *v, int kind, char *buf, size_t len)
+const char *vafm_scene_value_text(const vafm_param_info *info, const json_t *v, char *buf, size_t len)
 {
-    switch (kind) {
+    switch (info->kind) {
     case VAFM_PARAM_REAL:
-        if (json_is_real(v))
-            snprintf(buf, len, "%.17g", json_real_value(v));
-        else if (json_is_integer(v))
-            snprintf(buf, len, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
-        else
+        if (!json_is_number(v))
             return NULL;
+        snprintf(buf, len, "%.17g", json_number_value(v));
         return buf;
     case VAFM_PARAM_SEED:
-        /* Strings carry seeds beyond jansson's signed 64-bit integers. */
-        if (json_is_integer(v))
+        /* a non-negative integer, or its decimal digits as a string (JSON integers end at 2^63 - 1) */
+        if (json_is_integer(v) && json_integer_value(v) >= 0)
             snprintf(buf, len, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
-        else if (json_is_string(v))
+        else if (json_is_string(v) && json_string_length(v) > 0 && json_string_length(v) <= 20 &&
+                 strspn(json_string_value(v), "0123456789") == json_string_length(v))
             snprintf(buf, len, "%s", json_string_value(v));
         else
             return NULL;
         return buf;
     case VAFM_PARAM_BOOL:
-        if (json_is_boolean(v))
-            snprintf(buf, len, "%s", json_is_true(v) ? "true" : "false");
-        else if (json_is_integer(v))
-            snprintf(buf, len, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
-        else
+        if (!json_is_boolean(v))
             return NULL;
+        snprintf(buf, len, "%s", json_is_true(v) ? "true" : "false");
         return buf;
     case VAFM_PARAM_CHOICE:
-        if (!json_is_string(v))
+        /* no embedded NUL, and short enough to be a choice name */
+        if (!json_is_string(v) || json_string_length(v) >= len || strlen(json_string_value(v)) != json_string_length(v))
             return NULL;
         snprintf(buf, len, "%s", json_string_value(v));
         return buf;
     default: return NULL;
+    }
+}
+
+void vafm_scene_json_allowed(const vafm_param_info *info, char *buf, size_t len)
+{
+    switch (info->kind) {
+    case VAFM_PARAM_BOOL: snprintf(buf, len, "true or false"); break;
+    case VAFM_PARAM_SEED: snprintf(buf, len, "an integer in [0, 2^64 - 1] (a number or a string of decimal digits)"); break;
+    case VAFM_PARAM_CHOICE: snprintf(buf, len, "a string, one of %s", info->choices); break;
+    default: vafm_scene_param_allowed(info, buf, len); break;
     }
 }
 
@@ -105,8 +113,8 @@ static int s_apply_key(vafm_params *p, const char *path, const char *key, const 
         return VAFM_ENOTFOUND;
     }
     char text[256], allowed[160];
-    if (!s_value_text(v, info->kind, text, sizeof text)) {
-        vafm_cli_param_allowed(info, allowed, sizeof allowed);
+    if (!vafm_scene_value_text(info, v, text, sizeof text)) {
+        vafm_scene_json_allowed(info, allowed, sizeof allowed);
         snprintf(what, sizeof what, "key '%s' is %s, but must be %s", key, s_type_name(v), allowed);
         s_fail(err, VAFM_EINVAL, key, path, what);
         return VAFM_EINVAL;
@@ -170,14 +178,21 @@ static int s_apply_root(vafm_params *p, const char *path, json_t *root, char *pr
     return r;
 }
 
-int vafm_cli_scene_load(vafm_params *p, const char *path, char *preset, size_t preset_len, vafm_error *err)
+int vafm_scene_load_file(vafm_params *p, const char *path, char *preset, size_t preset_len, vafm_error *err)
 {
     if (preset && preset_len)
         preset[0] = '\0';
     char what[sizeof err->message];
     struct stat st;
-    if (stat(path, &st) == 0 && S_ISDIR(st.st_mode)) {
-        s_fail(err, VAFM_EIO, "scene", path, "is a directory, not a JSON scene file");
+    if (stat(path, &st) == 0 && !S_ISREG(st.st_mode)) { /* a FIFO would block the read forever */
+        s_fail(err, VAFM_EIO, "scene", path,
+               S_ISDIR(st.st_mode) ? "is a directory, not a JSON scene file" : "is not a regular file (a FIFO, device or socket)");
+        return VAFM_EIO;
+    }
+    if (stat(path, &st) == 0 && (uintmax_t)st.st_size > VAFM_SCENE_MAX_FILE_BYTES) {
+        snprintf(what, sizeof what, "is %ju bytes, larger than a scene file can be (%u bytes)", (uintmax_t)st.st_size,
+                 VAFM_SCENE_MAX_FILE_BYTES);
+        s_fail(err, VAFM_EIO, "scene", path, what);
         return VAFM_EIO;
     }
     json_error_t je;
@@ -196,7 +211,7 @@ int vafm_cli_scene_load(vafm_params *p, const char *path, char *preset, size_t p
     return r;
 }
 
-int vafm_cli_scene_parse(vafm_params *p, const char *text, const char *origin, vafm_error *err)
+int vafm_scene_parse(vafm_params *p, const char *text, const char *origin, vafm_error *err)
 {
     char what[sizeof err->message];
     json_error_t je;
@@ -242,7 +257,7 @@ static int s_grid_list(const json_t *root, const char *key, double **out, size_t
     return 0;
 }
 
-int vafm_cli_grid_parse(const char *text, const char *origin, vafm_cli_grid *g, vafm_error *err)
+int vafm_scene_grid_parse(const char *text, const char *origin, vafm_scene_grid *g, vafm_error *err)
 {
     memset(g, 0, sizeof *g);
     char what[sizeof err->message];
@@ -276,16 +291,37 @@ int vafm_cli_grid_parse(const char *text, const char *origin, vafm_cli_grid *g, 
         snprintf(what, sizeof what, "grid key '%s' is not %s", bad,
                  strcmp(bad, "curves_per_point") ? "a list of numbers" : "an integer >= 1");
         s_fail(err, VAFM_EFORMAT, bad, origin, what);
-        vafm_cli_grid_free(g);
+        vafm_scene_grid_free(g);
         return VAFM_EFORMAT;
     }
     return 0;
 }
 
-void vafm_cli_grid_free(vafm_cli_grid *g)
+void vafm_scene_grid_free(vafm_scene_grid *g)
 {
     free(g->T_K);
     free(g->v_m_per_s);
     free(g->k_N_per_m);
     memset(g, 0, sizeof *g);
+}
+
+int vafm_scene_from_h5(const vafm_h5_reader *r, const char *path, vafm_params *p, vafm_scene_grid *g,
+                       vafm_error *err)
+{
+    if (g)
+        memset(g, 0, sizeof *g);
+    vafm_h5_provenance pv;
+    if (!r || vafm_h5_reader_provenance(r, &pv) || !pv.is_vafm || !pv.scene_json) {
+        s_fail(err, VAFM_ENOTFOUND, "vafm scene", path ? path : "(file)", "records no vafm scene (not a vafm file)");
+        return VAFM_ENOTFOUND;
+    }
+    char origin[1100];
+    snprintf(origin, sizeof origin, "%s: 'vafm scene'", path ? path : "(file)");
+    vafm_params_default(p);
+    int rc = vafm_scene_parse(p, pv.scene_json, origin, err);
+    if (!rc && g && pv.grid_json) {
+        snprintf(origin, sizeof origin, "%s: 'vafm grid'", path ? path : "(file)");
+        rc = vafm_scene_grid_parse(pv.grid_json, origin, g, err);
+    }
+    return rc;
 }
