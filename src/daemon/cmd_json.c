@@ -4,6 +4,8 @@
  * executed, so the control loop only ever runs well-formed commands and a bad request changes nothing.
  */
 #include "daemon/cmd_json.h"
+#include "record/scene_value.h"
+#include "vafm/scene.h"
 #include <inttypes.h>
 #include <math.h>
 #include <stdarg.h>
@@ -162,50 +164,13 @@ json_t *vafmd_param_value(const vafm_params *p, const vafm_param_info *f)
     }
 }
 
-static void s_range_text(const vafm_param_info *f, char *buf, size_t len)
-{
-    switch (f->kind) {
-    case VAFM_PARAM_REAL: snprintf(buf, len, "[%g, %g] %s", f->min, f->max, f->unit); break;
-    case VAFM_PARAM_CHOICE: snprintf(buf, len, "one of %s", f->choices); break;
-    case VAFM_PARAM_BOOL: snprintf(buf, len, "true or false"); break;
-    default: snprintf(buf, len, "an integer in [0, 2^64-1] (number or decimal string)"); break;
-    }
-}
-
-/* Apply one scene value; the JSON type must match the field's kind. */
+/* Apply one scene value: the JSON type must fit the field's kind, by the rules every vafm program
+ * shares (src/record/scene_value.h); then the core judges the value. */
 static int s_param_apply(vafm_params *p, const vafm_param_info *f, json_t *v, vafmd_err *e)
 {
-    char text[64], allowed[128];
-    s_range_text(f, allowed, sizeof allowed);
-    int ok_type = 1;
-    switch (f->kind) {
-    case VAFM_PARAM_REAL:
-        ok_type = json_is_number(v);
-        if (ok_type)
-            snprintf(text, sizeof text, "%.17g", json_number_value(v));
-        break;
-    case VAFM_PARAM_CHOICE:
-        ok_type = json_is_string(v) && json_string_length(v) < sizeof text &&
-                  strlen(json_string_value(v)) == json_string_length(v); /* no embedded NUL */
-        if (ok_type)
-            snprintf(text, sizeof text, "%s", json_string_value(v));
-        break;
-    case VAFM_PARAM_BOOL:
-        ok_type = json_is_boolean(v);
-        if (ok_type)
-            snprintf(text, sizeof text, "%s", json_is_true(v) ? "true" : "false");
-        break;
-    default: /* SEED */
-        if (json_is_integer(v) && json_integer_value(v) >= 0)
-            snprintf(text, sizeof text, "%" PRIu64, (uint64_t)json_integer_value(v));
-        else if (json_is_string(v) && json_string_length(v) > 0 && json_string_length(v) <= 20 &&
-                 strspn(json_string_value(v), "0123456789") == json_string_length(v))
-            snprintf(text, sizeof text, "%s", json_string_value(v));
-        else
-            ok_type = 0;
-        break;
-    }
-    if (!ok_type) {
+    char text[64], allowed[160];
+    vafm_scene_json_allowed(f, allowed, sizeof allowed);
+    if (!vafm_scene_value_text(f, v, text, sizeof text)) {
         vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' has the wrong type: expected %s", f->name, allowed);
         return -1;
     }
