@@ -15,6 +15,7 @@
 #include <time.h>
 #include <zmq.h>
 #include "vafm/h5.h"
+#include "vafm/record.h"
 #include "daemon/cmd_json.h"
 #include "daemon/daemon.h"
 #include "daemon/replay.h"
@@ -148,29 +149,24 @@ static json_t *s_log(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         vafmd_err_set(e, VAFMD_E_STATE, "path", "already logging to '%.300s'; stop it first", L->path);
         return NULL;
     }
-    vafm_h5_writer_opts o;
-    vafm_h5_writer_opts_default(&o);
-    o.overwrite = c->log_overwrite;
-    o.resume = c->log_resume;
+    vafm_recorder_opts o;
+    vafm_recorder_opts_default(&o); /* durable after every curve */
+    o.mode = c->log_resume ? VAFM_RECORD_RESUME : c->log_overwrite ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE;
     vafm_error verr;
     memset(&verr, 0, sizeof verr);
-    vafm_h5_writer *w = NULL;
-    int rc = vafm_h5_writer_open(&w, c->log_path, &o, &verr);
+    vafm_recorder *w = NULL;
+    /* the file's provenance is the scene at log start (wire.md "log") */
+    int rc = vafm_recorder_open(&w, c->log_path, &o, &d->scene, NULL, &verr);
     if (rc) {
-        vafmd_err_set(e, rc == VAFM_EINVAL ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_IO, "path", "cannot %s '%.300s': %s",
-                      c->log_resume ? "resume" : "create", c->log_path,
-                      verr.message[0] ? verr.message : vafm_strerror(rc));
+        /* a resume whose scene is not the file's names the scene field; the file itself, "path" */
+        int scene_mismatch = c->log_resume && rc == VAFM_EINVAL && verr.field[0] && strcmp(verr.field, "path");
+        vafmd_err_set(e, scene_mismatch ? VAFMD_E_INVALID_SCENE : rc == VAFM_EINVAL ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_IO,
+                      scene_mismatch ? "resume" : "path", "cannot %s '%.300s': %s%s%s",
+                      c->log_resume ? "resume" : "create", c->log_path, verr.message[0] ? verr.message : vafm_strerror(rc),
+                      scene_mismatch ? "; scene field " : "", scene_mismatch ? verr.field : "");
         return NULL;
     }
-    if ((rc = vafm_h5_writer_set_provenance(w, &d->scene, NULL, &verr)) != 0) {
-        vafm_error ignored;
-        vafm_h5_writer_close(&w, &ignored);
-        vafmd_err_set(e, rc == VAFM_EINVAL ? VAFMD_E_INVALID_SCENE : VAFMD_E_IO, c->log_resume ? "resume" : "path",
-                      "cannot log to '%.300s': %s%s%s", c->log_path, verr.message[0] ? verr.message : vafm_strerror(rc),
-                      verr.field[0] ? "; scene field " : "", verr.field);
-        return NULL;
-    }
-    uint64_t kept = vafm_h5_writer_count(w);
+    uint64_t kept = vafm_recorder_count(w);
     L->w = w;
     snprintf(L->path, sizeof L->path, "%s", c->log_path);
     atomic_store(&L->curves, 0);

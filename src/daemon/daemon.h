@@ -151,7 +151,7 @@ typedef struct vafmd_log {
                                       simulation thread, main.c joins them in that order) */
     atomic_int state;              /* enum vafmd_log_state; OFF→ON by control, ON→STOPPING by control,
                                       STOPPING→OFF by the writer thread once the file is closed */
-    struct vafm_h5_writer *w;      /* owned by the writer thread while state != OFF */
+    struct vafm_recorder *w;       /* owned by the writer thread while state != OFF */
     char path[4096];
     atomic_uint_least64_t overflows;      /* blocks that found the ring full or the pool empty (simulation
                                              thread) */

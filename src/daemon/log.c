@@ -12,13 +12,14 @@
  * atomic log state (OFF → ON) and handed back, closed, by this thread (STOPPING → OFF).
  */
 #include <inttypes.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
 #include "daemon/daemon.h"
-#include "vafm/h5.h"
+#include "vafm/record.h"
 
 typedef struct s_curve {
     vafmd_log_begin *begin; /* NULL: no curve in progress */
@@ -76,37 +77,25 @@ static void s_set_err(vafmd_log *L, const char *fmt, const char *a, const char *
     pthread_mutex_unlock(&L->err_mu);
 }
 
-/* Append the finished curve and flush. */
+/* Append the finished curve; the recorder makes it durable before it returns (flush interval 0). */
 static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
 {
     vafm_samples s = { .n = c->n, .first = 0, .time_s = c->time_s, .height_m = c->height_m,
                        .deflection_m = NULL, .force_N = c->force_N, .tip_m = c->tip_m, .segment = c->segment };
-    const vafm_params *p = &c->begin->p;
-    vafm_h5_curve hc;
-    vafm_h5_curve_from_sim(&hc, &s, p, &end->result);
-    /* the layout's "tip position" is height + force/k (hdf5.md L14): with the detector on the force is a
-     * measured (noisy, quantised) one and the true tip is not that, so the column is left out */
-    if (c->begin->detector)
-        hc.tip_position_m = NULL;
     /* the group number is the file's curve count; the random stream index and the run are kept in the
-     * free-text ids (the curve-group attribute list is closed) */
-    char sid[48], cid[160];
-    snprintf(sid, sizeof sid, "vafmd seed %" PRIu64, p->seed);
-    snprintf(cid, sizeof cid, "run %" PRIu64 " index %" PRIu64 "%s%s", c->begin->run_id, c->begin->index,
-             c->begin->client_run_id[0] ? " client " : "", c->begin->client_run_id);
-    hc.meta.session_id = sid;
-    hc.meta.curve_id = cid;
-    vafm_h5_truth t;
-    vafm_h5_truth_from_sim(&t, c->begin->point, p, &end->result);
-    t.result.index = vafm_h5_writer_count(L->w);
+     * curve id (the curve-group attribute list is closed). With the detector on the force is a measured
+     * (noisy, quantised) one, so "tip position" = height + force/k (hdf5.md L14) is left out. */
+    vafm_curve_result res = end->result;
+    res.index = c->begin->index;
+    vafm_record_curve rc = { .samples = &s, .params = &c->begin->p, .result = &res, .point = c->begin->point,
+                             .run_id = c->begin->run_id, .client_run_id = c->begin->client_run_id,
+                             .sensitivity_m_per_V = NAN, .measured_force = c->begin->detector };
     vafm_error e;
     memset(&e, 0, sizeof e);
-    int rc = vafm_h5_writer_append(L->w, &hc, &t, &e);
-    if (!rc)
-        rc = vafm_h5_writer_flush(L->w, &e);
-    if (rc) {
+    int r = vafm_recorder_append(L->w, &rc, &e);
+    if (r) {
         atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
-        s_set_err(L, "%s (%s)", e.message[0] ? e.message : vafm_strerror(rc), e.field);
+        s_set_err(L, "%s (%s)", e.message[0] ? e.message : vafm_strerror(r), e.field);
     } else
         atomic_fetch_add_explicit(&L->curves, 1, memory_order_relaxed);
 }
@@ -197,7 +186,7 @@ void *vafmd_log_main(void *arg)
             if (c.begin)
                 atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
             s_curve_reset(&c);
-            if (vafm_h5_writer_close(&L->w, &e))
+            if (vafm_recorder_close(&L->w, NULL, &e))
                 s_set_err(L, "closing the file: %s%s", e.message, "");
             atomic_store_explicit(&L->state, VAFMD_LOG_OFF, memory_order_release);
             continue;
