@@ -236,11 +236,6 @@ typedef struct vafmd {
     vafmd_auth auth;
 } vafmd;
 
-struct json_t;
-/* control.c: the "run.start" JSON of a run (also called by the simulation thread for campaign curves:
- * pure, no shared state). camp: the run's "campaign" object (stolen) or NULL. NULL on no memory. */
-char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int kind, uint64_t run_id,
-                           uint64_t index, const char *client_run_id, double dt_s, struct json_t *camp);
 /* sim_thread.c */
 void *vafmd_sim_main(void *arg);
 /* log.c: the HDF5 writer thread */

@@ -38,6 +38,7 @@
 #include <zmq.h>
 #include "daemon/daemon.h"
 #include "daemon/replay.h"
+#include "daemon/run_json.h"
 #include "vafm/rng.h"
 #include "vafm/wire.h"
 
