@@ -523,3 +523,42 @@ def test_cli_listen_records_a_replay_to_csv(tmp_path):
     assert np.array_equal(bits(num("deflection_m")), bits(ch["force"] / k))
     assert np.array_equal(bits(num("vDeflection_V")), bits(ch["force"] / k / sens))
     assert [int(c[col["segment"]]) for c in cells] == list(ch["segment"])
+
+
+def test_selection_by_group_name_gapped_float32(fig4, tmp_path):
+    """Curves are named by their group number everywhere (issue #18): an afmformats export whose groups are
+    "1" and "5" (float32 data, widened exactly) replays as [5, 1]; run.start's selection and the curve events
+    say the same numbers; a group the file lacks is refused naming the file's groups."""
+    path = tmp_path / "gapped.h5"
+    rng = np.random.default_rng(3)
+    chans = {}
+    with h5py.File(path, "w") as f:
+        f.attrs["software"] = "afmformats"
+        f.attrs["software version"] = "0.18.0"
+        for g, n in ((1, 40), (5, 60)):
+            ch = instrument_curve(rng, n, n // 2, 0.05)
+            ch = {k: (v.astype(np.float32) if v.dtype == np.float64 else v) for k, v in ch.items()}
+            chans[g] = ch
+            write_curve(f, g, ch, {"imaging mode": "force-distance", "spring constant": 0.05, "rate approach": 1e3,
+                                   "rate retract": 1e3})
+    s = fig4.sub(greet=True)
+    r = fig4.cmd({"cmd": "replay", "path": str(path), "curves": [5, 1]})
+    assert r["status"] == "ok", r
+    start, blocks, events, end, _, _ = collect_run(s, r["run_id"])
+    assert end["status"] == "ok" and start["replay"]["selection"] == [5, 1]
+    assert [c["curve"] for c in start["replay"]["curves"]] == [5, 1]
+    assert [e["curve"] for e in events if e["kind"] == "curve"] == [5, 1]
+    force = arrays(start, blocks)["force_N"]
+    want = np.r_[chans[5]["force"].astype(np.float64), chans[1]["force"].astype(np.float64)]
+    assert np.array_equal(bits(force), bits(want))  # float32 widened exactly
+    fig4.wait_idle()
+    r = fig4.cmd({"cmd": "replay", "path": str(path), "curves": "1-"})
+    assert r["status"] == "ok", r
+    start, _, _, end, _, _ = collect_run(s, r["run_id"])
+    assert start["replay"]["selection"] == [1, 5] and end["status"] == "ok"
+    fig4.wait_idle()
+    for bad in ([0], [2], "2-4"):
+        r = fig4.cmd({"cmd": "replay", "path": str(path), "curves": bad})
+        error_ok(r, "out_of_range", "curves")
+        assert "1 to 5" in r["message"], r
+    assert fig4.cmd({"cmd": "status"})["state"] == "idle"

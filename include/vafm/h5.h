@@ -35,6 +35,12 @@ extern "C" {
 #define VAFM_H5_FORMAT_MAJOR 1
 #define VAFM_H5_FORMAT_MINOR 0
 
+/** The most samples a curve (each of its channels) may have, written or read: 2^25 = 33,554,432 (a
+ *  3.4 s curve at 8 MS/s has 27 M; five float64 channels of this length take 1.3 GB). A reader checks
+ *  the declared length against it before reading any data (a small file of deflated zeros can declare
+ *  gigabytes). */
+#define VAFM_H5_MAX_SAMPLES ((uint64_t)1 << 25)
+
 typedef struct vafm_h5_writer vafm_h5_writer;
 typedef struct vafm_h5_reader vafm_h5_reader;
 
@@ -156,6 +162,16 @@ VAFM_API int vafm_h5_writer_set_provenance(vafm_h5_writer *w, const vafm_params 
                                            const vafm_campaign_spec *grid, vafm_error *err);
 
 /**
+ * Check, without changing a byte of it, that `path` can be resumed with this scene and grid: a vafm file
+ * of this format major version whose stored scene and grid equal them (as vafm_h5_writer_set_provenance
+ * compares them). Call before vafm_h5_writer_open with resume, which may drop an unflushed tail.
+ * @return 0, VAFM_EINVAL (naming the first differing field), VAFM_EFORMAT, VAFM_EIO, VAFM_ESTATE (the
+ *         file is in use by another process), VAFM_ENOMEM.
+ */
+VAFM_API int vafm_h5_resume_check(const char *path, const vafm_params *scene, const vafm_campaign_spec *grid,
+                                  vafm_error *err);
+
+/**
  * Append one curve as group "<count>". The curve is checked against the layout first (lengths,
  * segment values, time from 0 and increasing, tip position convention, date/time formats); "point
  * count" is set to n. In a file with provenance, truth is required and truth->result.index must equal
@@ -221,6 +237,18 @@ VAFM_API size_t vafm_h5_reader_count(const vafm_h5_reader *r);
  *         force-distance), VAFM_ENOMEM.
  */
 VAFM_API int vafm_h5_reader_curve(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_error *err);
+
+/** @return the group number (name) of curve i (0 ≤ i < count), or UINT64_MAX outside. Curves are
+ *  addressed by group number everywhere users see them (vafm export --curve, replay selections); a file
+ *  may number its groups with gaps or not from 0 (afmformats' exports do). */
+VAFM_API uint64_t vafm_h5_reader_group(const vafm_h5_reader *r, size_t i);
+
+/** The position i of group number `group`. @return 0, or VAFM_ENOTFOUND (no such group), VAFM_EINVAL. */
+VAFM_API int vafm_h5_reader_find(const vafm_h5_reader *r, uint64_t group, size_t *i);
+
+/** Curve i's metadata and length (out->n) without reading its data (channel pointers stay NULL): what a
+ *  caller checks against its own limits before vafm_h5_reader_curve. Same returns as that. */
+VAFM_API int vafm_h5_reader_curve_info(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_error *err);
 
 /** Provenance of the file (strings owned by the reader). @return 0. */
 VAFM_API int vafm_h5_reader_provenance(const vafm_h5_reader *r, vafm_h5_provenance *out);

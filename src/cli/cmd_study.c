@@ -21,10 +21,14 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
+#include <spawn.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
+
+extern char **environ;
 
 #include "cli/study.h"
 #include "cli/study_fit.h"
@@ -255,25 +259,70 @@ static double s_kT_to_K(const vafm_params *p, double kT_red)
 
 /* ---- figures --------------------------------------------------------------------------------------- */
 
+/* Run the plotter with an argument vector (never through a shell: the output directory is the user's
+ * string, and `x'$(touch y)'` or O'Brien must reach python as they are). Its stdout and stderr go into
+ * msg. @return its wait status, or -1 when it could not be started. */
+static int s_run_plotter(const char *script, const char *name, const char *out, char *msg, size_t len)
+{
+    int fds[2];
+    if (pipe2(fds, O_CLOEXEC))
+        return -1;
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_adddup2(&fa, fds[1], STDOUT_FILENO);
+    posix_spawn_file_actions_adddup2(&fa, fds[1], STDERR_FILENO);
+    /* the environment plus MPLBACKEND=Agg (no display) */
+    size_t ne = 0;
+    while (environ[ne])
+        ne++;
+    char **env = calloc(ne + 2, sizeof *env);
+    int st = -1;
+    if (env) {
+        size_t k = 0;
+        for (size_t i = 0; i < ne; i++)
+            if (strncmp(environ[i], "MPLBACKEND=", 11))
+                env[k++] = environ[i];
+        env[k++] = (char *)"MPLBACKEND=Agg";
+        env[k] = NULL;
+        char *argv[] = { (char *)"/usr/bin/python3", (char *)script, (char *)name, (char *)out, NULL };
+        pid_t pid;
+        if (posix_spawn(&pid, argv[0], &fa, NULL, argv, env) == 0) {
+            close(fds[1]);
+            fds[1] = -1;
+            size_t used = 0;
+            char buf[1024];
+            ssize_t got;
+            while ((got = read(fds[0], buf, sizeof buf)) > 0 || (got < 0 && errno == EINTR))
+                if (got > 0 && used + (size_t)got < len) {
+                    memcpy(msg + used, buf, (size_t)got);
+                    used += (size_t)got;
+                }
+            msg[used < len ? used : len - 1] = '\0';
+            while (waitpid(pid, &st, 0) < 0 && errno == EINTR)
+                ;
+        }
+        free(env);
+    }
+    posix_spawn_file_actions_destroy(&fa);
+    close(fds[0]);
+    if (fds[1] >= 0)
+        close(fds[1]);
+    return st;
+}
+
 static void s_plot(s_ctx *ctx)
 {
     const char *script = getenv("VAFM_STUDY_PLOT");
     if (!script || !*script)
         script = VAFM_STUDY_PLOT;
-    char cmd[4096];
-    snprintf(cmd, sizeof cmd, "MPLBACKEND=Agg /usr/bin/python3 '%s' '%s' '%s' 2>&1", script, ctx->name, ctx->out);
     struct stat st;
     if (stat(script, &st) || stat("/usr/bin/python3", &st)) {
         fprintf(ctx->rep, "\n**Figures: skipped** (plot script %s or /usr/bin/python3 not found).\n", script);
         fprintf(stderr, "vafm study: figures skipped: %s or /usr/bin/python3 not found\n", script);
         return;
     }
-    FILE *pp = popen(cmd, "r");
-    char line[1024], msg[4096] = "";
-    while (pp && fgets(line, sizeof line, pp))
-        if (strlen(msg) + strlen(line) < sizeof msg)
-            strcat(msg, line);
-    int st2 = pp ? pclose(pp) : -1;
+    char msg[4096] = "";
+    int st2 = s_run_plotter(script, ctx->name, ctx->out, msg, sizeof msg);
     int code = st2 >= 0 && WIFEXITED(st2) ? WEXITSTATUS(st2) : -1;
     if (code == 0) {
         fprintf(ctx->rep, "\nFigures (matplotlib, `%s`):\n\n%s", script, msg);

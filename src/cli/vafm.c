@@ -1439,18 +1439,23 @@ static int s_cmd_export(const s_args *a)
     vafm_h5_reader *r = NULL;
     if ((rc = s_open_reader(a->file, &r)) != 0)
         return rc;
-    size_t n = vafm_h5_reader_count(r);
-    uint64_t i = 0;
+    size_t n = vafm_h5_reader_count(r), i = 0;
+    uint64_t group = 0;
     if (!n) {
         s_error("--curve: %s holds no curves", a->file);
         rc = S_EXIT_USAGE;
-    } else {
-        rc = s_parse_u64("--curve", a->val[O_CURVE], 0, (uint64_t)n - 1, &i);
+    } else if (!(rc = s_parse_u64("--curve", a->val[O_CURVE], 0, UINT64_MAX - 1, &group)) &&
+               vafm_h5_reader_find(r, group, &i)) {
+        /* curves are named by their group, as vafm info lists them (a file may have gaps) */
+        uint64_t lo = vafm_h5_reader_group(r, 0), hi = vafm_h5_reader_group(r, n - 1);
+        s_error("--curve: %s has no curve group '%" PRIu64 "' (its %zu groups are numbered %" PRIu64 " to %" PRIu64
+                "%s; vafm info lists them)", a->file, group, n, lo, hi, hi - lo + 1 > n ? ", with gaps" : "");
+        rc = S_EXIT_USAGE;
     }
     vafm_h5_curve c;
     vafm_error err;
     memset(&err, 0, sizeof err);
-    int cr = rc ? 0 : vafm_h5_reader_curve(r, (size_t)i, &c, &err);
+    int cr = rc ? 0 : vafm_h5_reader_curve(r, i, &c, &err);
     if (!rc && cr) {
         s_error("%s", err.message[0] ? err.message : vafm_strerror(cr));
         rc = S_EXIT_RUNTIME;
@@ -1683,7 +1688,7 @@ static const s_command s_commands[] = {
       1 },
     { "export", s_cmd_export, S_GENERAL | M(O_CURVE) | M(O_CSV), 0, "one curve of an HDF5 file as CSV",
       "vafm export FILE --curve I [--csv OUT|-]\n"
-      "  --curve I            the curve, 0 to count-1 (vafm info lists them)\n"
+      "  --curve I            the curve: its group number, as vafm info lists them\n"
       "  --csv OUT|-          output file (default '-': stdout); the columns of vafm samples;\n"
       "                       empty where the file lacks the channel (protocol/csv.md)\n",
       1 },

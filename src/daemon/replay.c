@@ -130,37 +130,47 @@ int vafmd_replay_advance(vafmd_replay *rp, size_t max, vafm_sample_fn fn, void *
 
 /* ---- loading (control thread) -------------------------------------------------------------------- */
 
-/* Parse the selection: a string "all" | "A,B-C,D-" (inclusive ranges, "D-" to the last curve) or an
- * array of integers. Order and repetitions are kept. */
-static int s_selection(json_t *v, size_t count, uint64_t **out, size_t *n_out, vafmd_err *e)
+/* Parse the selection: a string "all" | "A,B-C,D-" (inclusive ranges of group numbers, "D-" to the
+ * last group) or an array of group numbers. Curves are named by their group number, as `vafm info` and
+ * `vafm export` name them (a file may number its groups with gaps, or not from 0). Order and repetitions
+ * are kept; out: positions in the reader. */
+static int s_selection(json_t *v, const vafm_h5_reader *rd, uint64_t **out, size_t *n_out, vafmd_err *e)
 {
+    size_t count = vafm_h5_reader_count(rd);
+    uint64_t g_first = vafm_h5_reader_group(rd, 0), g_last = vafm_h5_reader_group(rd, count - 1);
     size_t cap = VAFMD_REPLAY_MAX_CURVES, n = 0;
     uint64_t *sel = malloc(cap * sizeof *sel);
     if (!sel) {
         vafmd_err_set(e, VAFMD_E_INTERNAL, "curves", "out of memory");
         return -1;
     }
-#define S_ADD(x)                                                                                              \
+#define S_ADD_POS(pos)                                                                                        \
     do {                                                                                                      \
-        if ((x) >= count) {                                                                                   \
-            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "curve %" PRIu64 " is not in the file (it holds " \
-                          "curves 0 to %zu)", (uint64_t)(x), count - 1);                                      \
-            goto fail;                                                                                        \
-        }                                                                                                     \
         if (n >= cap) {                                                                                       \
             vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "the selection has more than %u curves; replay " \
                           "at most %u at a time", VAFMD_REPLAY_MAX_CURVES, VAFMD_REPLAY_MAX_CURVES);         \
             goto fail;                                                                                        \
         }                                                                                                     \
-        sel[n++] = (x);                                                                                       \
+        sel[n++] = (pos);                                                                                     \
+    } while (0)
+#define S_ADD_GROUP(x)                                                                                        \
+    do {                                                                                                      \
+        size_t pos_;                                                                                          \
+        if (vafm_h5_reader_find(rd, (uint64_t)(x), &pos_)) {                                                  \
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "curve group '%" PRIu64 "' is not in the file "  \
+                          "(its %zu groups are numbered %" PRIu64 " to %" PRIu64 "%s; vafm info lists them)",  \
+                          (uint64_t)(x), count, g_first, g_last, g_last - g_first + 1 > count ? ", with gaps" : ""); \
+            goto fail;                                                                                        \
+        }                                                                                                     \
+        S_ADD_POS(pos_);                                                                                      \
     } while (0)
     if (!v || (json_is_string(v) && !strcmp(json_string_value(v), "all"))) {
-        for (uint64_t i = 0; i < count; i++)
-            S_ADD(i);
+        for (size_t i = 0; i < count; i++)
+            S_ADD_POS(i);
     } else if (json_is_array(v)) {
         size_t i;
         json_t *x;
-        json_array_foreach(v, i, x) S_ADD((uint64_t)json_integer_value(x)); /* the decoder checked the types */
+        json_array_foreach(v, i, x) S_ADD_GROUP(json_integer_value(x)); /* the decoder checked the types */
     } else {
         const char *s = json_string_value(v);
         while (*s) {
@@ -171,25 +181,33 @@ static int s_selection(json_t *v, size_t count, uint64_t **out, size_t *n_out, v
                 goto syntax;
             unsigned long long a = strtoull(s, &end, 10), b = a;
             s = end;
-            if (*s == '-') {
+            int range = *s == '-';
+            if (range) {
                 s++;
                 if (*s >= '0' && *s <= '9') {
                     b = strtoull(s, &end, 10);
                     s = end;
                 } else {
-                    if (a >= count)
-                        S_ADD(a); /* reports it */
-                    b = count - 1;
+                    b = g_last;
                 }
                 if (b < a) {
                     vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "range %llu-%llu of \"curves\" is empty", a, b);
                     goto fail;
                 }
+                size_t before = n;
+                for (size_t i = 0; i < count; i++) { /* every group in [a, b], in file order */
+                    uint64_t g = vafm_h5_reader_group(rd, i);
+                    if (g >= a && g <= b)
+                        S_ADD_POS(i);
+                }
+                if (n == before) {
+                    vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "no curve group in %llu-%llu (the file's "
+                                  "groups are numbered %" PRIu64 " to %" PRIu64 ")", a, b, g_first, g_last);
+                    goto fail;
+                }
+            } else {
+                S_ADD_GROUP(a);
             }
-            if (b - a >= VAFMD_REPLAY_MAX_CURVES)
-                b = a + VAFMD_REPLAY_MAX_CURVES; /* S_ADD reports the excess */
-            for (unsigned long long i = a; i <= b; i++)
-                S_ADD(i);
             while (*s == ' ')
                 s++;
             if (*s == ',')
@@ -200,7 +218,8 @@ static int s_selection(json_t *v, size_t count, uint64_t **out, size_t *n_out, v
         if (!n)
             goto syntax;
     }
-#undef S_ADD
+#undef S_ADD_GROUP
+#undef S_ADD_POS
     if (!n) {
         vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "the selection is empty");
         goto fail;
@@ -210,7 +229,7 @@ static int s_selection(json_t *v, size_t count, uint64_t **out, size_t *n_out, v
     return 0;
 syntax:
     vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "\"curves\" must be \"all\", a list like \"0,3,5-9,12-\" "
-                  "(inclusive ranges; \"12-\": to the last curve) or an array of curve numbers");
+                  "(inclusive ranges of group numbers; \"12-\": to the last group) or an array of group numbers");
 fail:
     free(sel);
     return -1;
@@ -431,7 +450,7 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
         vafmd_err_set(e, VAFMD_E_BAD_FILE, "path", "cannot replay '%.300s': the file holds no curves", c->replay_path);
         goto fail;
     }
-    if (s_selection(c->replay_curves, count, &sel, &n_sel, e))
+    if (s_selection(c->replay_curves, rd, &sel, &n_sel, e))
         goto fail;
     if (!(r = calloc(1, sizeof *r)) || !(r->c = calloc(n_sel, sizeof *r->c))) {
         vafmd_err_set(e, VAFMD_E_INTERNAL, "", "out of memory");
@@ -441,6 +460,22 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
     vafm_h5_reader_provenance(rd, &pv);
     unsigned mask = (1u << S_NCH) - 1;
     curves = json_array();
+    uint64_t declared = 0;
+    for (size_t i = 0; i < n_sel; i++) { /* the lengths first: nothing is read beyond the pass's limit */
+        vafm_h5_curve cv;
+        if ((rc = vafm_h5_reader_curve_info(rd, (size_t)sel[i], &cv, &verr)) != 0) {
+            s_file_err(e, rc, c->replay_path, &verr);
+            goto fail;
+        }
+        declared += cv.n;
+        if (declared > VAFMD_REPLAY_MAX_SAMPLES) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "the selection holds more than %u samples (%llu up "
+                          "to its curve %llu); replay holds at most %u samples (~100 MiB) in memory: select fewer "
+                          "curves", VAFMD_REPLAY_MAX_SAMPLES, (unsigned long long)declared,
+                          (unsigned long long)cv.group, VAFMD_REPLAY_MAX_SAMPLES);
+            goto fail;
+        }
+    }
     for (size_t i = 0; i < n_sel; i++) {
         vafm_h5_curve cv;
         rc = vafm_h5_reader_curve(rd, (size_t)sel[i], &cv, &verr);
@@ -486,7 +521,7 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
                                                 "dtype", "<f8"));
     json_t *sel_j = json_array();
     for (size_t i = 0; i < n_sel; i++)
-        json_array_append_new(sel_j, json_integer((json_int_t)sel[i]));
+        json_array_append_new(sel_j, json_integer((json_int_t)vafm_h5_reader_group(rd, (size_t)sel[i])));
     json_t *vafm = json_null(), *scene = NULL;
     if (pv.is_vafm) {
         char fmt[32], seed[32];

@@ -400,6 +400,9 @@ static int s_check(s_ctx *x)
         vafm_h5i_err(x->err, VAFM_EIO, "", "[L2] %s: cannot be opened", path);
         return VAFM_EIO;
     }
+    int crc = vafm_h5i_check_path(path, 0, x->err);
+    if (crc)
+        return crc;
     if (H5Fis_hdf5(path) <= 0)
         FAIL("L2", "", "not an HDF5 file");
     hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);

@@ -7,10 +7,14 @@
 #include <fcntl.h>
 #include <math.h>
 #include <stddef.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <errno.h>
+#include <sys/sysmacros.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include "h5/h5_internal.h"
@@ -215,8 +219,21 @@ void vafm_h5i_truth_from_row(vafm_h5_truth *t, const vafm_h5i_row *row)
 
 /* ---- HDF5 errors ---------------------------------------------------------------------------------- */
 
+/* Before HDF5's first call: no library shutdown at exit. HDF5 1.10 keeps a file whose close failed (a
+ * full disk during the final flush) half destroyed in its table of open files, and closing it again at
+ * exit reads a NULL pointer inside the library (H5F__close_cb): a full disk ended every run in a
+ * segfault after the error was reported. The process ends anyway; the files hold their last flush. */
+static pthread_once_t s_init_once = PTHREAD_ONCE_INIT;
+
+static void s_init(void)
+{
+    H5dont_atexit();
+}
+
 void vafm_h5i_quiet_begin(vafm_h5i_quiet *q)
 {
+    pthread_once(&s_init_once, s_init);
+    vafm_h5i_io_errno = 0;
     q->fn = NULL;
     q->data = NULL;
     H5Eget_auto2(H5E_DEFAULT, &q->fn, &q->data);
@@ -258,13 +275,25 @@ static herr_t s_walk_first(unsigned n, const H5E_error2_t *e, void *data)
     return 0;
 }
 
+void vafm_h5i_reason(char *buf, size_t len)
+{
+    if (vafm_h5i_io_errno && len) { /* the operating system's reason beats HDF5's generic one */
+        snprintf(buf, len, "%s", strerror(vafm_h5i_io_errno));
+        return;
+    }
+    char inner[160] = "";
+    /* Walking upward starts at the innermost (most specific) entry. */
+    H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, s_walk_first, inner);
+    if (inner[0] && len)
+        snprintf(buf, len, "%s", inner);
+}
+
 void vafm_h5i_err_hdf5(vafm_error *err, int code, const char *object, const char *fmt, ...)
 {
     char inner[160] = "", suffix[200] = "";
-    /* Walking upward starts at the innermost (most specific) entry. */
-    H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, s_walk_first, inner);
+    vafm_h5i_reason(inner, sizeof inner);
     if (inner[0])
-        snprintf(suffix, sizeof suffix, " (HDF5: %s)", inner);
+        snprintf(suffix, sizeof suffix, vafm_h5i_io_errno ? ": %s" : " (HDF5: %s)", inner);
     va_list ap;
     va_start(ap, fmt);
     s_verr(err, code, object, suffix, fmt, ap);
@@ -839,4 +868,74 @@ herr_t vafm_h5i_attr_cb(hid_t loc, const char *name, const H5A_info_t *info, voi
     (void)loc;
     (void)info;
     return vafm_h5i_names_push(data, name) ? -1 : 0;
+}
+
+/* ---- the path: a regular file, not in use ------------------------------------------------------ */
+
+/* The process holding a flock on (dev, ino), from /proc/locks ("1: FLOCK  ADVISORY  WRITE 123 fd:01:456 0 EOF").
+ * @return its pid, or 0 when it cannot be told. */
+static long s_lock_holder(dev_t dev, ino_t ino)
+{
+    FILE *f = fopen("/proc/locks", "re");
+    if (!f)
+        return 0;
+    char line[256];
+    long pid = 0;
+    while (!pid && fgets(line, sizeof line, f)) {
+        char kind[16], adv[16], mode[16];
+        long p;
+        unsigned maj, min;
+        unsigned long long i;
+        if (sscanf(line, "%*s %15s %15s %15s %ld %x:%x:%llu", kind, adv, mode, &p, &maj, &min, &i) == 7 &&
+            !strcmp(kind, "FLOCK") && i == (unsigned long long)ino && maj == major(dev) && min == minor(dev))
+            pid = p;
+    }
+    fclose(f);
+    return pid;
+}
+
+int vafm_h5i_check_path(const char *path, int for_write, vafm_error *err)
+{
+    struct stat st;
+    if (stat(path, &st))
+        return 0; /* absent: the caller says what that means */
+    if (!S_ISREG(st.st_mode)) {
+        vafm_h5i_err(err, VAFM_EIO, "", "%s: is not a regular file (%s); refused", path,
+                     S_ISDIR(st.st_mode) ? "a directory" : S_ISFIFO(st.st_mode) ? "a FIFO" : S_ISSOCK(st.st_mode) ? "a socket"
+                                                                                                             : "a device");
+        return VAFM_EIO;
+    }
+    /* HDF5 (and vafm's journal driver) hold a flock while a file is open: exclusive for a writer, shared
+     * for readers. Probe it before HDF5 touches the file, so that a file another process writes is named
+     * as such (not "damaged") and is never truncated or resumed under it. */
+    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) {
+        vafm_h5i_err(err, VAFM_EIO, "", "%s: cannot open: %s", path, strerror(errno));
+        return VAFM_EIO;
+    }
+    int rc = 0;
+    if (flock(fd, (for_write ? LOCK_EX : LOCK_SH) | LOCK_NB) == 0)
+        flock(fd, LOCK_UN);
+    else if (errno == EWOULDBLOCK) {
+        long pid = s_lock_holder(st.st_dev, st.st_ino);
+        char who[96] = "another process";
+        if (pid == (long)getpid())
+            snprintf(who, sizeof who, "this process itself");
+        else if (pid > 0) {
+            char comm[32] = "", cp[64];
+            snprintf(cp, sizeof cp, "/proc/%ld/comm", pid);
+            FILE *c = fopen(cp, "re");
+            if (c) {
+                if (fgets(comm, sizeof comm, c))
+                    comm[strcspn(comm, "\n")] = 0;
+                fclose(c);
+            }
+            snprintf(who, sizeof who, "another process (pid %ld%s%s)", pid, comm[0] ? ", " : "", comm);
+        }
+        vafm_h5i_err(err, VAFM_ESTATE, "", "%s: is in use by %s, which has it open%s; wait until it has closed "
+                     "it%s", path, who, for_write ? "" : " for writing", for_write ? " (it was left untouched)" : "");
+        rc = VAFM_ESTATE;
+    }
+    close(fd);
+    return rc;
 }

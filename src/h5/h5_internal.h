@@ -121,6 +121,14 @@ void vafm_h5i_quiet_end(const vafm_h5i_quiet *q);
 /** Fill err: code, object path (err->field) and message. */
 void vafm_h5i_err(vafm_error *err, int code, const char *object, const char *fmt, ...) VAFM_H5_PRINTF(4, 5);
 /** Same, appending " (HDF5: <innermost message of HDF5's error stack>)". */
+/** Before HDF5 opens an existing file: refuse what is not a regular file (a FIFO would block forever)
+ *  with VAFM_EIO, and a file another process (or this one) has open — for writing, or at all when
+ *  for_write — with VAFM_ESTATE naming the holder from /proc/locks. An absent path passes. */
+int vafm_h5i_check_path(const char *path, int for_write, vafm_error *err);
+
+/** The innermost message on HDF5's error stack into buf (unchanged when the stack is empty). Take it right
+ *  after the failing call: every later HDF5 call (a close on the way out) clears the stack. */
+void vafm_h5i_reason(char *buf, size_t len);
 void vafm_h5i_err_hdf5(vafm_error *err, int code, const char *object, const char *fmt, ...)
     VAFM_H5_PRINTF(4, 5);
 
@@ -187,6 +195,9 @@ int vafm_h5i_journal_overlay(const char *path, unsigned char *buf, uint64_t off,
 
 /** Test hook (tests/test_h5.c only): die at step 1–4 of the next commit (h5_journal.c). */
 extern int vafm_h5i_journal_crash_at;
+/** errno of the journal driver's last failed write or truncate on this thread (0: none since reset): the
+ *  operating system's reason ("No space left on device") that HDF5's error stack does not carry up. */
+extern _Thread_local int vafm_h5i_io_errno;
 
 /* ---- defences against damage HDF5 1.10 does not detect ------------------------------------------- */
 

@@ -134,6 +134,8 @@ static int s_pread_full(int fd, void *buf, size_t n, uint64_t off, uint64_t eof)
     return 0;
 }
 
+_Thread_local int vafm_h5i_io_errno;
+
 static int s_pwrite_full(int fd, const void *buf, size_t n, uint64_t off)
 {
     const unsigned char *b = buf;
@@ -142,6 +144,7 @@ static int s_pwrite_full(int fd, const void *buf, size_t n, uint64_t off)
         if (put < 0) {
             if (errno == EINTR)
                 continue;
+            vafm_h5i_io_errno = errno; /* the cause, for the message (HDF5's own stack loses it) */
             return -1;
         }
         b += put;
@@ -258,6 +261,7 @@ typedef struct s_file {
     uint64_t eof;       /* logical end of file (without a journal being replayed in memory) */
     uint64_t committed; /* [0, committed) is the last committed state */
     s_pages pages;      /* writer: pending pages; reader: a replayed journal */
+    int closed;         /* a close failed (disk full): the descriptor is gone, only the struct remains */
 } s_file;
 
 static void s_push(H5E_major_t maj, H5E_minor_t min, const char *msg)
@@ -273,6 +277,17 @@ int vafm_h5i_journal_crash_at = 0;
 static int s_commit(s_file *f)
 {
     uint64_t final = f->eoa != HADDR_UNDEF && f->eoa > 0 ? (uint64_t)f->eoa : f->eof;
+    /* The new state's end of allocation must be reachable before anything of it is committed: with the
+     * file size limited (EFBIG) a state whose superblock claims more than the file can hold would be
+     * "truncated" for every reader, and so would its journal when replayed. Extending first (sparse,
+     * no blocks) fails at once where the size is limited; the committed state stays as it was. */
+    if (final > f->eof) {
+        if (ftruncate(f->fd, (off_t)final)) {
+            vafm_h5i_io_errno = errno;
+            return -1;
+        }
+        f->eof = final;
+    }
     if (f->pages.n) {
         /* pages clipped to the committed state: bytes past it were written directly */
         size_t n = f->pages.n;
@@ -318,7 +333,7 @@ static int s_commit(s_file *f)
         if (f->eoa == HADDR_UNDEF || f->eoa == 0)
             final = js; /* (HDF5 always has an end of allocation here) */
     }
-    if (ftruncate(f->fd, (off_t)final))
+    if (ftruncate(f->fd, (off_t)final) && (vafm_h5i_io_errno = errno) != 0)
         return -1;
     f->eof = final;
     f->committed = final;
@@ -327,9 +342,9 @@ static int s_commit(s_file *f)
 
 static H5FD_t *s_open(const char *name, unsigned flags, hid_t fapl, haddr_t maxaddr)
 {
-    int o = (flags & H5F_ACC_RDWR) ? O_RDWR : O_RDONLY;
-    if (flags & H5F_ACC_TRUNC)
-        o |= O_TRUNC;
+    /* O_TRUNC is not passed to open(): the file is locked first and cut only once the lock is ours, so a
+     * file another process writes is never truncated under it (HDF5 takes its lock after the open). */
+    int o = ((flags & H5F_ACC_RDWR) ? O_RDWR : O_RDONLY) | O_NONBLOCK | O_CLOEXEC;
     if (flags & H5F_ACC_CREAT)
         o |= O_CREAT;
     if (flags & H5F_ACC_EXCL)
@@ -339,6 +354,24 @@ static H5FD_t *s_open(const char *name, unsigned flags, hid_t fapl, haddr_t maxa
         char msg[300];
         snprintf(msg, sizeof msg, "unable to open file: name = '%s', errno = %d, error message = '%s'", name, errno,
                  strerror(errno));
+        s_push(H5E_FILE, H5E_CANTOPENFILE, msg);
+        return NULL;
+    }
+    struct stat st0;
+    if (fstat(fd, &st0) || !S_ISREG(st0.st_mode)) {
+        close(fd);
+        s_push(H5E_FILE, H5E_CANTOPENFILE, "not a regular file");
+        return NULL;
+    }
+    if (flock(fd, ((flags & H5F_ACC_RDWR) ? LOCK_EX : LOCK_SH) | LOCK_NB) && errno != ENOSYS && errno != ENOLCK) {
+        close(fd);
+        s_push(H5E_FILE, H5E_CANTLOCKFILE, "unable to lock the file (another process has it open)");
+        return NULL;
+    }
+    if ((flags & H5F_ACC_TRUNC) && ftruncate(fd, 0)) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "unable to truncate the file: %s", strerror(errno));
+        close(fd);
         s_push(H5E_FILE, H5E_CANTOPENFILE, msg);
         return NULL;
     }
@@ -388,18 +421,34 @@ static H5FD_t *s_open(const char *name, unsigned flags, hid_t fapl, haddr_t maxa
     return &f->pub;
 }
 
+/* As HDF5's own drivers: a failed close keeps the struct, because HDF5 keeps the file open and closes it
+ * again later (at the latest when the library shuts down at exit); freeing it here made that second close
+ * read freed memory (a full disk ended in a segfault at exit). The descriptor is closed at once: the
+ * committed state [0, committed) is on disk, the uncommitted pages could not be written and are dropped,
+ * so the file holds the last completed flush, as after a kill. */
 static herr_t s_close(H5FD_t *_f)
 {
     s_file *f = (s_file *)_f;
+    if (f->closed) {
+        free(f);
+        return 0;
+    }
     herr_t rc = 0;
     if (!f->rdonly && s_commit(f)) {
-        s_push(H5E_IO, H5E_WRITEERROR, "the journal cannot be committed at close");
+        char msg[160];
+        snprintf(msg, sizeof msg, "the journal cannot be committed at close: %s", strerror(errno));
+        s_push(H5E_IO, H5E_WRITEERROR, msg);
         rc = -1;
     }
     s_pages_free(&f->pages);
     close(f->fd);
+    f->fd = -1;
+    if (rc) {
+        f->closed = 1;
+        return rc;
+    }
     free(f);
-    return rc;
+    return 0;
 }
 
 static int s_cmp(const H5FD_t *_a, const H5FD_t *_b)
@@ -490,7 +539,9 @@ static herr_t s_write(H5FD_t *_f, H5FD_mem_t type, hid_t dxpl, haddr_t addr, siz
     /* the rest is new space: straight to the file */
     if (a < end) {
         if (s_pwrite_full(f->fd, b + (a - addr), (size_t)(end - a), a)) {
-            s_push(H5E_IO, H5E_WRITEERROR, "write failed");
+            char msg[160];
+            snprintf(msg, sizeof msg, "write failed: %s", strerror(errno));
+            s_push(H5E_IO, H5E_WRITEERROR, msg);
             return -1;
         }
         if (end > f->eof)
@@ -516,7 +567,7 @@ static herr_t s_truncate(H5FD_t *_f, hid_t dxpl, hbool_t closing)
     s_file *f = (s_file *)_f;
     /* extend now; shrinking waits for the commit, which knows whether the cut bytes are still needed */
     if (!f->rdonly && f->eoa != HADDR_UNDEF && (uint64_t)f->eoa > f->eof) {
-        if (ftruncate(f->fd, (off_t)f->eoa)) {
+        if (ftruncate(f->fd, (off_t)f->eoa) && (vafm_h5i_io_errno = errno) != 0) {
             s_push(H5E_IO, H5E_SEEKERROR, "unable to extend the file");
             return -1;
         }

@@ -283,6 +283,13 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
     }
     size_t esize = c->is_segment ? 1 : 8;
     /* gzip compresses at most ~1030:1: a longer claim is damage, not data */
+    if (dims[0] > VAFM_H5_MAX_SAMPLES) { /* checked before any data is read: a small file of deflated zeros
+                                           can declare gigabytes (a decompression bomb) */
+        vafm_h5i_err(err, rc = VAFM_EFORMAT, obj, "%s: %s declares %llu samples, more than a curve may have (%llu; "
+                     "VAFM_H5_MAX_SAMPLES): refused before reading", path, obj, (unsigned long long)dims[0],
+                     (unsigned long long)VAFM_H5_MAX_SAMPLES);
+        goto done;
+    }
     if ((double)dims[0] * (double)esize > 1100.0 * ((double)file_size + 4096.0) || dims[0] > ((hsize_t)1 << 40)) {
         vafm_h5i_err(err, rc, obj, "%s: %s claims %llu samples, more than a file of %llu bytes can hold (damaged file)",
                      path, obj, (unsigned long long)dims[0], (unsigned long long)file_size);
@@ -377,6 +384,11 @@ static int s_read_attr(hid_t g, const char *path, const char *gname, const char 
         if (v.cls != H5T_FLOAT && v.cls != H5T_INTEGER) {
             vafm_h5i_err(err, rc, obj, "%s: curve group '%s': attribute '%s' is %s (afmformats wants a number, %s)", path,
                          gname, name, s_class_name(v.cls), k->unit);
+            goto done;
+        }
+        if (!isfinite(v.d)) { /* absent is how a reader says "not known"; a stored NaN or inf is no value */
+            vafm_h5i_err(err, rc, obj, "%s: curve group '%s': attribute '%s' is %g (a finite number in %s, or absent)",
+                         path, gname, name, v.d, k->unit);
             goto done;
         }
         *(double *)f = v.d;
@@ -560,6 +572,9 @@ static int s_reader_open(vafm_h5_reader *r, const char *path, vafm_error *err)
         return VAFM_EIO;
     }
     r->file_size = (uint64_t)st.st_size;
+    int crc = vafm_h5i_check_path(path, 0, err);
+    if (crc)
+        return crc;
     htri_t is = H5Fis_hdf5(path);
     if (is <= 0) {
         vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: not an HDF5 file (no HDF5 signature)", path);
@@ -726,6 +741,46 @@ int vafm_h5_reader_curve(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_e
     vafm_h5i_quiet q;
     vafm_h5i_quiet_begin(&q);
     int rc = vafm_h5i_curve_read(r->file, r->path, r->groups[i], 1, r->file_size, &r->buf, out, err);
+    vafm_h5i_quiet_end(&q);
+    return rc;
+}
+
+uint64_t vafm_h5_reader_group(const vafm_h5_reader *r, size_t i)
+{
+    return r && i < r->n ? r->groups[i] : UINT64_MAX;
+}
+
+int vafm_h5_reader_find(const vafm_h5_reader *r, uint64_t group, size_t *i)
+{
+    if (!r || !i)
+        return VAFM_EINVAL;
+    size_t lo = 0, hi = r->n; /* groups are held in ascending order of their numbers */
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (r->groups[mid] < group)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (lo >= r->n || r->groups[lo] != group)
+        return VAFM_ENOTFOUND;
+    *i = lo;
+    return 0;
+}
+
+int vafm_h5_reader_curve_info(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_error *err)
+{
+    if (!r || r->tag != S_TAG || !out) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_reader_curve_info: no reader or output given");
+        return VAFM_EINVAL;
+    }
+    if (i >= r->n) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "%s: curve %zu requested, the file holds %zu", r->path, i, r->n);
+        return VAFM_EINVAL;
+    }
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    int rc = vafm_h5i_curve_read(r->file, r->path, r->groups[i], 0, r->file_size, &r->buf, out, err);
     vafm_h5i_quiet_end(&q);
     return rc;
 }

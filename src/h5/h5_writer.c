@@ -20,7 +20,7 @@
 #define S_TAG 0x76683577u /* "vh5w" */
 #define S_JSON_MAX 65536
 /* one chunk per channel: HDF5 limits a chunk to 4 GiB */
-#define S_MAX_SAMPLES ((size_t)1 << 28)
+#define S_MAX_SAMPLES ((size_t)VAFM_H5_MAX_SAMPLES)
 
 struct vafm_h5_writer {
     uint32_t tag;
@@ -158,11 +158,15 @@ static int s_create(vafm_h5_writer *w, vafm_error *err)
     /* root attributes in dense storage from the start: the scene JSON and the ground-truth table
      * exceed the 64 KiB limit of attributes kept in the object header */
     struct stat st;
-    if (!w->o.overwrite && !stat(w->path, &st)) {
+    int rc = 0;
+    if (!w->o.overwrite && !stat(w->path, &st))
+        vafm_h5i_err(err, rc = VAFM_EIO, "", "%s: exists already (resume it, or allow overwriting)", w->path);
+    else if (w->o.overwrite)
+        rc = vafm_h5i_check_path(w->path, 1, err); /* never truncate a file in use (the driver locks first too) */
+    if (rc) {
         H5Pclose(fcpl);
         H5Pclose(fapl);
-        vafm_h5i_err(err, VAFM_EIO, "", "%s: exists already (resume it, or allow overwriting)", w->path);
-        return VAFM_EIO;
+        return rc;
     }
     w->file = H5Fcreate(w->path, w->o.overwrite ? H5F_ACC_TRUNC : H5F_ACC_EXCL, fcpl, fapl);
     H5Pclose(fcpl);
@@ -250,6 +254,9 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
         vafm_h5i_err(err, VAFM_EIO, "", "%s: cannot be resumed: %s", w->path, strerror(errno));
         return VAFM_EIO;
     }
+    int crc = vafm_h5i_check_path(w->path, 1, err);
+    if (crc)
+        return crc;
     if (H5Fis_hdf5(w->path) <= 0) {
         vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: cannot be resumed: not an HDF5 file", w->path);
         return VAFM_EFORMAT;
@@ -476,6 +483,60 @@ static void s_first_diff_key(const char *a, const char *b, char *key, size_t len
     }
 }
 
+/* A resumed file's stored scene and grid against the caller's (JSON texts). @return 0 or VAFM_EINVAL
+ * naming the first differing key. */
+static int s_prov_compare(const char *path, const char *stored_scene, const char *stored_grid, const char *sj,
+                          const char *gj, vafm_error *err)
+{
+    const char *which = NULL, *a = NULL, *b = NULL;
+    if (!stored_scene || strcmp(stored_scene, sj)) {
+        which = "scene";
+        a = stored_scene ? stored_scene : "";
+        b = sj;
+    } else if (!stored_grid || strcmp(stored_grid, gj)) {
+        which = "grid";
+        a = stored_grid ? stored_grid : "";
+        b = gj;
+    }
+    if (!which)
+        return 0;
+    char key[64];
+    s_first_diff_key(a, b, key, sizeof key);
+    vafm_h5i_err(err, VAFM_EINVAL, key,
+                 "%s: the %s differs from the one the file was written with (first at '%s'); resume needs the same "
+                 "campaign", path, which, key);
+    return VAFM_EINVAL;
+}
+
+int vafm_h5_resume_check(const char *path, const vafm_params *scene, const vafm_campaign_spec *grid, vafm_error *err)
+{
+    if (!path || !scene) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_resume_check: no path or scene given");
+        return VAFM_EINVAL;
+    }
+    vafm_h5_reader *r = NULL;
+    int rc = vafm_h5_reader_open(&r, path, err);
+    if (rc)
+        return rc;
+    vafm_h5_provenance pv;
+    vafm_h5_reader_provenance(r, &pv);
+    char *sj = malloc(S_JSON_MAX), *gj = malloc(S_JSON_MAX);
+    if (!sj || !gj)
+        vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", path);
+    else if (!pv.is_vafm || pv.format_major != VAFM_H5_FORMAT_MAJOR)
+        vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x", path,
+                     VAFM_H5_FORMAT_MAJOR);
+    else if (vafm_params_to_json(scene, sj, S_JSON_MAX) < 0 || s_grid_json(grid, gj, S_JSON_MAX))
+        vafm_h5i_err(err, rc = VAFM_EINVAL, "", "%s: the scene or grid does not fit in %d bytes of JSON", path,
+                     S_JSON_MAX);
+    else if (pv.scene_json) /* a file without provenance yet takes the caller's */
+        rc = s_prov_compare(path, pv.scene_json, pv.grid_json, sj, gj, err);
+    free(sj);
+    free(gj);
+    vafm_h5_reader_destroy(&r);
+    return rc;
+}
+
 int vafm_h5_writer_set_provenance(vafm_h5_writer *w, const vafm_params *scene, const vafm_campaign_spec *grid,
                                   vafm_error *err)
 {
@@ -494,25 +555,8 @@ int vafm_h5_writer_set_provenance(vafm_h5_writer *w, const vafm_params *scene, c
                      S_JSON_MAX);
         goto done;
     }
-    if (w->has_prov) {
-        /* resume: the run must continue the same campaign */
-        const char *which = NULL, *a = NULL, *b = NULL;
-        if (strcmp(w->scene, sj)) {
-            which = "scene";
-            a = w->scene;
-            b = sj;
-        } else if (!w->grid || strcmp(w->grid, gj)) {
-            which = "grid";
-            a = w->grid ? w->grid : "";
-            b = gj;
-        }
-        if (which) {
-            char key[64];
-            s_first_diff_key(a, b, key, sizeof key);
-            vafm_h5i_err(err, rc = VAFM_EINVAL, key,
-                         "%s: the %s differs from the one the file was written with (first at '%s'); resume needs the same "
-                         "campaign", w->path, which, key);
-        }
+    if (w->has_prov) { /* resume: the run must continue the same campaign */
+        rc = s_prov_compare(w->path, w->scene, w->grid, sj, gj, err);
         goto done;
     }
     if (w->count > 0) {
@@ -746,10 +790,18 @@ int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_
             ok = !s_write_channel(w, g, ch, data, c->n);
     }
     ok = ok && !s_write_meta(w, g, c);
-    if (g >= 0 && H5Gclose(g) < 0)
+    char why[160] = "";
+    if (!ok)
+        vafm_h5i_reason(why, sizeof why); /* before H5Gclose clears the stack */
+    if (g >= 0 && H5Gclose(g) < 0) {
+        if (ok)
+            vafm_h5i_reason(why, sizeof why);
         ok = 0;
+    }
     if (!ok) {
-        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, name, "%s: curve group '%s' cannot be written", w->path, name);
+        vafm_h5i_err(err, rc = VAFM_EIO, name, "%s: curve group '%s' cannot be written%s%s%s", w->path, name,
+                     why[0] ? (vafm_h5i_io_errno ? ": " : " (HDF5: ") : "", why,
+                     why[0] && !vafm_h5i_io_errno ? ")" : "");
         if (g >= 0)
             H5Ldelete(w->file, name, H5P_DEFAULT); /* leave no half-written curve behind */
     } else {

@@ -185,7 +185,10 @@ int vafm_recorder_open(vafm_recorder **out, const char *path, const vafm_recorde
     wo.overwrite = o.mode == VAFM_RECORD_OVERWRITE;
     wo.gzip_level = o.gzip_level;
     double t0 = s_now();
-    int rc = vafm_h5_writer_open(&r->w, path, &wo, err);
+    /* a resume that would be refused (another scene or grid) is refused before a byte of the file changes */
+    int rc = wo.resume && scene ? vafm_h5_resume_check(path, scene, grid, err) : 0;
+    if (!rc)
+        rc = vafm_h5_writer_open(&r->w, path, &wo, err);
     if (!rc && scene) {
         rc = vafm_h5_writer_set_provenance(r->w, scene, grid, err);
         r->has_prov = !rc;

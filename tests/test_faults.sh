@@ -1,0 +1,162 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+#
+# The faults of issue #18, each reproduced in seconds: nothing lost, nothing crashes.
+#   1. --overwrite of a file another process writes is refused and leaves it intact; a refused --resume
+#      changes no byte; info/export/resume of a file in use say "in use", not "damaged".
+#   3. a full disk (ulimit -f: EFBIG, the same path as ENOSPC) ends with exit 1 and the OS's reason, no
+#      crash; the file holds every flushed curve and resumes.
+#   4. a FIFO named *.h5 (or given as a scene file) is refused at once, never opened.
+#   6. a small file that declares more samples than a curve may have is refused before its data are read.
+#   7. curves are addressed by group name: a gapped file exports group 2 as --curve 2, and --curve 1 is
+#      refused naming the groups.
+#   9. the study's plotter never goes through a shell: a directory named x'$(touch pwned)' runs nothing,
+#      one named O'Brien gets its figure.
+# Usage: test_faults.sh path/to/vafm [--asan]. Prints one line per check and "N passed, M failed".
+set -u
+
+VAFM=${1:?usage: test_faults.sh path/to/vafm [--asan]}
+ASAN=${2:-}
+PY=/usr/bin/python3
+. "$(dirname "$0")/harness.sh"
+
+WRITER=
+harness_cleanup() { [ -n "$WRITER" ] && kill -9 "$WRITER" 2>/dev/null; wait 2>/dev/null; }
+
+run() { "$VAFM" "$@" >"$TMP/out" 2>"$TMP/err"; rc=$?; }
+# expect DESC STATUS NEEDLE -- ARGS...: vafm ARGS exits STATUS and stderr holds NEEDLE (within 60 s)
+expect() {
+    local desc=$1 want=$2 needle=$3
+    shift 4
+    timeout 60 "$VAFM" "$@" >"$TMP/out" 2>"$TMP/err"
+    rc=$?
+    if [ "$rc" -ne "$want" ]; then
+        bad "$desc" "exit $rc, want $want: $(head -c 300 "$TMP/err")"
+    elif ! grep -qF -- "$needle" "$TMP/err"; then
+        bad "$desc" "message lacks '$needle': $(head -c 300 "$TMP/err")"
+    else
+        ok "$desc"
+    fi
+}
+cd "$TMP" || exit 1
+FAST=(--preset paper-fig4 --v 6.4e-4 --threads 1 -q)
+
+# ---- 1: a file another process writes ------------------------------------------------------------
+# A long campaign (thousands of curves, flushed every 0.2 s) is the other writer; it is killed at the end.
+"$VAFM" campaign -n 100000 --preset paper-fig4 --threads 1 --flush-interval 0.2 --out busy.h5 -q \
+    >/dev/null 2>"$TMP/writer.err" &
+WRITER=$!
+for _ in $(seq 1 300); do
+    [ -s busy.h5 ] && grep -q "in use" <("$VAFM" info busy.h5 2>&1) && break
+    sleep 0.1
+done
+sleep 1 # some flushes
+size_before=$(stat -c %s busy.h5)
+expect "--overwrite of a file another process writes is refused, naming it" 1 "in use by another process" -- \
+    campaign -n 2 "${FAST[@]}" --out busy.h5 --overwrite
+size_after=$(stat -c %s busy.h5)
+if [ "$size_after" -ge "$size_before" ]; then ok "the file was not truncated ($size_before -> $size_after bytes)"
+else bad "the file was not truncated" "$size_before -> $size_after bytes"; fi
+expect "vafm info of a file being written says 'in use', not 'damaged'" 1 "open for writing" -- info busy.h5
+expect "vafm export of a file being written says 'in use'" 1 "in use by another process" -- export busy.h5 --curve 0
+expect "--resume of a file being written is refused" 1 "in use by another process" -- \
+    campaign -n 100000 --preset paper-fig4 --threads 1 --out busy.h5 --resume -q
+kill -9 "$WRITER" 2>/dev/null
+wait "$WRITER" 2>/dev/null
+WRITER=
+run info busy.h5
+n_busy=$(sed -n 's/.* \([0-9]*\) curve(s)$/\1/p' "$TMP/out" | head -1)
+if [ "$rc" -eq 0 ] && [ "${n_busy:-0}" -ge 1 ]; then ok "the other writer's file survived ($n_busy flushed curves, kill -9 after)"
+else bad "the other writer's file survived" "info exit $rc: $(head -c 300 "$TMP/err")"; fi
+
+# a refused --resume (another grid) changes no byte
+run campaign -n 3 "${FAST[@]}" --out grid.h5
+cp grid.h5 grid0.h5
+expect "--resume with another grid is refused, naming the field" 2 "curves_per_point" -- \
+    campaign -n 4 "${FAST[@]}" --out grid.h5 --resume
+expect "--resume with another scene is refused, naming the field" 2 "T_K" -- \
+    campaign -n 3 "${FAST[@]}" --T 7 --out grid.h5 --resume
+if cmp -s grid0.h5 grid.h5; then ok "a refused --resume changes no byte of the file"
+else bad "a refused --resume changes no byte of the file" "$(cmp grid0.h5 grid.h5 | head -1)"; fi
+
+# ---- 3: a full disk ------------------------------------------------------------------------------
+# ulimit -f makes write() fail with EFBIG (SIGXFSZ ignored), as ENOSPC does on a full file system.
+# paper-fig4 at its own speed: ~0.5 MB per curve, so the third curve does not fit in 1.5 MB.
+FULL=(--preset paper-fig4 --threads 1 -q --flush-interval 0)
+(ulimit -f 1500; trap '' XFSZ; exec "$VAFM" campaign -n 10 "${FULL[@]}" --out full.h5) \
+    >"$TMP/out" 2>"$TMP/err"
+rc=$?
+if [ "$rc" -eq 1 ] && grep -q "File too large" "$TMP/err"; then ok "a full disk: exit 1 with the OS's reason"
+else bad "a full disk: exit 1 with the OS's reason" "exit $rc: $(head -c 300 "$TMP/err")"; fi
+run info full.h5
+n_full=$(sed -n 's/.* \([0-9]*\) curve(s)$/\1/p' "$TMP/out" | head -1)
+if [ "$rc" -eq 0 ] && [ "${n_full:-0}" -ge 1 ]; then ok "the full disk's file holds its $n_full flushed curves"
+else bad "the full disk's file holds its flushed curves" "info exit $rc: $(head -c 300 "$TMP/err")"; fi
+run campaign -n 10 "${FULL[@]}" --out full.h5 --resume
+run2=$rc
+run info full.h5
+if [ "$run2" -eq 0 ] && grep -q " 10 curve(s)" "$TMP/out"; then ok "with room again, --resume completes it (10 curves)"
+else bad "with room again, --resume completes it" "exit $run2: $(head -c 300 "$TMP/err")"; fi
+
+# ---- 4: FIFOs ------------------------------------------------------------------------------------
+mkfifo fifo.h5 fifo.json
+expect "vafm info of a FIFO is refused at once" 1 "not a regular file" -- info fifo.h5
+expect "vafm export of a FIFO is refused at once" 1 "not a regular file" -- export fifo.h5 --curve 0
+expect "--resume of a FIFO is refused at once" 1 "not a regular file" -- campaign -n 1 "${FAST[@]}" --out fifo.h5 --resume
+expect "--overwrite of a FIFO is refused at once" 1 "not a regular file" -- campaign -n 1 "${FAST[@]}" --out fifo.h5 --overwrite
+expect "a FIFO as scene file is refused at once" 2 "not a regular file" -- run --scene fifo.json
+
+# ---- 6: a decompression bomb -------------------------------------------------------------------
+if "$PY" -c 'import h5py, numpy' 2>/dev/null; then
+    "$PY" - <<'EOF'
+import h5py, numpy as np
+n = (1 << 25) + 1  # one more than VAFM_H5_MAX_SAMPLES: 268 MB of zeros, a few hundred kB deflated
+with h5py.File("bomb.h5", "w") as f:
+    f.attrs["software"] = "test"
+    f.attrs["software version"] = "0"
+    g = f.create_group("0")
+    for name, unit, dt in (("force", "N", "<f8"), ("height (piezo)", "m", "<f8"), ("segment", "", "u1")):
+        ds = g.create_dataset(name, shape=(n,), dtype=dt, chunks=(1 << 20,), compression="gzip")
+        for i in range(0, n, 1 << 22):
+            ds[i:i + (1 << 22)] = 0
+        ds.attrs["unit"] = unit
+    g.attrs["imaging mode"] = "force-distance"
+EOF
+    bytes=$(stat -c %s bomb.h5)
+    expect "a ${bytes}-byte file declaring 2^25+1 samples is refused before reading (info)" 1 "declares 33554433 samples" -- \
+        info bomb.h5
+    expect "... and by export" 1 "declares 33554433 samples" -- export bomb.h5 --curve 0
+else
+    ok "decompression bomb: skipped (no h5py for $PY)"
+fi
+
+# ---- 7: group names ----------------------------------------------------------------------------
+run campaign -n 3 "${FAST[@]}" --out gap.h5
+if "$PY" -c 'import h5py' 2>/dev/null; then
+    cp gap.h5 full3.h5
+    "$PY" -c 'import h5py; f = h5py.File("gap.h5", "a"); del f["1"]; f.close()'
+    expect "export --curve 1 of a file with groups 0 and 2 is refused, naming the groups" 2 "no curve group '1'" -- \
+        export gap.h5 --curve 1
+    run export gap.h5 --curve 2 --csv gap2.csv
+    r1=$rc
+    run export full3.h5 --curve 2 --csv full2.csv
+    if [ "$r1" -eq 0 ] && cmp -s gap2.csv full2.csv; then ok "export --curve 2 of the gapped file is group 2"
+    else bad "export --curve 2 of the gapped file is group 2" "exit $r1"; fi
+else
+    ok "gapped file: skipped (no h5py for $PY)"
+fi
+
+# ---- 9: the study's plotter and the shell ----------------------------------------------------------
+mkdir -p plots
+(cd plots && "$VAFM" study hysteresis --quick --out "x'\$(touch pwned)'" >/dev/null 2>&1)
+if [ ! -e plots/pwned ] && [ -f "plots/x'\$(touch pwned)'/report.md" ]; then ok "an output directory x'\$(touch pwned)' runs nothing"
+else bad "an output directory x'\$(touch pwned)' runs nothing" "$(ls plots)"; fi
+(cd plots && "$VAFM" study hysteresis --quick --out "O'Brien" >/dev/null 2>&1)
+if "$PY" -c 'import matplotlib' 2>/dev/null; then
+    if [ -f "plots/O'Brien/hysteresis.png" ]; then ok "a directory named O'Brien gets its figure"
+    else bad "a directory named O'Brien gets its figure" "$(ls "plots/O'Brien" 2>&1)"; fi
+else
+    ok "O'Brien figure: skipped (no matplotlib for $PY)"
+fi
+
+harness_done
