@@ -333,7 +333,7 @@ if [ "$dk" -eq 0 ] && [ "$(ncurves)" = 100 ] && [ -s "$TMP/s.ref" ] && cmp -s "$
 else bad "killed + resumed differs" "$dk curves differ"; fi
 
 # export errors
-expect_fail "export: curve index out of range names the range" 2 --curve 100 "[0, 99]" -- export "$TMP/ref.h5" --curve 100
+expect_fail "export: a curve group the file lacks is refused, naming its groups" 2 --curve "no curve group '100'" "numbered 0 to 99" -- export "$TMP/ref.h5" --curve 100
 expect_fail "export without --curve" 2 --curve -- export "$TMP/ref.h5"
 expect_fail "export of a missing file" 1 "$TMP/none.h5" -- export "$TMP/none.h5" --curve 0
 

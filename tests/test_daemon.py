@@ -955,6 +955,49 @@ def test_log_kill9_loses_at_most_the_curve_in_progress(tmp_path):
     vafm_info_ok(path)
 
 
+def test_log_kill9_keeps_every_curve_said_logged(tmp_path):
+    """Issue #18, finding 2: run.end says "log": "pending" for a logged curve, and the event "logged" (with
+    its group) follows only once the curve is durable. A paced campaign with logging on is killed (-9)
+    after ~1.2 s: every curve an event said logged is in the file, bit for bit its stream, whatever the
+    timing; run.end alone promises nothing."""
+    h5py = pytest.importorskip("h5py")
+    d = Daemon("--preset", "paper-fig4")  # paced at 1x: ~63 ms of samples a curve, ~20 curves in the window
+    path = tmp_path / "dur.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    assert d.cmd({"cmd": "campaign", "n": 200})["status"] == "ok"
+    force, ends, logged = {}, {}, {}
+    deadline = time.monotonic() + 1.2
+    while time.monotonic() < deadline:
+        if not s.poll(100):
+            continue
+        parts = s.recv_multipart()
+        if parts[0] == b"data":
+            h = HEADER.unpack(parts[1])
+            force.setdefault(h[4], []).append(np.frombuffer(parts[2 + CHANNELS.index("force_N")], "<f8"))
+        elif parts[0] == b"run.end":
+            j = json.loads(parts[1])
+            ends[j["run_id"]] = j
+            assert j["log"] == ("pending" if j["status"] == "ok" else None), j
+        elif parts[0] == b"event":
+            j = json.loads(parts[1])
+            assert j["kind"] != "log_failed", j
+            if j["kind"] == "logged":
+                assert j["run_id"] in ends, j  # run.end first, then the notice
+                logged[j["run_id"]] = j["group"]
+    d.proc.kill()  # SIGKILL: no clean-up at all
+    d.proc.wait(timeout=10)
+    d.ctx.destroy(0)
+    assert len(logged) >= 1, (len(ends), len(logged))
+    with h5py.File(path, "r") as f:
+        for run_id, group in logged.items():
+            assert str(group) in f, (run_id, group, sorted(f.keys()))
+            assert np.array_equal(f[str(group)]["force"][:].view(np.uint64),
+                                  np.concatenate(force[run_id]).view(np.uint64)), (run_id, group)
+    vafm_info_ok(path)
+
+
 # ---- compute ahead (lookahead_s; protocol/wire.md §5.1) --------------------------------------------------
 # paper-fig4 computes about as fast as real time (~63 ms of samples per curve at 200 kS/s), so at speed 0.1
 # the simulation runs far ahead of the release and the FIFO matters; these tests check its semantics, not

@@ -140,8 +140,21 @@ typedef struct vafmd_log_item {
 
 enum vafmd_log_state { VAFMD_LOG_OFF = 0, VAFMD_LOG_ON = 1, VAFMD_LOG_STOPPING = 2 };
 
+/* Writer thread → simulation thread: a logged curve is durable in the file (ok, its group), or will not
+ * be written (ok 0). The simulation thread publishes it as an event "logged" / "log_failed" (wire.md
+ * "log"): run.end comes first and says "log": "pending"; only this event says the curve is safe. */
+typedef struct vafmd_log_notice {
+    uint64_t run_id;
+    uint64_t group; /* its curve group (file count − 1 after the append) */
+    int ok;
+} vafmd_log_notice;
+
+#define VAFMD_LOG_NOTICE_CAP 256 /* the writer waits (it may; the simulation thread never does) when full */
+
 typedef struct vafmd_log {
     vafmd_ring ring;               /* simulation thread → writer thread */
+    vafmd_ring notice_ring;        /* writer thread → simulation thread: durability notices */
+    vafmd_log_notice notice_store[VAFMD_LOG_NOTICE_CAP];
     vafmd_log_item *ring_store;
     vafmd_ring free_ring;          /* writer thread → simulation thread: log blocks to reuse (set up by the
                                       simulation thread before its first log item) */

@@ -77,6 +77,19 @@ static void s_set_err(vafmd_log *L, const char *fmt, const char *a, const char *
     pthread_mutex_unlock(&L->err_mu);
 }
 
+/* Tell the simulation thread (which publishes it) that run_id is durable as `group`, or will not be
+ * written (ok 0). This thread may wait for room; it gives up once the daemon is quitting (the simulation
+ * thread, which empties the ring, has gone then). */
+static void s_notice(vafmd_log *L, uint64_t run_id, uint64_t group, int ok)
+{
+    vafmd_log_notice n = { run_id, group, ok };
+    while (!vafmd_ring_push(&L->notice_ring, &n)) {
+        if (atomic_load_explicit(&L->quit, memory_order_acquire))
+            return;
+        nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
+    }
+}
+
 /* Append the finished curve; the recorder makes it durable before it returns (flush interval 0). */
 static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
 {
@@ -96,8 +109,11 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
     if (r) {
         atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
         s_set_err(L, "%s (%s)", e.message[0] ? e.message : vafm_strerror(r), e.field);
-    } else
+        s_notice(L, c->begin->run_id, 0, 0);
+    } else {
         atomic_fetch_add_explicit(&L->curves, 1, memory_order_relaxed);
+        s_notice(L, c->begin->run_id, vafm_recorder_count(L->w) - 1, 1); /* durable: flushed in append */
+    }
 }
 
 /* An item is done with: a log block goes back to the simulation thread's pool through the free ring (it
@@ -144,13 +160,16 @@ static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
         const vafmd_log_end *e = it->ptr;
         if (!c->begin || c->begin->run_id != it->run_id) {
             atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed); /* its begin was lost */
+            if (e->ok)
+                s_notice(L, it->run_id, 0, 0);
             break;
         }
         if (!e->ok)
             atomic_fetch_add_explicit(&L->curves_skipped, 1, memory_order_relaxed);
-        else if (c->broken || e->broken || c->n == 0 || !on)
+        else if (c->broken || e->broken || c->n == 0 || !on) {
             atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
-        else
+            s_notice(L, it->run_id, 0, 0);
+        } else
             s_write(L, c, e);
         s_curve_reset(c);
         break;

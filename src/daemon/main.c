@@ -336,6 +336,7 @@ int main(int argc, char **argv)
         return 1;
     }
     vafmd_ring_init(&d.log.ring, d.log.ring_store, sizeof(vafmd_log_item), log_cap);
+    vafmd_ring_init(&d.log.notice_ring, d.log.notice_store, sizeof(vafmd_log_notice), VAFMD_LOG_NOTICE_CAP);
     atomic_init(&d.log.state, VAFMD_LOG_OFF);
     pthread_mutex_init(&d.log.err_mu, NULL);
     d.next_run_id = 1;

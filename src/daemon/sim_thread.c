@@ -584,6 +584,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
                                                    s_num_or_null(res.detach_force_N)));
         }
     }
+    int log_pending = 0;
     if (r->log) {
         vafmd_log_end *le = calloc(1, sizeof *le);
         if (le) {
@@ -591,9 +592,13 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
             le->broken = r->log_broken;
             if (vafm_sim_result(r->cmd.sim, &le->result))
                 le->ok = 0;
+            log_pending = le->ok;
         }
         s_log_push(r, VAFMD_LOG_END, le);
     }
+    /* "pending": the writer thread will append it; the event "logged" (or "log_failed") says when it is
+     * durable in the file. null: this run is not logged. */
+    json_object_set_new(j, "log", log_pending ? json_string("pending") : json_null());
     int ok = !strcmp(status, "ok") && !err_code;
     if (cp && ok)
         atomic_store_explicit(&sh->camp_done, ++cp->done, memory_order_relaxed);
@@ -618,6 +623,19 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     }
     if (cp && job_over)
         s_camp_end(x, ok ? "ok" : failed ? "error" : "aborted", failed ? msg : NULL, 0);
+}
+
+/* The writer thread's durability notices, published as events (the simulation thread owns the socket). */
+static void s_log_notices(s_ctx *x)
+{
+    vafmd_log_notice n;
+    while (vafmd_ring_pop(&x->d->log.notice_ring, &n)) {
+        if (n.ok)
+            s_send_json(x, "event", json_pack("{s:I,s:s,s:I}", "run_id", (json_int_t)n.run_id, "kind", "logged",
+                                              "group", (json_int_t)n.group));
+        else
+            s_send_json(x, "event", json_pack("{s:I,s:s}", "run_id", (json_int_t)n.run_id, "kind", "log_failed"));
+    }
 }
 
 /* Publish campaign.end and free the campaign. mark_done: the job is not yet reported done (no curve
@@ -1079,6 +1097,7 @@ void *vafmd_sim_main(void *arg)
         }
         if (quit)
             break;
+        s_log_notices(x);
         s_subscriptions(x);
         int64_t now = s_now();
         if (now >= next_hb) {
