@@ -998,6 +998,29 @@ def test_log_kill9_keeps_every_curve_said_logged(tmp_path):
     vafm_info_ok(path)
 
 
+def test_huge_curves_refused_before_they_start(tmp_path):
+    """Issue #18, finding 5: a scene whose curve would have more samples than a curve may have is refused by
+    `set` (invalid_scene: each value is in its range, the scene they make is not; naming the field); with logging on, a curve longer than the writer assembles in
+    memory (256 MiB) is refused at `curve` and `campaign`, and the daemon stays idle and serving."""
+    d = Daemon("--preset", "paper-fig4", "--free-run")
+    try:
+        r = d.cmd({"cmd": "set", "values": {"sample_rate_Hz": 1e10}})
+        error_ok(r, "invalid_scene", "sample_rate_Hz")
+        assert "VAFM_SIM_MAX_SAMPLES" in r["message"], r
+        error_ok(d.cmd({"cmd": "set", "values": {"dwell_s": 1e4}}), "invalid_scene", "dwell_s")
+        # paper-fig4 at 2e8 Hz: ~1.3e7 samples, within a curve's limit, beyond the writer's 8.1e6
+        assert d.cmd({"cmd": "set", "values": {"sample_rate_Hz": 2e8}})["status"] == "ok"
+        assert d.cmd({"cmd": "log", "path": str(tmp_path / "big.h5")})["status"] == "ok"
+        for cmd in ({"cmd": "curve"}, {"cmd": "campaign", "n": 2}):
+            r = d.cmd(cmd)
+            error_ok(r, "out_of_range", "sample_rate_Hz")
+            assert "logging" in r["message"], r
+        assert d.cmd({"cmd": "status"})["state"] == "idle"
+        assert d.cmd({"cmd": "log", "stop": True})["status"] == "ok"
+    finally:
+        assert d.stop() == 0
+
+
 # ---- compute ahead (lookahead_s; protocol/wire.md §5.1) --------------------------------------------------
 # paper-fig4 computes about as fast as real time (~63 ms of samples per curve at 200 kS/s), so at speed 0.1
 # the simulation runs far ahead of the release and the FIFO matters; these tests check its semantics, not

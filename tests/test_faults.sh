@@ -7,6 +7,7 @@
 #   3. a full disk (ulimit -f: EFBIG, the same path as ENOSPC) ends with exit 1 and the OS's reason, no
 #      crash; the file holds every flushed curve and resumes.
 #   4. a FIFO named *.h5 (or given as a scene file) is refused at once, never opened.
+#   5. a curve, tune or campaign that would take gigabytes is refused before it starts, naming the field.
 #   6. a small file that declares more samples than a curve may have is refused before its data are read.
 #   7. curves are addressed by group name: a gapped file exports group 2 as --curve 2, and --curve 1 is
 #      refused naming the groups.
@@ -105,6 +106,18 @@ expect "vafm export of a FIFO is refused at once" 1 "not a regular file" -- expo
 expect "--resume of a FIFO is refused at once" 1 "not a regular file" -- campaign -n 1 "${FAST[@]}" --out fifo.h5 --resume
 expect "--overwrite of a FIFO is refused at once" 1 "not a regular file" -- campaign -n 1 "${FAST[@]}" --out fifo.h5 --overwrite
 expect "a FIFO as scene file is refused at once" 2 "not a regular file" -- run --scene fifo.json
+
+# ---- 5: curves and campaigns that would take gigabytes are refused before they start ----------------
+expect "sample_rate_Hz 1e10 is refused before the curve runs" 2 "VAFM_SIM_MAX_SAMPLES" -- \
+    campaign -n 1 --preset paper-fig4 --sample_rate_Hz=1e10 --out big.h5
+expect "a 1e-12 m/s retract is refused, naming v_retract_m_per_s" 2 "v_retract_m_per_s" -- \
+    run --preset paper-fig4 --v_retract_m_per_s=1e-12
+expect "a 1e4 s dwell is refused, naming dwell_s" 2 "dwell_s" -- samples --preset paper-fig4 --dwell_s=1e4
+expect "a thermal tune of 1e6 s is refused, naming tune_duration_s" 2 "tune_duration_s" -- \
+    samples --tune --preset paper-fig4 --tune_duration_s=1e6
+expect "-n 1e9 over three points: the file size is estimated and refused" 2 "more than the" -- \
+    campaign -n 1000000000 --preset paper-fig4 --T 1,2,3 --out huge.h5
+if [ ! -e big.h5 ] && [ ! -e huge.h5 ]; then ok "refused campaigns leave no file"; else bad "refused campaigns leave no file"; fi
 
 # ---- 6: a decompression bomb -------------------------------------------------------------------
 if "$PY" -c 'import h5py, numpy' 2>/dev/null; then

@@ -17,6 +17,7 @@
 #include "vafm/integrator.h"
 #include "vafm/params.h"
 #include "vafm/units.h"
+#include "vafm/sim.h"
 
 /* REAL fields that are dimensionless by design (a ratio): everything else must carry an SI unit. */
 static int t_dimensionless(const char *name)
@@ -529,8 +530,50 @@ static void test_strerror(void)
     ENSURE(vafm_version() && vafm_version()[0]);
 }
 
+/* The cost estimate (issue #18, finding 5) against real curves: the typical duration within 30% of a
+ * curve's, the longest bound above it; the limits refuse what they say, naming the field. */
+static void test_cost_estimate(void)
+{
+    static const char *presets[] = { "paper-fig4", "paper-fig4-bd" };
+    for (size_t k = 0; k < sizeof presets / sizeof presets[0]; k++) {
+        vafm_params p;
+        vafm_params_preset(&p, presets[k], NULL);
+        p.v_approach_m_per_s = p.v_retract_m_per_s = 6.4e-5; /* fast: a few ms a curve */
+        vafm_sim_estimate est;
+        vafm_error e;
+        ENSURE(vafm_sim_estimate_cost(&p, &est, &e) == 0);
+        vafm_sim *sim = NULL;
+        vafm_curve_result r;
+        ENSURE(vafm_sim_new(&sim, &p, &e) == 0);
+        ENSURE(sim && vafm_sim_curve(sim, 0, NULL, NULL, &r) == 0);
+        vafm_sim_destroy(&sim);
+        ENSURE_MSG(fabs(est.duration_s / r.duration_s - 1.0) < 0.3, "%s: estimate %g s, curve %g s", presets[k],
+                   est.duration_s, r.duration_s);
+        ENSURE_MSG(est.duration_max_s >= r.duration_s, "%s: bound %g s < curve %g s", presets[k], est.duration_max_s,
+                   r.duration_s);
+        ENSURE(fabs(est.samples - est.duration_s * p.sample_rate_Hz) <= 1e-6 * est.samples);
+        ENSURE(est.steps >= (double)r.steps * 0.5); /* the plain-step count bounds the shortcut run's */
+    }
+    vafm_params p;
+    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    p.sample_rate_Hz = 1e10;
+    ENSURE(vafm_params_validate(&p, &e) == VAFM_EINVAL && !strcmp(e.field, "sample_rate_Hz"));
+    vafm_params_preset(&p, "paper-fig4", NULL);
+    p.dwell_s = 1e4;
+    ENSURE(vafm_params_validate(&p, &e) == VAFM_EINVAL && !strcmp(e.field, "dwell_s"));
+    vafm_params_preset(&p, "paper-fig4", NULL);
+    p.v_retract_m_per_s = 1e-12;
+    ENSURE(vafm_params_validate(&p, &e) == VAFM_EINVAL && !strcmp(e.field, "v_retract_m_per_s"));
+    vafm_params_preset(&p, "paper-fig1", NULL);
+    p.sample_rate_Hz = 8e6; /* the highest rate the daemon is benchmarked at stays allowed */
+    ENSURE(vafm_params_validate(&p, &e) == 0);
+}
+
 int main(void)
 {
+    RUN_TEST(test_cost_estimate);
     RUN_TEST(test_field_table);
     RUN_TEST(test_presets);
     RUN_TEST(test_set_get_roundtrip);

@@ -73,6 +73,32 @@ typedef struct vafm_curve_result {
 
 /** Create a simulation for a validated scene. @return 0, VAFM_EINVAL/VAFM_EUNSTABLE (err filled) or
  *  VAFM_ENOMEM. On success *out is owned by the caller (vafm_sim_destroy). */
+/** The most output samples a curve or a thermal tune may have (2^25 = 33,554,432: a 3.4 s curve at
+ *  8 MS/s has 27 M; the CLI keeps a campaign curve's samples in memory at 41 bytes each, 1.4 GB here).
+ *  vafm_params_validate refuses a scene whose typical curve (vafm_sim_estimate) or tune exceeds it. */
+#define VAFM_SIM_MAX_SAMPLES ((uint64_t)1 << 25)
+/** The most integrator steps a typical curve or tune may take (hours of CPU at ~35 ns a step). */
+#define VAFM_SIM_MAX_STEPS 1e12
+
+/** What a curve and a thermal tune of a scene cost, estimated before running them. */
+typedef struct vafm_sim_estimate {
+    double duration_s;     /**< simulated duration of a typical curve: approach to the expected trigger,
+                                dwell, retract to the quasi-static detachment and the margin, s */
+    double duration_max_s; /**< the longest a curve can run (approach to its travel limit, retract to
+                                retract_max_m or the automatic limit), s */
+    double samples;        /**< output samples of a typical curve */
+    double samples_max;    /**< output samples of the longest curve */
+    double steps;          /**< integrator steps of a typical curve at the plain step (the exact free and
+                                well steps take fewer) */
+    double tune_samples;   /**< output samples of a thermal tune (tune_duration_s) */
+    double tune_steps;     /**< integrator steps of a thermal tune at the plain step */
+    uint8_t reserved[32];
+} vafm_sim_estimate;
+
+/** Estimate a scene's cost without running it (no allocation). @return 0, or the scene's validation
+ *  error (out is filled whenever the numerics could be derived). */
+VAFM_API int vafm_sim_estimate_cost(const vafm_params *p, vafm_sim_estimate *out, vafm_error *err);
+
 VAFM_API int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err);
 
 /** Destroy a simulation; NULL-safe; sets *s to NULL. */

@@ -19,6 +19,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -1115,6 +1116,55 @@ static void s_camp_summary(FILE *o, const s_scene *sc, const vafm_campaign_spec 
     free(stats);
 }
 
+/* The file a campaign will write, estimated before anything is written (vafm_sim_estimate_cost of every
+ * grid point; 41 bytes a sample: five float64 channels and the segment byte). Said on stderr; refused
+ * when it cannot fit the free space of the file system (with --gzip only said: the ratio is not known). */
+static int s_camp_size_check(const s_args *a, const s_camp_opts *co, const vafm_params *base,
+                             const vafm_campaign_spec *spec)
+{
+    uint64_t have = 0;
+    if (co->resume) {
+        vafm_h5_reader *r = NULL;
+        vafm_error e;
+        if (!vafm_h5_reader_open(&r, co->out, &e))
+            have = vafm_h5_reader_count(r);
+        vafm_h5_reader_destroy(&r);
+    }
+    size_t np = vafm_campaign_points(spec);
+    double bytes = 0.0, curves = 0.0;
+    for (size_t i = 0; i < np; i++) {
+        vafm_params p;
+        vafm_sim_estimate est;
+        vafm_campaign_point_params(base, spec, i, &p);
+        if (vafm_sim_estimate_cost(&p, &est, NULL))
+            continue;
+        /* the curves of this point still to run */
+        double lo = (double)i * (double)spec->curves_per_point, hi = lo + (double)spec->curves_per_point;
+        double todo = hi <= (double)have ? 0.0 : hi - fmax(lo, (double)have);
+        bytes += todo * est.samples * 41.0;
+        curves += todo;
+    }
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s", co->out);
+    char *slash = strrchr(dir, '/');
+    if (slash)
+        *(slash == dir ? slash + 1 : slash) = '\0';
+    else
+        snprintf(dir, sizeof dir, ".");
+    struct statvfs vs;
+    double avail = statvfs(dir, &vs) == 0 ? (double)vs.f_bavail * (double)vs.f_frsize : INFINITY;
+    if (!a->on[O_QUIET])
+        fprintf(stderr, "vafm: %s: %.0f curve(s) to run, ~%.3g GB of samples uncompressed (%.3g GB free there)\n",
+                co->out, curves, bytes / 1e9, avail / 1e9);
+    if (bytes > avail && !co->gzip) {
+        s_error("-n: the campaign would write ~%.3g GB to %s, more than the %.3g GB free on its file system; "
+                "run fewer curves (-n, the grid), lower sample_rate_Hz, or compress (--gzip)", bytes / 1e9, co->out,
+                avail / 1e9);
+        return S_EXIT_USAGE;
+    }
+    return 0;
+}
+
 /* One campaign, single-process (mpi NULL) or as one MPI rank (campaign_mpi.h): the same checks, the
  * same per-curve computation and the same writer callback; MPI only changes who computes which curve.
  * Rank 0 alone touches the file; the other ranks check their scene against rank 0's, then compute. */
@@ -1127,6 +1177,8 @@ static int s_campaign(const s_args *a, vafm_cli_mpi *mpi)
     int rc = s_grid_parse(a, &g);
     if (!rc && !(rc = s_curves_check(a, &sc, &g)) && !(rc = root ? s_camp_parse(a, &co) : 0))
         rc = s_check_points(&sc.p, &g.spec);
+    if (!rc && root)
+        rc = s_camp_size_check(a, &co, &sc.p, &g.spec);
     if ((rc = vafm_cli_mpi_agree(mpi, rc, &sc.p, &g.spec)) != 0) {
         s_grid_free(&g);
         return rc;

@@ -13,6 +13,7 @@
 #include "vafm/common.h"
 #include "vafm/contact.h"
 #include "vafm/params.h"
+#include "vafm/sim.h"
 #include "vafm/units.h"
 
 #if defined(__GNUC__)
@@ -41,10 +42,14 @@ typedef struct vafm_numerics {
     long n_sub_far;       /* steps per output sample there */
     double y_near;        /* spring distance u_spr − u_spr* below which the retract is "near" */
     double u_soft;        /* indentation where the branch's stiffness vanishes (JKR force minimum) */
+    double u_spr_turn;    /* spring position where the approach is expected to turn (the trigger) */
 } vafm_numerics;
 
 /** Derive the numerics of a scene and check them (time step against the stability limit, step count).
  *  out may be NULL. @return 0 or VAFM_EUNSTABLE / VAFM_EINVAL with err filled. */
 int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err);
+
+/** The cost estimate of a scene from its numerics (vafm_sim_estimate). */
+void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out);
 
 #endif

@@ -5,6 +5,7 @@
  * pull-off) and the stability check against it. One function, used by validation and by vafm_sim_new.
  */
 #include <math.h>
+#include <string.h>
 
 #include "vafm/integrator.h"
 #include "vafm/theory.h"
@@ -14,6 +15,77 @@
 static double s_x_at_force(double c, double F)
 {
     return 0.75 * (c + sqrt(c * c + 4.0 * F / 3.0));
+}
+
+void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out)
+{
+    const vafm_reduced *r = &nm->r;
+    const double L = nm->sc.length_m, T = nm->sc.time_s;
+    memset(out, 0, sizeof *out);
+    /* a typical curve: approach from the start to the trigger, dwell, retract to the quasi-static
+     * detachment and the margin after it (sim.c: s_begin, s_start_retract) */
+    double uspr_start = -p->start_height_m / L;
+    double approach = fmax(0.0, nm->u_spr_turn - uspr_start), margin = p->retract_margin_m / L;
+    double t = approach / r->v_approach + p->dwell_s / T + (nm->u_c + margin) / r->v_retract;
+    /* the longest: the approach to its travel limit, the retract to its own */
+    double sigma = r->k > 0 ? sqrt(r->kT / r->k) : 0.0;
+    double zr = p->z_range_m > 0 ? p->z_range_m / L
+                                 : fmax(0.0, -uspr_start) + 2.0 * (p->setpoint_N / nm->sc.force_N) / r->k + 20.0 * sigma + 1.0;
+    double ret = p->retract_max_m > 0 ? p->retract_max_m / L : 4.0 * fmax(zr + uspr_start - (nm->u_spr_turn - nm->u_c), 0.0) + margin + 1.0;
+    double tmax = zr / r->v_approach + p->dwell_s / T + (zr + ret) / r->v_retract;
+    out->duration_s = t * T;
+    out->duration_max_s = fmax(t, tmax) * T;
+    out->samples = t / nm->Ts;
+    out->samples_max = out->duration_max_s / T / nm->Ts;
+    out->steps = t / nm->dt;
+    out->tune_samples = p->tune_duration_s * p->sample_rate_Hz;
+    out->tune_steps = p->tune_duration_s / T / nm->dt;
+}
+
+/* Refuse a scene whose curve or tune would exceed the documented cost limits (vafm/sim.h), naming the
+ * field that drives it. @return 0 or VAFM_EINVAL. */
+static int s_check_cost(const vafm_params *p, const vafm_numerics *nm, vafm_error *e)
+{
+    vafm_sim_estimate est;
+    vafm_numerics_estimate(p, nm, &est);
+    const double T = nm->sc.time_s;
+    /* the part of the typical curve's time that dominates names the field */
+    double t_dwell = p->dwell_s, t_ret = est.duration_s - t_dwell, t_app = 0.0;
+    double uspr_start = -p->start_height_m / nm->sc.length_m;
+    t_app = fmax(0.0, nm->u_spr_turn - uspr_start) / nm->r.v_approach * T;
+    t_ret -= t_app;
+    const char *slow = t_dwell >= t_app && t_dwell >= t_ret ? "dwell_s"
+                       : t_app >= t_ret                       ? "v_approach_m_per_s"
+                                                              : "v_retract_m_per_s";
+    if (est.samples > (double)VAFM_SIM_MAX_SAMPLES) {
+        /* the field to change: the sample rate, unless the curve is too long even at 1 MS/s */
+        const char *field = est.duration_s * 1e6 > (double)VAFM_SIM_MAX_SAMPLES ? slow : "sample_rate_Hz";
+        vafm_err_set(e, VAFM_EINVAL, field,
+                     "a curve of this scene runs ~%.3g s (simulated; %s sets most of it) and would have ~%.3g samples "
+                     "at sample_rate_Hz = %.6g Hz: more than a curve may have (%llu, VAFM_SIM_MAX_SAMPLES; ~%.0f MB "
+                     "in memory); lower sample_rate_Hz or shorten the curve (%s)",
+                     est.duration_s, slow, est.samples, p->sample_rate_Hz, (unsigned long long)VAFM_SIM_MAX_SAMPLES,
+                     est.samples * 41e-6, slow);
+        return VAFM_EINVAL;
+    }
+    if (est.tune_samples > (double)VAFM_SIM_MAX_SAMPLES) {
+        vafm_err_set(e, VAFM_EINVAL, "tune_duration_s",
+                     "a thermal tune of tune_duration_s = %.6g s at %.6g Hz would have %.3g samples: more than %llu "
+                     "(VAFM_SIM_MAX_SAMPLES); shorten it or lower sample_rate_Hz",
+                     p->tune_duration_s, p->sample_rate_Hz, est.tune_samples, (unsigned long long)VAFM_SIM_MAX_SAMPLES);
+        return VAFM_EINVAL;
+    }
+    if (est.steps > VAFM_SIM_MAX_STEPS || est.tune_steps > VAFM_SIM_MAX_STEPS) {
+        int tune = est.tune_steps > est.steps;
+        vafm_err_set(e, VAFM_EINVAL, tune ? "tune_duration_s" : slow,
+                     "a %s of this scene runs ~%.3g s (simulated) at a time step of %.3g s: ~%.3g integrator steps, "
+                     "more than %.0e (VAFM_SIM_MAX_STEPS, hours of CPU); %s",
+                     tune ? "thermal tune" : "curve", tune ? p->tune_duration_s : est.duration_s, nm->dt * T,
+                     tune ? est.tune_steps : est.steps, VAFM_SIM_MAX_STEPS,
+                     tune ? "shorten tune_duration_s" : "raise the speeds or shorten dwell_s");
+        return VAFM_EINVAL;
+    }
+    return 0;
 }
 
 int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err)
@@ -65,6 +137,7 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
         }
     }
     nm->u_c = fmax(u_spr_turn - u_end, 0.0);
+    nm->u_spr_turn = u_spr_turn;
     if (p->start_in_contact) {
         /* an equilibrium on the contact branch exists for spring positions above the instability */
         double uspr0 = -p->start_height_m / nm->sc.length_m;
@@ -141,6 +214,8 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
         nm->n_sub_far = nf < 1 ? 1 : nf;
         nm->dt_far = nm->Ts / (double)nm->n_sub_far;
     }
+    if (s_check_cost(p, nm, err))
+        return VAFM_EINVAL;
     if (it == vafm_integrator_paper_vv) {
         double eta_dt = (1.0 + (has_contact ? r->eta_cont : 0.0)) * dt;
         if (!(eta_dt < 2.0)) {

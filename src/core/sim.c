@@ -77,6 +77,21 @@ struct vafm_sim {
     uint8_t *bseg;
 };
 
+int vafm_sim_estimate_cost(const vafm_params *p, vafm_sim_estimate *out, vafm_error *err)
+{
+    if (!p || !out) {
+        vafm_err_set(err, VAFM_EINVAL, "", "vafm_sim_estimate_cost: no scene or output given");
+        return VAFM_EINVAL;
+    }
+    memset(out, 0, sizeof *out);
+    vafm_numerics nm;
+    memset(&nm, 0, sizeof nm);
+    int rc = vafm_numerics_check(p, &nm, NULL); /* derives the numerics even when a limit is exceeded */
+    if (rc != VAFM_EUNSTABLE && isfinite(nm.dt) && nm.dt > 0)
+        vafm_numerics_estimate(p, &nm, out);
+    return vafm_params_validate(p, err);
+}
+
 int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
 {
     if (!out) {

@@ -283,6 +283,22 @@ static json_t *s_start_replay(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     return s_run_accepted(d, c, run_id, VAFMD_RUN_REPLAY, block_n);
 }
 
+/* With logging on, a run whose typical curve has more samples than the writer assembles in memory is
+ * refused at once (wire.md "log"). @return 0, or -1 with e filled. */
+static int s_log_fits(vafmd *d, const vafm_params *p, const char *where, vafmd_err *e)
+{
+    if (atomic_load_explicit(&d->log.state, memory_order_acquire) != VAFMD_LOG_ON)
+        return 0;
+    vafm_sim_estimate est;
+    if (vafm_sim_estimate_cost(p, &est, NULL) || est.samples <= (double)VAFMD_LOG_MAX_CURVE_SAMPLES)
+        return 0;
+    vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "sample_rate_Hz",
+                  "%s: with logging on a curve may have at most %zu samples (256 MiB in the writer); this one would "
+                  "have ~%.3g (%.3g s at %.6g Hz): lower sample_rate_Hz, or stop logging",
+                  where, VAFMD_LOG_MAX_CURVE_SAMPLES, est.samples, est.duration_s, p->sample_rate_Hz);
+    return -1;
+}
+
 static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
     int kind = c->kind == VAFMD_CMD_TUNE     ? VAFMD_RUN_TUNE
@@ -327,6 +343,10 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     if (rc) {
         vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "cannot build the simulation: %s",
                       verr.message[0] ? verr.message : vafm_strerror(rc));
+        return NULL;
+    }
+    if (kind == VAFMD_RUN_CURVE && s_log_fits(d, &p, "curve", e)) {
+        vafm_sim_destroy(&sim);
         return NULL;
     }
     uint64_t run_id = d->next_run_id;
@@ -405,21 +425,28 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     cp->spec.first_curve = c->camp_first;
     size_t points = vafm_campaign_points(&cp->spec);
     cp->total = c->camp_n * (uint64_t)points; /* ≤ 1e9 · 1e5: no overflow */
-    /* every point's scene, as vafm campaign checks them before its first curve */
+    /* every point's scene, as vafm campaign checks them before its first curve (vafm_campaign_validate);
+     * with logging on, each point's curves must fit the writer */
+    size_t bad = 0;
+    vafm_error cverr = { 0 };
+    int crc = vafm_campaign_validate(&cp->base, &cp->spec, &bad, &cverr);
+    if (crc) {
+        const char *field = !strcmp(cverr.field, "T_K") && n[0]                   ? names[0]
+                            : strstr(cverr.field, "_m_per_s") && n[1]             ? names[1]
+                            : !strcmp(cverr.field, "k_N_per_m") && n[2]           ? names[2]
+                                                                                  : cverr.field;
+        vafmd_err_set(e, n[0] + n[1] + n[2] ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_INVALID_SCENE, field, "%s",
+                      cverr.message[0] ? cverr.message : vafm_strerror(crc));
+        free(cp->lists);
+        free(cp);
+        return NULL;
+    }
     for (size_t pt = 0; pt < points; pt++) {
         vafm_params pp;
-        vafm_error verr = { 0 };
-        int rc = vafm_campaign_point_params(&cp->base, &cp->spec, pt, &pp);
-        if (!rc)
-            rc = vafm_params_validate(&pp, &verr);
-        if (rc) {
-            const char *field = !strcmp(verr.field, "T_K") && n[0]                   ? names[0]
-                                : strstr(verr.field, "_m_per_s") && n[1]             ? names[1]
-                                : !strcmp(verr.field, "k_N_per_m") && n[2]           ? names[2]
-                                                                                     : verr.field;
-            vafmd_err_set(e, n[0] + n[1] + n[2] ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_INVALID_SCENE, field,
-                          "grid point %zu (T_K %g, v_m_per_s %g, k_N_per_m %g): %s", pt, pp.T_K,
-                          pp.v_retract_m_per_s, pp.k_N_per_m, verr.message[0] ? verr.message : vafm_strerror(rc));
+        char where[64];
+        vafm_campaign_point_params(&cp->base, &cp->spec, pt, &pp);
+        snprintf(where, sizeof where, "grid point %zu", pt);
+        if (s_log_fits(d, &pp, where, e)) {
             free(cp->lists);
             free(cp);
             return NULL;

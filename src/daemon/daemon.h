@@ -149,6 +149,11 @@ typedef struct vafmd_log_notice {
     int ok;
 } vafmd_log_notice;
 
+/* The writer assembles a logged curve in memory before it appends it: at most this many samples (33
+ * bytes each: 256 MiB, wire.md "log"). A run whose typical curve is longer is refused while logging is on;
+ * a curve that grows past it anyway (no trigger, a late detachment) is not written (log_failed). */
+#define VAFMD_LOG_MAX_CURVE_SAMPLES ((size_t)(256u << 20) / 33u)
+
 #define VAFMD_LOG_NOTICE_CAP 256 /* the writer waits (it may; the simulation thread never does) when full */
 
 typedef struct vafmd_log {

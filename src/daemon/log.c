@@ -29,17 +29,22 @@ typedef struct s_curve {
     uint8_t *segment;
 } s_curve;
 
+static void s_curve_free(s_curve *c);
+
 static void s_curve_reset(s_curve *c)
 {
     free(c->begin);
     c->begin = NULL;
     c->broken = 0;
     c->n = 0;
+    if (c->cap > ((size_t)1 << 20)) /* a long curve's buffers go back to the system (an idle daemon holds
+                                      at most ~35 MB of them) */
+        s_curve_free(c);
 }
 
 static void s_curve_free(s_curve *c)
 {
-    s_curve_reset(c);
+    free(c->begin);
     free(c->time_s);
     free(c->height_m);
     free(c->force_N);
@@ -52,9 +57,13 @@ static int s_curve_grow(s_curve *c, size_t need)
 {
     if (need <= c->cap)
         return 0;
+    if (need > VAFMD_LOG_MAX_CURVE_SAMPLES)
+        return -1; /* the curve is not written (log_failed), memory stays bounded */
     size_t cap = c->cap ? c->cap : 65536;
     while (cap < need)
         cap *= 2;
+    if (cap > VAFMD_LOG_MAX_CURVE_SAMPLES)
+        cap = VAFMD_LOG_MAX_CURVE_SAMPLES;
     double **d[4] = { &c->time_s, &c->height_m, &c->force_N, &c->tip_m };
     for (int i = 0; i < 4; i++) {
         double *p = realloc(*d[i], cap * sizeof(double));
