@@ -58,10 +58,10 @@ static int s_one(const uint8_t *data, size_t len)
                               (c.log_overwrite && c.log_resume)))
                 ok = -1;
         }
-        vafmd_cmd_free(&c);
     } else if (!s_known_code(e.code) || !e.message[0]) {
         ok = -1;
     }
+    vafmd_cmd_free(&c); /* a rejected request is kept too (its id is echoed) */
     if (!ok) {
         json_t *r = vafmd_error_reply(&e, NULL);
         char *t = json_dumps(r, JSON_COMPACT);

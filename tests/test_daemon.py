@@ -175,6 +175,9 @@ def test_idempotent_retry_and_state_errors():
     # a retry after the end still answers with the same run and starts nothing
     r3 = d.cmd({"cmd": "tune", "duration_s": 0.05, "client_run_id": "job-42"})
     assert r3["run_id"] == r1["run_id"] and r3["duplicate"] is True
+    # ... and says it has ended (a client must not wait for its run.end), with the same block_samples
+    assert r3["state"] == "ended" and "run.end" in r3["note"] and r3["block_samples"] == r1["block_samples"], r3
+    assert r2["state"] == "running" and r2["block_samples"] == r1["block_samples"], r2
     assert d.wait_idle()["runs_started"] == 1
     # abort mid-run
     r4 = d.cmd({"cmd": "tune", "duration_s": 0.05})
@@ -1019,6 +1022,59 @@ def test_huge_curves_refused_before_they_start(tmp_path):
         assert d.cmd({"cmd": "log", "stop": True})["status"] == "ok"
     finally:
         assert d.stop() == 0
+
+
+EXAMPLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "protocol", "examples")
+
+
+def test_error_examples_match_the_daemon(fig4):
+    """Every error example of protocol/examples/ (but the state-dependent ones) is what the daemon answers:
+    the same code, field and echoed id; the unknown-command message (it lists the commands) word for word."""
+    checked = 0
+    for name in sorted(os.listdir(EXAMPLES)):
+        if not name.startswith("error_") or name in ("error_state.json", "error_log_path.json"):
+            continue
+        with open(os.path.join(EXAMPLES, name)) as f:
+            ex = json.load(f)
+        req = ex["request"]
+        raw = req.encode() if isinstance(req, str) else json.dumps(req).encode()
+        r = fig4.send_raw(raw)
+        want = ex["reply"]
+        assert (r["status"], r["code"], r.get("field"), r.get("id")) == \
+            (want["status"], want["code"], want.get("field"), want.get("id")), (name, r)
+        if name == "error_unknown_command.json":
+            assert r["message"] == want["message"], (name, r)
+        checked += 1
+    assert checked >= 4
+
+
+def test_error_codes_pinned_down(fig4):
+    """wire.md §2.2's list of the cases the code table could leave open, and the id echoed on every error."""
+    cases = [
+        (b'{"cmd":"fly","id":"u1"}', "unknown_command", "cmd", "u1"),
+        (b'{"cmd":"curve","bogus":1,"id":2}', "unknown_field", "bogus", 2),
+        (b'{"id":3}', "missing_field", "cmd", 3),
+        (b'{"cmd":3,"id":4}', "wrong_type", "cmd", 4),
+        (b'{"cmd":"curve","index":"x","id":[5]}', "wrong_type", "index", [5]),
+        (b'{"cmd":"set","values":{"k_N_per_m":1e400}}', "out_of_range", "k_N_per_m", None),
+        (b'{"cmd":"set","values":{"T_K":123456789012345678901234567890}}', "out_of_range", "T_K", None),
+        (b'{"cmd":"curve","index":9223372036854775808}', "out_of_range", "index", None),
+        (b'{"cmd":"curve","index":-1,"id":"n"}', "out_of_range", "index", "n"),
+        (b'{"cmd":"campaign","n":1,"first_index":-1}', "out_of_range", "first_index", None),
+        (b'{"cmd":"replay","path":"a.h5","curves":[-1]}', "out_of_range", "curves", None),
+        (b'{"cmd":"set","values":{"seed":-1}}', "out_of_range", "seed", None),
+        (b'{"cmd":"set","values":{"seed":1.5}}', "wrong_type", "seed", None),
+        (b'{"cmd":"set","values":{"adc_bits":8.5}}', "wrong_type", "adc_bits", None),
+        (b'{"cmd":"set","values":{"free_exact":1}}', "wrong_type", "free_exact", None),
+        (b'{"cmd":"log"}', "missing_field", "path", None),
+        (b'{"cmd":"log","path":"x.h5","overwrite":true,"resume":true}', "out_of_range", "resume", None),
+        (b'{"cmd":"set"}', "missing_field", "values", None),
+        (b'[' * 3000 + b']' * 3000, "malformed", None, None),
+    ]
+    for raw, code, field, rid in cases:
+        r = fig4.send_raw(raw)
+        assert (r["status"], r["code"], r.get("field"), r.get("id")) == ("error", code, field, rid), (raw[:60], r)
+    assert fig4.cmd({"cmd": "status"})["state"] == "idle"
 
 
 # ---- compute ahead (lookahead_s; protocol/wire.md §5.1) --------------------------------------------------

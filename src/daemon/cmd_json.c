@@ -170,6 +170,11 @@ static int s_param_apply(vafm_params *p, const vafm_param_info *f, json_t *v, va
 {
     char text[64], allowed[160];
     vafm_scene_json_allowed(f, allowed, sizeof allowed);
+    if (f->kind == VAFM_PARAM_SEED && json_is_integer(v) && json_integer_value(v) < 0) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, f->name, "'%s' = %" JSON_INTEGER_FORMAT " is negative: expected %s",
+                      f->name, json_integer_value(v), allowed);
+        return -1;
+    }
     if (!vafm_scene_value_text(f, v, text, sizeof text)) {
         vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' has the wrong type: expected %s", f->name, allowed);
         return -1;
@@ -225,6 +230,33 @@ static int s_key_allowed(int kind, const char *key)
     return strstr(keys, pat) != NULL;
 }
 
+/* The JSON object key whose value ends near byte `pos` of buf: the last "key": before it. */
+static void s_key_before(const void *buf, size_t pos, char *key, size_t len)
+{
+    const char *b = buf;
+    size_t i = pos;
+    while (i > 0 && b[i - 1] != ':')
+        i--;
+    if (i == 0)
+        return;
+    size_t end = i - 1;
+    while (end > 0 && (b[end - 1] == ' ' || b[end - 1] == '\t' || b[end - 1] == '\n' || b[end - 1] == '\r'))
+        end--;
+    if (end == 0 || b[end - 1] != '"')
+        return;
+    size_t start = end - 1;
+    while (start > 0 && b[start - 1] != '"')
+        start--;
+    size_t n = end - 1 - start;
+    if (start == 0 || n == 0 || n >= len)
+        return;
+    for (size_t k = 0; k < n; k++)
+        if ((unsigned char)b[start + k] < 0x20 || b[start + k] == '\\')
+            return;
+    memcpy(key, b + start, n);
+    key[n] = '\0';
+}
+
 int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
 {
     memset(c, 0, sizeof *c);
@@ -236,6 +268,16 @@ int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
     json_error_t jerr;
     json_t *root = json_loadb(buf, len, JSON_REJECT_DUPLICATES, &jerr);
     if (!root) {
+        if (json_error_code(&jerr) == json_error_numeric_overflow) {
+            /* valid JSON, a number beyond doubles or 64-bit integers: out of range, not malformed; the
+             * field is the key just before it */
+            char key[64] = "";
+            s_key_before(buf, jerr.position >= 0 && (size_t)jerr.position < len ? (size_t)jerr.position : len, key, sizeof key);
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, key, "the number %s%s%sat line %d, column %d is out of range (beyond "
+                          "64-bit integers or double precision)", key[0] ? "of '" : "", key, key[0] ? "' " : "",
+                          jerr.line, jerr.column);
+            return -1;
+        }
         vafmd_err_set(e, VAFMD_E_MALFORMED, "", "not valid JSON: %s (line %d, column %d)", jerr.text, jerr.line,
                       jerr.column);
         return -1;
@@ -267,11 +309,22 @@ static int s_decode_replay(json_t *root, vafmd_cmd *c, vafmd_err *e)
     if ((v = json_object_get(root, "curves")) != NULL) {
         int ok = json_is_string(v) && json_string_length(v) >= 1 && json_string_length(v) <= 4096 &&
                  strlen(json_string_value(v)) == json_string_length(v);
+        int negative = 0;
         if (json_is_array(v)) {
             size_t i;
             json_t *x;
             ok = 1;
-            json_array_foreach(v, i, x) if (!json_is_integer(x) || json_integer_value(x) < 0) ok = 0;
+            json_array_foreach(v, i, x) {
+                if (!json_is_integer(x))
+                    ok = 0;
+                else if (json_integer_value(x) < 0)
+                    negative = 1;
+            }
+        }
+        if (ok && negative) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "\"curves\" lists a negative curve number (curve "
+                          "groups are numbered from 0)");
+            return -1;
         }
         if (!ok) {
             vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "curves", "\"curves\" must be \"all\", a string like \"0,3,5-9\" "
@@ -317,6 +370,10 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         vafmd_err_set(e, VAFMD_E_MALFORMED, "", "a request must be a JSON object {\"cmd\": NAME, ...}");
         return -1;
     }
+    /* from here on the request could be read: its "id" is echoed by every reply, an error's too (wire.md
+     * §2.2), so c keeps the request (and id) even when decoding fails; vafmd_cmd_free releases it */
+    c->root = json_incref(root);
+    c->id = json_object_get(root, "id");
     json_t *cmd = json_object_get(root, "cmd");
     if (!cmd) {
         vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "cmd", "the request has no \"cmd\"");
@@ -345,7 +402,6 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
     }
     c->kind = kind;
-    c->id = json_object_get(root, "id");
     if ((v = json_object_get(root, "names")) != NULL) {
         if (!json_is_array(v)) {
             vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "names", "\"names\" must be an array of strings");
@@ -387,7 +443,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     }
     if ((v = json_object_get(root, "index")) != NULL && s_cmd_keys[kind]) {
         if (!json_is_integer(v) || json_integer_value(v) < 0) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "index", "\"index\" must be an integer in [0, 2^63-1]");
+            /* the type is right for a negative integer, its value is not (wire.md §2.2) */
+            vafmd_err_set(e, json_is_integer(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "index",
+                          "\"index\" must be an integer in [0, 2^63-1]");
             return -1;
         }
         c->has_index = 1;
@@ -468,7 +526,8 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         if ((v = json_object_get(root, "first_index")) != NULL) {
             if (!json_is_integer(v) || json_integer_value(v) < 0) {
-                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "first_index", "\"first_index\" must be an integer >= 0");
+                vafmd_err_set(e, json_is_integer(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "first_index",
+                              "\"first_index\" must be an integer >= 0");
                 return -1;
             }
             c->camp_first = (uint64_t)json_integer_value(v);
@@ -520,7 +579,6 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     }
     if (kind == VAFMD_CMD_REPLAY && s_decode_replay(root, c, e))
         return -1;
-    c->root = json_incref(root);
     return 0;
 }
 

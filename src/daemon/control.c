@@ -29,6 +29,7 @@ typedef struct s_hist {
     uint64_t run_id;
     int kind;              /* enum vafmd_run_kind, or S_KIND_CAMPAIGN */
     uint64_t campaign_id, curves; /* campaigns */
+    size_t block_samples;  /* runs: the accepted reply's block_samples (a duplicate reply repeats it) */
 } s_hist;
 #define S_KIND_CAMPAIGN 1000
 
@@ -241,6 +242,18 @@ static s_hist *s_history_add(const vafmd_cmd *c, uint64_t run_id, int kind)
     return h;
 }
 
+/* A duplicate start's reply says whether that run (a campaign: its first run) is still going: a client
+ * that waits for its run.end after an "ended" answer would wait forever, so it is told (wire.md "curve"). */
+static void s_duplicate_state(vafmd *d, json_t *r, uint64_t run_id)
+{
+    int running = s_busy(d) && (d->pending_run_id == run_id || d->camp_run_id == run_id);
+    json_object_set_new(r, "state", json_string(running ? "running" : "ended"));
+    if (!running)
+        json_object_set_new(r, "note", json_string("this run has ended: its run.end was published on the stream "
+                                                   "already (and its curve logged, with logging on); start a new "
+                                                   "run with a new client_run_id to run again"));
+}
+
 /* A run handed to the simulation thread: count it, remember its client run id (idempotent retries)
  * and build the ok reply. */
 static json_t *s_run_accepted(vafmd *d, const vafmd_cmd *c, uint64_t run_id, int kind, size_t block_n)
@@ -249,7 +262,9 @@ static json_t *s_run_accepted(vafmd *d, const vafmd_cmd *c, uint64_t run_id, int
     d->next_run_id++;
     d->runs_started++;
     d->jobs_started++;
-    s_history_add(c, run_id, kind);
+    s_hist *h = s_history_add(c, run_id, kind);
+    if (h)
+        h->block_samples = block_n;
     json_t *r = s_ok(c);
     json_object_set_new(r, "run_id", json_integer((json_int_t)run_id));
     json_object_set_new(r, "client_run_id", c->client_run_id[0] ? json_string(c->client_run_id) : json_null());
@@ -317,6 +332,8 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             json_object_set_new(r, "run_id", json_integer((json_int_t)h->run_id));
             json_object_set_new(r, "client_run_id", json_string(h->client_run_id));
             json_object_set_new(r, "duplicate", json_true());
+            json_object_set_new(r, "block_samples", json_integer((json_int_t)h->block_samples));
+            s_duplicate_state(d, r, h->run_id);
             return r;
         }
     }
@@ -391,6 +408,7 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             json_object_set_new(r, "run_id", json_integer((json_int_t)h->run_id));
             json_object_set_new(r, "client_run_id", json_string(h->client_run_id));
             json_object_set_new(r, "duplicate", json_true());
+            s_duplicate_state(d, r, h->run_id);
             return r;
         }
     }
@@ -612,10 +630,11 @@ int vafmd_control_loop(vafmd *d)
         json_t *r = NULL;
         if (parts > 1)
             vafmd_err_set(&e, VAFMD_E_MALFORMED, "", "a request is one single-frame message (got %d frames)", parts);
-        else if (vafmd_cmd_decode(zmq_msg_data(&msg), zmq_msg_size(&msg), &c, &e) == 0) {
-            r = s_execute(d, &c, &quit, &e);
+        else {
+            if (vafmd_cmd_decode(zmq_msg_data(&msg), zmq_msg_size(&msg), &c, &e) == 0)
+                r = s_execute(d, &c, &quit, &e);
             if (!r)
-                r = vafmd_error_reply(&e, c.id);
+                r = vafmd_error_reply(&e, c.id); /* the id of any request that was a JSON object */
             vafmd_cmd_free(&c);
         }
         if (!r)

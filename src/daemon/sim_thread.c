@@ -578,9 +578,13 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
             json_object_set_new(o, "steps_free", json_integer((json_int_t)res.steps_free));
             json_object_set_new(j, "result", o);
             if (!strcmp(status, "ok") && !(res.flags & VAFM_CURVE_NO_CONTACT) && isfinite(res.detach_time_s))
-                s_send_json(x, "event", json_pack("{s:I,s:s,s:o,s:o,s:o}", "run_id", (json_int_t)r->cmd.run_id,
-                                                   "kind", "detach", "time_s", s_num_or_null(res.detach_time_s),
-                                                   "height_m", s_num_or_null(res.detach_height_m), "force_N",
+                /* time_s from the run's start, as every other stream time; retract_time_s from the retract's
+                 * start (the result's detach_time_s) */
+                s_send_json(x, "event", json_pack("{s:I,s:s,s:o,s:o,s:o,s:o}", "run_id", (json_int_t)r->cmd.run_id,
+                                                   "kind", "detach", "time_s",
+                                                   s_num_or_null(res.retract_start_s + res.detach_time_s),
+                                                   "retract_time_s", s_num_or_null(res.detach_time_s), "height_m",
+                                                   s_num_or_null(res.detach_height_m), "force_N",
                                                    s_num_or_null(res.detach_force_N)));
         }
     }
