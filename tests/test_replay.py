@@ -357,7 +357,7 @@ def test_damaged_files_refused_and_daemon_stays_up(fig4, tmp_path):
     error_ok(fig4.cmd({"cmd": "replay", "path": 3}), "wrong_type", "path")
     error_ok(fig4.cmd({"cmd": "replay", "path": str(ok), "curves": "1"}), "out_of_range", "curves")
     error_ok(fig4.cmd({"cmd": "replay", "path": str(ok), "curves": "0,x"}), "out_of_range", "curves")
-    error_ok(fig4.cmd({"cmd": "replay", "path": str(ok), "curves": [0, -1]}), "wrong_type", "curves")
+    error_ok(fig4.cmd({"cmd": "replay", "path": str(ok), "curves": [0, -1]}), "out_of_range", "curves")  # a negative group number (wire.md §2.2)
     error_ok(fig4.cmd({"cmd": "replay", "path": str(ok), "speed": 0}), "out_of_range", "speed")
     error_ok(fig4.cmd({"cmd": "replay", "path": str(ok), "loop": 0}), "out_of_range", "loop")
     error_ok(fig4.cmd({"cmd": "replay", "path": str(ok), "loop": "always"}), "wrong_type", "loop")

@@ -677,17 +677,18 @@ static int s_cmd_samples(const s_args *a)
     }
     s_progress pg;
     s_progress_init(&pg, a);
-    fputs("time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
     int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : vafm_sim_curve_begin(sim, index);
+    int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
+    fputs("time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
     if (!r)
         r = s_advance_all(sim, s_write_samples, f, &pg);
     rc = s_close_out(f, a->val[O_CSV], r == VAFM_EABORT);
     if (r && r != VAFM_EABORT) {
         const vafm_error *e = vafm_sim_error(sim);
         s_error("%s %" PRIu64 " failed: %s", a->on[O_TUNE] ? "tune" : "curve", index,
-                e ? e->message : vafm_strerror(r));
+                e && e->message[0] ? e->message : vafm_strerror(r));
         vafm_sim_destroy(&sim);
-        return S_EXIT_RUNTIME;
+        return began ? S_EXIT_RUNTIME : s_exit_of(r);
     }
     vafm_sim_destroy(&sim);
     return rc;

@@ -49,6 +49,11 @@ typedef struct vafm_numerics {
  *  out may be NULL. @return 0 or VAFM_EUNSTABLE / VAFM_EINVAL with err filled. */
 int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err);
 
+/** A thermal tune of the scene within VAFM_SIM_MAX_SAMPLES and VAFM_SIM_MAX_STEPS? @return 0 or
+ *  VAFM_EINVAL naming tune_duration_s. (Checked when a tune starts, not by validation: a scene for fast
+ *  curves at a high sample rate is valid though its default tune would not be.) */
+int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, vafm_error *err);
+
 /** The cost estimate of a scene from its numerics (vafm_sim_estimate). */
 void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out);
 

@@ -68,21 +68,31 @@ static int s_check_cost(const vafm_params *p, const vafm_numerics *nm, vafm_erro
                      est.samples * 41e-6, slow);
         return VAFM_EINVAL;
     }
-    if (est.tune_samples > (double)VAFM_SIM_MAX_SAMPLES) {
-        vafm_err_set(e, VAFM_EINVAL, "tune_duration_s",
-                     "a thermal tune of tune_duration_s = %.6g s at %.6g Hz would have %.3g samples: more than %llu "
-                     "(VAFM_SIM_MAX_SAMPLES); shorten it or lower sample_rate_Hz",
-                     p->tune_duration_s, p->sample_rate_Hz, est.tune_samples, (unsigned long long)VAFM_SIM_MAX_SAMPLES);
-        return VAFM_EINVAL;
-    }
-    if (est.steps > VAFM_SIM_MAX_STEPS || est.tune_steps > VAFM_SIM_MAX_STEPS) {
-        int tune = est.tune_steps > est.steps;
+    /* (a tune's own limits are checked when a tune starts: vafm_numerics_check_tune) */
+    if (est.steps > VAFM_SIM_MAX_STEPS) {
+        int tune = 0;
         vafm_err_set(e, VAFM_EINVAL, tune ? "tune_duration_s" : slow,
                      "a %s of this scene runs ~%.3g s (simulated) at a time step of %.3g s: ~%.3g integrator steps, "
                      "more than %.0e (VAFM_SIM_MAX_STEPS, hours of CPU); %s",
                      tune ? "thermal tune" : "curve", tune ? p->tune_duration_s : est.duration_s, nm->dt * T,
                      tune ? est.tune_steps : est.steps, VAFM_SIM_MAX_STEPS,
                      tune ? "shorten tune_duration_s" : "raise the speeds or shorten dwell_s");
+        return VAFM_EINVAL;
+    }
+    return 0;
+}
+
+int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, vafm_error *err)
+{
+    vafm_sim_estimate est;
+    vafm_numerics_estimate(p, nm, &est);
+    if (est.tune_samples > (double)VAFM_SIM_MAX_SAMPLES || est.tune_steps > VAFM_SIM_MAX_STEPS) {
+        vafm_err_set(err, VAFM_EINVAL, "tune_duration_s",
+                     "a thermal tune of tune_duration_s = %.6g s at %.6g Hz would have %.3g samples and %.3g steps: "
+                     "more than %llu samples (VAFM_SIM_MAX_SAMPLES) or %.0e steps (VAFM_SIM_MAX_STEPS); shorten it or "
+                     "lower sample_rate_Hz",
+                     p->tune_duration_s, p->sample_rate_Hz, est.tune_samples, est.tune_steps,
+                     (unsigned long long)VAFM_SIM_MAX_SAMPLES, VAFM_SIM_MAX_STEPS);
         return VAFM_EINVAL;
     }
     return 0;

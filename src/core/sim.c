@@ -303,6 +303,10 @@ int vafm_sim_tune_begin(vafm_sim *s, uint64_t index)
 {
     if (!s)
         return VAFM_EINVAL;
+    memset(&s->err, 0, sizeof s->err);
+    int rc = vafm_numerics_check_tune(&s->p, &s->nm, &s->err);
+    if (rc)
+        return rc;
     s_begin(s, index, S_SCENE_TUNE);
     return 0;
 }

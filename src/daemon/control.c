@@ -366,6 +366,16 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         vafm_sim_destroy(&sim);
         return NULL;
     }
+    vafm_sim_estimate est;
+    if (kind == VAFMD_RUN_TUNE && !vafm_sim_estimate_cost(&p, &est, NULL) &&
+        (est.tune_samples > (double)VAFM_SIM_MAX_SAMPLES || est.tune_steps > VAFM_SIM_MAX_STEPS)) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s",
+                      "a tune of %.6g s at %.6g Hz would have %.3g samples (at most %llu, VAFM_SIM_MAX_SAMPLES) and %.3g "
+                      "steps (at most %.0e): shorten it or lower sample_rate_Hz", p.tune_duration_s, p.sample_rate_Hz,
+                      est.tune_samples, (unsigned long long)VAFM_SIM_MAX_SAMPLES, est.tune_steps, VAFM_SIM_MAX_STEPS);
+        vafm_sim_destroy(&sim);
+        return NULL;
+    }
     uint64_t run_id = d->next_run_id;
     size_t block_n = vafmd_block_samples(p.sample_rate_Hz, d->set.block_s);
     vafmd_sim_cmd sc;
