@@ -13,11 +13,13 @@
 #      refused naming the groups.
 #   9. the study's plotter never goes through a shell: a directory named x'$(touch pwned)' runs nothing,
 #      one named O'Brien gets its figure.
-# Usage: test_faults.sh path/to/vafm [--asan]. Prints one line per check and "N passed, M failed".
+#   and the smaller ones: vafm listen keeps an existing CSV without --overwrite; vafm info names at most 20
+#   unreadable curves; vafmd binds tcp://localhost and names the endpoint it cannot bind.
+# Usage: test_faults.sh path/to/vafm path/to/vafmd. Prints one line per check and "N passed, M failed".
 set -u
 
-VAFM=${1:?usage: test_faults.sh path/to/vafm [--asan]}
-ASAN=${2:-}
+VAFM=${1:?usage: test_faults.sh path/to/vafm path/to/vafmd}
+VAFMD=${2:?usage: test_faults.sh path/to/vafm path/to/vafmd}
 PY=/usr/bin/python3
 . "$(dirname "$0")/harness.sh"
 
@@ -171,5 +173,36 @@ if "$PY" -c 'import matplotlib' 2>/dev/null; then
 else
     ok "O'Brien figure: skipped (no matplotlib for $PY)"
 fi
+
+# ---- smaller ones --------------------------------------------------------------------------------
+echo "keep me" >keep.csv
+expect "vafm listen keeps an existing CSV without --overwrite" 2 "--overwrite replaces it" -- \
+    listen --out keep.csv --endpoint ipc://"$TMP"/nobody --timeout 200
+if [ "$(cat keep.csv)" = "keep me" ]; then ok "... and the CSV is unchanged"; else bad "... and the CSV is unchanged"; fi
+if "$PY" -c 'import h5py' 2>/dev/null; then
+    "$PY" -c '
+import h5py
+with h5py.File("empty.h5", "w") as f:
+    f.attrs["software"] = "test"; f.attrs["software version"] = "0"
+    for i in range(3000):
+        f.create_group(str(i))'
+    run info empty.h5
+    lines=$(grep -c "" "$TMP/err")
+    if [ "$rc" -ne 0 ] && [ "$lines" -le 25 ] && grep -q "2980 more curve(s)" "$TMP/err"; then
+        ok "vafm info of 3000 empty groups names 20 and sums up the rest ($lines lines)"
+    else bad "vafm info of 3000 empty groups names 20 and sums up the rest" "exit $rc, $lines lines"; fi
+fi
+port=$("$PY" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()')
+"$VAFMD" --preset paper-fig4 --rep "tcp://localhost:$port" --pub "tcp://localhost:$((port + 1))" 2>"$TMP/d1.err" &
+DAEMON=$!
+for _ in $(seq 1 100); do "$VAFM" ctl --endpoint "tcp://localhost:$port" --timeout 200 hello >/dev/null 2>&1 && break; sleep 0.1; done
+run ctl --endpoint "tcp://localhost:$port" hello
+if [ "$rc" -eq 0 ] && grep -q '"protocol_version"' "$TMP/out"; then ok "vafmd binds tcp://localhost (as 127.0.0.1) and answers there"
+else bad "vafmd binds tcp://localhost (as 127.0.0.1) and answers there" "exit $rc: $(cat "$TMP/d1.err")"; fi
+"$VAFMD" --preset paper-fig4 --rep "tcp://127.0.0.1:$port" --pub "tcp://127.0.0.1:$((port + 2))" 2>"$TMP/d2.err"
+if [ $? -eq 1 ] && grep -q "cannot bind tcp://127.0.0.1:$port" "$TMP/d2.err"; then ok "a second vafmd names the endpoint it cannot bind"
+else bad "a second vafmd names the endpoint it cannot bind" "$(cat "$TMP/d2.err")"; fi
+"$VAFM" ctl --endpoint "tcp://localhost:$port" shutdown >/dev/null 2>&1
+wait "$DAEMON"
 
 harness_done

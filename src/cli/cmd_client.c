@@ -509,7 +509,7 @@ static const char *s_listen_usage =
     "  --start KIND       after subscribing, start one run (curve or tune) and record it\n"
     "  --index I          with --start: the run's random stream index (default 0)\n"
     "  --duration S       with --start tune: its duration in s (default: the scene's)\n"
-    "  --overwrite        replace an existing FILE.h5\n"
+    "  --overwrite        replace an existing FILE.h5 or FILE.csv\n"
     "Runs already in progress when listen subscribes are skipped (their start was missed). A run with\n"
     "lost data blocks (a sequence gap) is not written; listen names it on stderr, goes on, and exits 1.\n";
 
@@ -870,8 +870,11 @@ int vafm_cli_listen(int argc, char **argv)
             return S_RUNTIME;
         }
     } else {
-        L.csv = strcmp(L.out, "-") ? fopen(L.out, "w") : stdout;
+        /* an existing file is kept unless --overwrite says otherwise (as for FILE.h5) */
+        L.csv = strcmp(L.out, "-") ? fopen(L.out, overwrite ? "w" : "wx") : stdout;
         if (!L.csv) {
+            if (errno == EEXIST)
+                return s_usage(&x, s_listen_usage, "the output file exists already; --overwrite replaces it");
             s_err(&x, "cannot open '%s' for writing: %s", L.out, strerror(errno));
             return S_RUNTIME;
         }

@@ -45,6 +45,7 @@ enum { S_EXIT_OK = 0, S_EXIT_RUNTIME = 1, S_EXIT_USAGE = 2 };
 #define S_PROGRESS_PERIOD_S 0.5
 #define S_CHUNK_SAMPLES 64 /* samples per vafm_sim_advance call: progress granularity of one curve */
 #define S_MAX_TOTAL_CURVES 1000000000000000ULL
+#define S_MAX_CURVE_ERRORS 20 /* vafm info names at most this many unreadable curves */
 
 /* ---- messages --------------------------------------------------------------------------------- */
 
@@ -1419,13 +1420,19 @@ static int s_cmd_info(const s_args *a)
         memset(&err, 0, sizeof err);
         int cr = vafm_h5_reader_curve(r, i, &c, &err);
         if (cr) {
-            fflush(stdout);
-            s_error("%s", err.message[0] ? err.message : vafm_strerror(cr));
+            /* the first S_MAX_CURVE_ERRORS are named; a file of a million damaged groups is summed up */
+            if (damaged < S_MAX_CURVE_ERRORS) {
+                fflush(stdout);
+                s_error("%s", err.message[0] ? err.message : vafm_strerror(cr));
+            }
             damaged++;
             continue;
         }
         s_info_curve_line(stdout, &c, r, pv.is_vafm);
     }
+    if (damaged > S_MAX_CURVE_ERRORS)
+        s_error("%s: ... and %" PRIu64 " more curve(s) that cannot be read (only the first %d are named)", a->file,
+                damaged - S_MAX_CURVE_ERRORS, S_MAX_CURVE_ERRORS);
     if (pv.is_vafm && ip.scene_ok && ip.grid_ok && n) {
         size_t np = vafm_campaign_points(&ip.spec);
         vafm_point_stats *stats = calloc(np, sizeof *stats);

@@ -67,6 +67,14 @@ static int s_endpoint_allowed(const char *ep)
     return !strncmp(h, "127.", 4) || !strncmp(h, "localhost:", 10) || !strncmp(h, "[::1]:", 6);
 }
 
+static void s_bind_address(const char *ep, char *out, size_t len)
+{
+    if (!strncmp(ep, "tcp://localhost:", 16))
+        snprintf(out, len, "tcp://127.0.0.1:%s", ep + 16);
+    else
+        snprintf(out, len, "%s", ep);
+}
+
 static int s_usage_error(const char *fmt, const char *a)
 {
     fprintf(stderr, "vafmd: ");
@@ -309,8 +317,13 @@ int main(int argc, char **argv)
         zmq_ctx_term(d.zctx);
         return 1;
     }
-    if (zmq_bind(d.rep, rep_ep) || zmq_bind(d.pub, pub_ep)) {
-        fprintf(stderr, "vafmd: cannot bind: %s\n", zmq_strerror(errno));
+    /* ZeroMQ binds to interfaces and addresses, not host names: tcp://localhost:P is bound as 127.0.0.1 */
+    char rep_bind[4200], pub_bind[4200];
+    s_bind_address(rep_ep, rep_bind, sizeof rep_bind);
+    s_bind_address(pub_ep, pub_bind, sizeof pub_bind);
+    const char *failed = zmq_bind(d.rep, rep_bind) ? rep_ep : zmq_bind(d.pub, pub_bind) ? pub_ep : NULL;
+    if (failed) {
+        fprintf(stderr, "vafmd: cannot bind %s: %s\n", failed, zmq_strerror(errno));
         if (d.auth.zap)
             zmq_close(d.auth.zap);
         zmq_close(d.rep);

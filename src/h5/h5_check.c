@@ -45,7 +45,10 @@ static int s_vlen_str(s_ctx *x, const char *rule, hid_t loc, const char *obj, co
 {
     vafm_h5i_val v;
     *out = NULL;
-    if (H5Aexists(loc, name) <= 0)
+    htri_t ex = H5Aexists(loc, name);
+    if (ex < 0) /* a damaged header is not a missing attribute */
+        FAIL_H5(rule, obj, "attribute '%s' cannot be looked up (damaged file)", name);
+    if (ex == 0)
         FAIL(rule, obj, "attribute '%s' is missing", name);
     if (vafm_h5i_attr_get(loc, name, &v))
         FAIL_H5(rule, obj, "attribute '%s' cannot be read", name);
