@@ -171,7 +171,7 @@ def test_idempotent_retry_and_state_errors():
     start, blocks, _, end = collect_run(s, r1["run_id"])
     assert end["status"] == "ok" and end["client_run_id"] == "job-42"
     assert end["samples"] == sum(h[7] for h, _ in blocks) == round(0.05 * start["sample_rate_Hz"])
-    assert 0.45 < end["wall_s"] < 5, end  # paced: 0.05 s / 0.1
+    assert 0.49 <= end["wall_s"] < 20, end  # paced: 0.05 s / 0.1, never early; the late side is the machine's
     # a retry after the end still answers with the same run and starts nothing
     r3 = d.cmd({"cmd": "tune", "duration_s": 0.05, "client_run_id": "job-42"})
     assert r3["run_id"] == r1["run_id"] and r3["duplicate"] is True
@@ -242,7 +242,7 @@ def test_stalled_subscriber_drops_without_slowdown():
     end, st = run_tune(d, healthy, 0.5)  # the healthy subscriber still gets every block, no gap
     assert end["blocks"] == 500
     assert st["dropped"] > 0 and end["dropped"] > 0, st
-    assert end["wall_s"] < 3 * end0["wall_s"] + 1.0, (end, end0)  # a publisher that blocked would never end
+    assert end["wall_s"] < 10 * end0["wall_s"] + 5.0, (end, end0)  # a publisher that blocked would never end
     stalled.close(0)
     assert d.stop() == 0
 
@@ -442,7 +442,7 @@ def test_log_signal_mid_run_leaves_valid_file(tmp_path, sig):
     assert d.cmd({"cmd": "set", "values": {"free_run": False, "speed": 0.05}})["status"] == "ok"
     rr = d.cmd({"cmd": "curve", "index": 2})
     time.sleep(0.3)
-    assert d.cmd({"cmd": "status"})["state"] == "running"
+    assert d.cmd({"cmd": "status"})["state"] in ("running", "starting")  # a loaded machine may be slow to start it
     d.proc.send_signal(sig)
     assert d.proc.wait(timeout=20) == 0
     assert collect_run(s, rr["run_id"], timeout_ms=5000)[3]["status"] == "aborted"
@@ -946,7 +946,7 @@ def test_log_kill9_loses_at_most_the_curve_in_progress(tmp_path):
     assert d.cmd({"cmd": "set", "values": {"free_run": False, "speed": 0.05}})["status"] == "ok"
     d.cmd({"cmd": "curve", "index": 2})
     time.sleep(0.3)
-    assert d.cmd({"cmd": "status"})["state"] == "running"
+    assert d.cmd({"cmd": "status"})["state"] in ("running", "starting")  # a loaded machine may be slow to start it
     d.proc.kill()  # SIGKILL: no clean-up at all
     d.proc.wait(timeout=10)
     d.ctx.destroy(0)

@@ -102,14 +102,22 @@ def test_logged_run_replays_bit_for_bit(fig4, tmp_path):
 
 # ---- pacing -------------------------------------------------------------------------------------------
 
+def slow_bound(D):
+    """The latest a paced run of duration D may end and still pass: never early is exact (the lower bound
+    D); the late side only catches gross errors, whatever the machine's load (a run ignoring its speed of
+    10, or paced at a tenth of it, fails)."""
+    return 1.5 * D + 2.0
+
+
 @pytest.mark.parametrize("speed,passes", [(1, 6), (10, 40)])
 def test_pacing_follows_recorded_rate(tmp_path, speed, passes):
     """A logged curve replayed `passes` times: the last block is released at t_start + D/speed, where D
     is the recorded duration (n / sample rate per pass: a vafm file's time column is uniform). Pacing
-    never releases a block early, so run.end's wall_s ≥ D/speed exactly; the late side depends on the
-    machine's load (stalls of ~0.1 s seen on a loaded 2-core machine): tolerance 0.25 s + 10 %, which
-    still fails a replay paced at half the asked speed (1×: 0.76 s > 0.67 s). Same bound on the client's clock, from the reply to the last
-    block (the run's clock starts after the reply is sent: at most a few ms earlier than it is read)."""
+    never releases a block early, so run.end's wall_s ≥ D/speed exactly. The late side depends on the
+    machine's load (stalls of ~0.1-0.5 s seen on a loaded 2-core machine with the sanitizers), so it is
+    bounded only against gross errors (SLOW_BOUND: a replay that ignored `speed` 10 fails it); how close to
+    its deadlines a block leaves is measured by bench/bench_daemon.py, not asserted here (issue #18: a test
+    must not depend on how busy the machine is)."""
     d = Daemon("--preset", "paper-fig4", "--free-run")
     try:
         s = d.sub(greet=True)
@@ -125,8 +133,8 @@ def test_pacing_follows_recorded_rate(tmp_path, speed, passes):
         start, blocks, events, end, t_first, t_last = collect_run(s, rr["run_id"])
         assert start["speed"] == speed and start["replay"]["passes"] == passes
         assert end["status"] == "ok" and end["samples"] == passes * n
-        assert D <= end["wall_s"] <= D * 1.1 + 0.25, (D, end["wall_s"])
-        assert D - 0.05 <= t_last - t_reply <= D * 1.1 + 0.25 + (t_reply - t0), (D, t_last - t_reply)
+        assert D <= end["wall_s"] <= slow_bound(D), (D, end["wall_s"])
+        assert D - 0.05 <= t_last - t_reply <= slow_bound(D) + (t_reply - t0), (D, t_last - t_reply)
         assert not any(h[12] & 8 for h, _ in blocks)  # paced, not FREE_RUN
         # one curve event per pass, at the pass boundaries
         assert [(e["sample"], e["pass"]) for e in events if e["kind"] == "curve"] == [(p * n, p) for p in range(passes)]
@@ -226,7 +234,7 @@ def test_instrument_file_without_time_or_provenance(tmp_path):
         start, blocks, events, end, _, _ = collect_run(s, r2["run_id"])
         D = 2 * (250 / ra + 150 / rr) / 5
         assert start["replay"]["duration_per_pass_s"] == pytest.approx(250 / ra + 150 / rr, rel=1e-12)  # at 1×
-        assert end["samples"] == 800 and D <= end["wall_s"] <= D * 1.1 + 0.25, (D, end["wall_s"])
+        assert end["samples"] == 800 and D <= end["wall_s"] <= slow_bound(D), (D, end["wall_s"])
     finally:
         assert d.stop() == 0
 
@@ -262,7 +270,7 @@ def test_non_uniform_time_streamed_with_timestamps(tmp_path):
         # recorded span + one mean interval, at speed 10
         mean_dt = (t[-1] - t[0]) / (na + nr - 1)
         D = (t[-1] - t[0] + mean_dt) / speed
-        assert D <= end["wall_s"] <= D * 1.1 + 0.25, (D, end["wall_s"])
+        assert D <= end["wall_s"] <= slow_bound(D), (D, end["wall_s"])
         # the block holding sample 499 (the approach's last) is released 0.5 s / 10 = 50 ms after the
         # run start, never earlier (uniform pacing would give 125 ms): on the client's clock, from the
         # reply, in [45, 100) ms -- the upper bound only if the daemon did not flag the block LATE
