@@ -1024,6 +1024,46 @@ def test_huge_curves_refused_before_they_start(tmp_path):
         assert d.stop() == 0
 
 
+def test_log_on_a_full_disk_fails_cleanly(tmp_path):
+    """Issue #18, finding 3: the log's file system fills up (RLIMIT_FSIZE: writes fail with EFBIG, as with
+    ENOSPC): the curves that do not fit are announced log_failed, status.log names the OS's reason, the
+    file holds every curve announced logged, and shutdown exits 0 (it crashed in HDF5's exit handler)."""
+    h5py = pytest.importorskip("h5py")
+    import resource
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1500 * 1024, 1500 * 1024))
+
+    d = Daemon("--preset", "paper-fig4", "--free-run", preexec_fn=limit)
+    path = tmp_path / "full.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    s = d.sub()
+    settle(d, s)
+    r = d.cmd({"cmd": "campaign", "n": 8})  # ~0.5 MB a curve: the third does not fit
+    assert r["status"] == "ok", r
+    logged, failed, ended = {}, set(), 0
+    deadline = time.monotonic() + 120
+    while ended < 8 or len(logged) + len(failed) < 8:
+        assert time.monotonic() < deadline and s.poll(TIMEOUT_MS), (ended, logged, failed)
+        parts = s.recv_multipart()
+        if parts[0] == b"run.end":
+            ended += 1
+        elif parts[0] == b"event":
+            j = json.loads(parts[1])
+            if j["kind"] == "logged":
+                logged[j["run_id"]] = j["group"]
+            elif j["kind"] == "log_failed":
+                failed.add(j["run_id"])
+    assert len(logged) >= 1 and len(failed) >= 1, (logged, failed)
+    st = d.cmd({"cmd": "status"})["log"]
+    assert st["curves_dropped"] == len(failed) and "File too large" in (st["error"] or ""), st
+    assert d.stop() == 0, d.proc.stderr.read().decode()[-2000:]
+    with h5py.File(path, "r") as f:
+        assert sorted(int(k) for k in f.keys()) == sorted(logged.values())
+    vafm_info_ok(path)
+
+
 EXAMPLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "protocol", "examples")
 
 

@@ -18,21 +18,23 @@ VAFMD = os.environ.get("VAFMD")
 TIMEOUT_MS = 20000
 HEADER = struct.Struct("<IHHQQQQIHHdqII")  # the data header, protocol/wire.md §4 (72 bytes)
 
-_STARTED = []  # every daemon process a test started: reaped after the test, also when it failed
+_STARTED = []  # (process, private folder) of every daemon a test started: reaped after the test, also
+# when it failed, and its folder of ipc:// sockets removed (a test run leaves no vafmd-* folder behind)
 
 
 @pytest.fixture(autouse=True)
 def reap_daemons():
     yield
     while _STARTED:
-        p = _STARTED.pop()
+        p, folder = _STARTED.pop()
         if p.poll() is None:
             p.kill()
             p.wait()
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 class Daemon:
-    def __init__(self, *args, tcp=False, curve=None, env=None):
+    def __init__(self, *args, tcp=False, curve=None, env=None, preexec_fn=None):
         self.curve = curve  # (server public key, client public key, client secret key), Z85 bytes
         self.dir = tempfile.mkdtemp(prefix="vafmd-")
         if tcp:
@@ -41,8 +43,8 @@ class Daemon:
             self.rep, self.pub = f"ipc://{self.dir}/rep", f"ipc://{self.dir}/pub"
         self.proc = subprocess.Popen([VAFMD, "--rep", self.rep, "--pub", self.pub, *args],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     env={**os.environ, **env} if env else None)
-        _STARTED.append(self.proc)
+                                     env={**os.environ, **env} if env else None, preexec_fn=preexec_fn)
+        _STARTED.append((self.proc, self.dir))
         self.ctx = zmq.Context()
         self.req = None
         self._connect()

@@ -189,7 +189,10 @@ static int s_create(vafm_h5_writer *w, vafm_error *err)
 static int s_read_root_str(hid_t file, const char *name, char **out)
 {
     *out = NULL;
-    if (H5Aexists(file, name) <= 0)
+    htri_t ex = H5Aexists(file, name);
+    if (ex < 0)
+        return -1; /* cannot be looked up: a damaged header, not a missing attribute */
+    if (ex == 0)
         return 0;
     vafm_h5i_val v;
     if (vafm_h5i_attr_get(file, name, &v))
@@ -276,8 +279,12 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
     }
     char *fmt = NULL;
     int ma = -1, mi = -1;
-    if (s_read_root_str(w->file, VAFM_H5I_A_FORMAT, &fmt) || !fmt || sscanf(fmt, "%d.%d", &ma, &mi) != 2 ||
-        ma != VAFM_H5_FORMAT_MAJOR) {
+    if (s_read_root_str(w->file, VAFM_H5I_A_FORMAT, &fmt)) {
+        vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: the root attributes cannot be read (damaged "
+                          "file header)", w->path);
+        return VAFM_EFORMAT;
+    }
+    if (!fmt || sscanf(fmt, "%d.%d", &ma, &mi) != 2 || ma != VAFM_H5_FORMAT_MAJOR) {
         vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x (root attribute '"
                      VAFM_H5I_A_FORMAT "' is %s)", w->path, VAFM_H5_FORMAT_MAJOR, fmt ? fmt : "missing");
         free(fmt);
