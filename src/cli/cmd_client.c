@@ -21,7 +21,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "cli/cli_ext.h"
+#include "cli/cli.h"
 #include "cli/cmd_client.h"
 #include "vafm/scene.h"
 #include "vafm/client.h"

@@ -15,7 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "cli/cli_ext.h"
+#include "cli/cli.h"
 #include "vafm/client.h"
 
 static const char *s_usage_text =

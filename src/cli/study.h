@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * `vafm study` and `vafm theory` (issue #7): the paper's results reproduced as campaigns with fits,
- * theory beside every point, a report and figures. Entry points for the cli_ext table, and the scene
+ * theory beside every point, a report and figures. Entry points for the command table (vafm.c), and the scene
  * option parser both commands share (preset, scene file, --NAME=VALUE overrides, as `vafm run`).
  */
 #ifndef VAFM_CLI_STUDY_H

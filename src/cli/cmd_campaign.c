@@ -1,0 +1,475 @@
+/* SPDX-License-Identifier: MIT */
+/* `vafm curves` (N curves per grid point: statistics, CSV) and `vafm campaign` (the same into one HDF5 file, resumable, on MPI too). */
+#include "cli/cli.h"
+
+/* ---- vafm curves: the campaign ----------------------------------------------------------------- */
+
+typedef struct s_curves {
+    FILE *csv;
+    vafm_point_stats *stats;
+    vafm_cli_progress pg;
+    uint64_t done, total;
+    int fail_status, io_error;
+    uint64_t fail_index;
+} s_curves;
+
+static int s_csv_row(FILE *f, const vafm_campaign_curve *c)
+{
+    const vafm_curve_result *r = &c->result;
+    const vafm_params *p = c->params;
+    return fprintf(f,
+                   "%" PRIu64 ",%zu,%.17g,%.17g,%.17g,%d,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,"
+                   "%" PRIu64 ",%" PRIu64 ",%" PRIu64 ",%" PRIu64 ",%.17g\n",
+                   c->index, c->point, p->T_K, p->v_retract_m_per_s, p->k_N_per_m, r->flags, r->pulloff_sampled_N,
+                   r->pulloff_spring_N, r->detach_force_N, r->detach_height_m, r->detach_eq_force_N,
+                   r->detach_time_s, r->touch_time_s, r->touch_height_m, r->retract_start_s, r->samples, r->steps,
+                   r->steps_contact, r->steps_free, r->duration_s);
+}
+
+static const char s_csv_header[] =
+    "index,point,T_K,v_m_per_s,k_N_per_m,flags,pulloff_sampled_N,pulloff_spring_N,detach_force_N,"
+    "detach_height_m,detach_eq_force_N,detach_time_s,touch_time_s,touch_height_m,retract_start_s,samples,"
+    "steps,steps_contact,steps_free,duration_s\n";
+
+/* "done/total curves, rate, ETA" on the progress line, when one is due (vafm curves and campaign). */
+static void s_progress_curves(vafm_cli_progress *pg, uint64_t done, uint64_t total)
+{
+    if (!vafm_cli_progress_due(pg))
+        return;
+    double wall = vafm_cli_now() - pg->t0, rate = (double)done / wall;
+    char line[160];
+    snprintf(line, sizeof line, "%" PRIu64 "/%" PRIu64 " curves, %.3g curves/s, ETA %.0f s", done, total, rate,
+             rate > 0 ? (double)(total - done) / rate : 0.0);
+    vafm_cli_progress_line(pg, line);
+}
+
+static void s_curves_progress(s_curves *cv)
+{
+    s_progress_curves(&cv->pg, cv->done, cv->total);
+}
+
+/* Called in index order, one at a time. A failed curve stops the campaign: it is a runtime error. */
+static int s_on_curve(void *user, const vafm_campaign_curve *c)
+{
+    s_curves *cv = user;
+    if (c->status) {
+        cv->fail_status = c->status;
+        cv->fail_index = c->index;
+        return 1;
+    }
+    if (cv->csv && s_csv_row(cv->csv, c) < 0) {
+        cv->io_error = 1;
+        return 1;
+    }
+    vafm_point_stats_add(&cv->stats[c->point], 0, &c->result);
+    cv->done++;
+    s_curves_progress(cv);
+    return 0;
+}
+
+typedef struct s_grid {
+    vafm_campaign_spec spec;
+    double *T, *v, *k;
+} s_grid;
+
+static void s_grid_free(s_grid *g)
+{
+    free(g->T);
+    free(g->v);
+    free(g->k);
+}
+
+static int s_grid_parse(const vafm_cli_args *a, s_grid *g)
+{
+    memset(g, 0, sizeof *g);
+    uint64_t N = 1, threads = 0, first = 0;
+    int rc = 0;
+    if (!a->val[O_N]) {
+        vafm_cli_error("vafm %s: -n N (curves per grid point) is required", a->cmd->name);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    if ((rc = vafm_cli_parse_u64("-n", a->val[O_N], 1, 1000000000ULL, &N)) ||
+        (a->val[O_THREADS] && (rc = vafm_cli_parse_u64("--threads", a->val[O_THREADS], 0, 256, &threads))) ||
+        (a->val[O_FIRST] && (rc = vafm_cli_parse_u64("--first", a->val[O_FIRST], 0, UINT64_MAX, &first))) ||
+        (a->val[O_T] && (rc = vafm_cli_parse_list("--T", a->val[O_T], &g->T, &g->spec.n_T))) ||
+        (a->val[O_V] && (rc = vafm_cli_parse_list("--v", a->val[O_V], &g->v, &g->spec.n_v))) ||
+        (a->val[O_K] && (rc = vafm_cli_parse_list("--k", a->val[O_K], &g->k, &g->spec.n_k))))
+        return rc;
+    g->spec.T_K = g->T;
+    g->spec.v_m_per_s = g->v;
+    g->spec.k_N_per_m = g->k;
+    g->spec.curves_per_point = N;
+    g->spec.threads = (int)threads;
+    g->spec.first_curve = first;
+    size_t np = vafm_campaign_points(&g->spec);
+    if ((double)np * (double)N > (double)VAFM_CLI_MAX_TOTAL_CURVES) {
+        vafm_cli_error("vafm %s: %zu grid points x %" PRIu64 " curves is too many", a->cmd->name, np, N);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    if (first > N * np) {
+        vafm_cli_error("--first: %" PRIu64 " is beyond the campaign's %" PRIu64 " curves", first, N * (uint64_t)np);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    return 0;
+}
+
+
+static void s_print_campaign_line(FILE *o, const vafm_campaign_spec *spec, uint64_t done, double wall)
+{
+    fprintf(o, "campaign     %zu grid point(s) x %" PRIu64 " curves, %" PRIu64 " run in %.3f s (%.4g curves/s)\n",
+            vafm_campaign_points(spec), spec->curves_per_point, done, wall, wall > 0 ? (double)done / wall : 0.0);
+}
+
+static void s_print_curves_summary(FILE *o, const vafm_cli_scene *sc, const s_grid *g, const s_curves *cv, double wall)
+{
+    vafm_cli_print_provenance(o, sc);
+    s_print_campaign_line(o, &g->spec, cv->done, wall);
+    vafm_cli_print_statistics(o, &sc->p, &g->spec, cv->stats);
+}
+
+/* With no grid lists the base scene is the only point: check it here for a plain error message
+ * (the campaign's own check prefixes the grid point). */
+static int s_curves_check(const vafm_cli_args *a, vafm_cli_scene *sc, const s_grid *g)
+{
+    int grid = g->spec.n_T || g->spec.n_v || g->spec.n_k;
+    return vafm_cli_resolve_scene(a, sc, !grid);
+}
+
+static int s_curves_finish(const s_curves *cv, int r, const vafm_error *err)
+{
+    if (cv->fail_status) {
+        vafm_cli_error("curve %" PRIu64 " failed: %s", cv->fail_index, vafm_strerror(cv->fail_status));
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
+    if (cv->io_error)
+        return VAFM_CLI_EXIT_RUNTIME; /* reported when the file is closed */
+    if (r)
+        return vafm_cli_report(err, r);
+    return VAFM_CLI_EXIT_OK;
+}
+
+int vafm_cli_cmd_curves(const vafm_cli_args *a)
+{
+    s_grid g;
+    vafm_cli_scene sc;
+    int rc = s_grid_parse(a, &g);
+    if (rc || (rc = s_curves_check(a, &sc, &g)) != 0) {
+        s_grid_free(&g);
+        return rc;
+    }
+    s_curves cv;
+    memset(&cv, 0, sizeof cv);
+    size_t np = vafm_campaign_points(&g.spec);
+    cv.total = g.spec.curves_per_point * (uint64_t)np - g.spec.first_curve;
+    cv.stats = calloc(np, sizeof *cv.stats);
+    if (!cv.stats) {
+        s_grid_free(&g);
+        vafm_cli_error("out of memory");
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
+    const char *csv_path = a->val[O_CSV];
+    if (csv_path && !(cv.csv = vafm_cli_open_out(csv_path))) {
+        free(cv.stats);
+        s_grid_free(&g);
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
+    if (cv.csv)
+        fputs(s_csv_header, cv.csv);
+    vafm_cli_progress_init(&cv.pg, a);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_campaign_run(&sc.p, &g.spec, s_on_curve, &cv, &err);
+    double wall = vafm_cli_now() - cv.pg.t0;
+    vafm_cli_progress_end(&cv.pg);
+    int crc = cv.csv ? vafm_cli_close_out(cv.csv, csv_path, cv.io_error) : 0;
+    rc = s_curves_finish(&cv, r == VAFM_EABORT ? 0 : r, &err);
+    /* The summary goes where the CSV does not. */
+    int csv_stdout = csv_path && !strcmp(csv_path, "-");
+    if (!rc && !crc && !(csv_stdout && a->on[O_QUIET]))
+        s_print_curves_summary(csv_stdout ? stderr : stdout, &sc, &g, &cv, wall);
+    free(cv.stats);
+    s_grid_free(&g);
+    return rc ? rc : crc;
+}
+
+/* ---- vafm campaign: one HDF5 file ------------------------------------------------------------------ */
+
+/*
+ * The curves reach s_camp_curve in index order, one at a time, from whichever worker finished the next
+ * one, and go into the file at once through the recorder (vafm/record.h), which flushes on a timer
+ * (--flush-interval) from its own thread: a kill -9 at any moment loses at most the curves of the last
+ * interval; --resume recomputes exactly those.
+ */
+
+typedef struct s_camp {
+    vafm_recorder *rec;
+    int werr_code; /* the first recorder error */
+    vafm_error werr;
+    vafm_cli_progress pg; /* the fields below belong to the delivering worker */
+    uint64_t done, total;
+    int fail_status;
+    uint64_t fail_index;
+} s_camp;
+
+/* Called in index order, one at a time. A failed curve stops the campaign, as in vafm curves. */
+static int s_camp_curve(void *user, const vafm_campaign_curve *c)
+{
+    s_camp *cp = user;
+    if (c->status) {
+        cp->fail_status = c->status;
+        cp->fail_index = c->index;
+        return 1;
+    }
+    vafm_record_curve rc = { .samples = &c->samples, .params = c->params, .result = &c->result,
+                             .point = c->point, .sensitivity_m_per_V = NAN };
+    int r = vafm_recorder_append(cp->rec, &rc, &cp->werr);
+    if (r) {
+        cp->werr_code = r;
+        return 1;
+    }
+    cp->done++;
+    s_progress_curves(&cp->pg, cp->done, cp->total);
+    return 0;
+}
+
+/* Every grid point's scene, checked before the file is created (so a bad grid leaves no file behind). */
+static int s_check_points(const vafm_params *base, const vafm_campaign_spec *spec)
+{
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_campaign_validate(base, spec, NULL, &err);
+    if (r) {
+        vafm_cli_error("%s", err.message[0] ? err.message : vafm_strerror(r));
+        return vafm_cli_exit_of(r);
+    }
+    return 0;
+}
+
+typedef struct s_camp_opts {
+    const char *out;
+    int resume, overwrite, gzip;
+    double interval;
+    double mb_before; /* size of the file continued by --resume */
+} s_camp_opts;
+
+static int s_camp_parse(const vafm_cli_args *a, s_camp_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->out = a->val[O_OUT];
+    o->resume = a->on[O_RESUME];
+    o->overwrite = a->on[O_OVERWRITE];
+    o->interval = 1.0;
+    uint64_t gz = 0;
+    int rc = 0;
+    if ((a->val[O_FLUSH] && (rc = vafm_cli_parse_real("--flush-interval", a->val[O_FLUSH], 0.0,
+                                               VAFM_RECORD_MAX_FLUSH_INTERVAL_S, "s", &o->interval))) ||
+        (a->val[O_GZIP] && (rc = vafm_cli_parse_u64("--gzip", a->val[O_GZIP], 0, 9, &gz))))
+        return rc;
+    o->gzip = (int)gz;
+    if (!o->out) {
+        vafm_cli_error("vafm campaign: --out FILE.h5 (the HDF5 file to write) is required");
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    if (o->resume && o->overwrite) {
+        vafm_cli_error("vafm campaign: --resume continues %s and --overwrite replaces it; give one of them", o->out);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    struct stat st;
+    int exists = stat(o->out, &st) == 0;
+    if (exists && !o->resume && !o->overwrite) {
+        vafm_cli_error("vafm campaign: %s exists already; --resume continues it, --overwrite replaces it", o->out);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    if (!exists && o->resume) {
+        vafm_cli_error("vafm campaign: --resume: %s cannot be resumed: %s", o->out, strerror(errno));
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    o->mb_before = o->resume ? (double)st.st_size / 1e6 : 0.0;
+    return 0;
+}
+
+/* Open (create or resume) the file and record or compare the provenance. */
+static int s_camp_open(s_camp *cp, const s_camp_opts *o, const vafm_cli_scene *sc, const vafm_campaign_spec *spec)
+{
+    vafm_recorder_opts ro;
+    vafm_recorder_opts_default(&ro);
+    ro.mode = o->resume ? VAFM_RECORD_RESUME : o->overwrite ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE;
+    ro.gzip_level = o->gzip;
+    /* a flush rewrites the file's metadata: a 0 s interval still flushes from the flusher thread, as
+     * soon as a curve waits, so the workers never wait on it */
+    ro.flush_interval_s = o->interval > 0 ? o->interval : 1e-9;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_recorder_open(&cp->rec, o->out, &ro, &sc->p, spec, &err);
+    return r ? vafm_cli_report(&err, r) : 0;
+}
+
+static void s_camp_summary(FILE *o, const vafm_cli_scene *sc, const vafm_campaign_spec *spec, const s_camp_opts *co,
+                           const s_camp *cp, const vafm_recorder_report *rep, uint64_t first, double wall)
+{
+    uint64_t in_file = first + cp->done;
+    double mb = vafm_cli_file_mb(co->out);
+    vafm_cli_print_provenance(o, sc);
+    fprintf(o, "file         %s: %" PRIu64 " curves (%" PRIu64 " kept from before, %" PRIu64 " new), %.4g MB written, "
+               "%.4g MB on disk\n",
+            co->out, in_file, first, cp->done, mb - co->mb_before, mb);
+    s_print_campaign_line(o, spec, cp->done, wall);
+    fprintf(o, "writer       %.3f s in open, append, flush and close = %.2f%% of the wall time; %" PRIu64
+               " flush(es) (every %g s and at the end), %.4g MB/s\n",
+            rep->writer_s, wall > 0 ? 100.0 * rep->writer_s / wall : 0.0, rep->flushes, co->interval,
+            wall > 0 ? (mb - co->mb_before) / wall : 0.0);
+    /* The statistics cover every curve of the file, from its ground truth. */
+    vafm_h5_reader *r = NULL;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    size_t np = vafm_campaign_points(spec);
+    vafm_point_stats *stats = calloc(np, sizeof *stats);
+    if (stats && !vafm_h5_reader_open(&r, co->out, &err)) {
+        vafm_cli_truth_stats(r, np, stats);
+        vafm_cli_print_statistics(o, &sc->p, spec, stats);
+    } else {
+        fprintf(o, "statistics   n/a: %s\n", stats ? err.message : "out of memory");
+    }
+    vafm_h5_reader_destroy(&r);
+    free(stats);
+}
+
+/* The file a campaign will write, estimated before anything is written (vafm_sim_estimate_cost of every
+ * grid point; 41 bytes a sample: five float64 channels and the segment byte). Said on stderr; refused
+ * when it cannot fit the free space of the file system (with --gzip only said: the ratio is not known). */
+static int s_camp_size_check(const vafm_cli_args *a, const s_camp_opts *co, const vafm_params *base,
+                             const vafm_campaign_spec *spec)
+{
+    uint64_t have = 0;
+    if (co->resume) {
+        vafm_h5_reader *r = NULL;
+        vafm_error e;
+        if (!vafm_h5_reader_open(&r, co->out, &e))
+            have = vafm_h5_reader_count(r);
+        vafm_h5_reader_destroy(&r);
+    }
+    size_t np = vafm_campaign_points(spec);
+    double bytes = 0.0, curves = 0.0;
+    for (size_t i = 0; i < np; i++) {
+        vafm_params p;
+        vafm_sim_estimate est;
+        vafm_campaign_point_params(base, spec, i, &p);
+        if (vafm_sim_estimate_cost(&p, &est, NULL))
+            continue;
+        /* the curves of this point still to run */
+        double lo = (double)i * (double)spec->curves_per_point, hi = lo + (double)spec->curves_per_point;
+        double todo = hi <= (double)have ? 0.0 : hi - fmax(lo, (double)have);
+        bytes += todo * est.samples * 41.0;
+        curves += todo;
+    }
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s", co->out);
+    char *slash = strrchr(dir, '/');
+    if (slash)
+        *(slash == dir ? slash + 1 : slash) = '\0';
+    else
+        snprintf(dir, sizeof dir, ".");
+    struct statvfs vs;
+    double avail = statvfs(dir, &vs) == 0 ? (double)vs.f_bavail * (double)vs.f_frsize : INFINITY;
+    if (!a->on[O_QUIET])
+        fprintf(stderr, "vafm: %s: %.0f curve(s) to run, ~%.3g GB of samples uncompressed (%.3g GB free there)\n",
+                co->out, curves, bytes / 1e9, avail / 1e9);
+    if (bytes > avail && !co->gzip) {
+        vafm_cli_error("-n: the campaign would write ~%.3g GB to %s, more than the %.3g GB free on its file system; "
+                "run fewer curves (-n, the grid), lower sample_rate_Hz, or compress (--gzip)", bytes / 1e9, co->out,
+                avail / 1e9);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    return 0;
+}
+
+/* One campaign, single-process (mpi NULL) or as one MPI rank (campaign_mpi.h): the same checks, the
+ * same per-curve computation and the same writer callback; MPI only changes who computes which curve.
+ * Rank 0 alone touches the file; the other ranks check their scene against rank 0's, then compute. */
+static int s_campaign(const vafm_cli_args *a, vafm_cli_mpi *mpi)
+{
+    s_grid g;
+    vafm_cli_scene sc;
+    s_camp_opts co;
+    int root = vafm_cli_mpi_rank(mpi) == 0;
+    int rc = s_grid_parse(a, &g);
+    if (!rc && !(rc = s_curves_check(a, &sc, &g)) && !(rc = root ? s_camp_parse(a, &co) : 0))
+        rc = s_check_points(&sc.p, &g.spec);
+    if (!rc && root)
+        rc = s_camp_size_check(a, &co, &sc.p, &g.spec);
+    if ((rc = vafm_cli_mpi_agree(mpi, rc, &sc.p, &g.spec)) != 0) {
+        s_grid_free(&g);
+        return rc;
+    }
+    if (!root) {
+        vafm_error werr;
+        memset(&werr, 0, sizeof werr);
+        g.spec.keep_samples = 1;
+        if (!(rc = vafm_cli_mpi_agree(mpi, 0, NULL, NULL))) /* rank 0 opened the file */
+            rc = vafm_cli_mpi_run(mpi, &sc.p, &g.spec, NULL, NULL, &werr) ? VAFM_CLI_EXIT_RUNTIME : VAFM_CLI_EXIT_OK;
+        s_grid_free(&g);
+        return rc;
+    }
+    s_camp cp;
+    memset(&cp, 0, sizeof cp);
+    vafm_cli_progress_init(&cp.pg, a);
+    double t_start = cp.pg.t0;
+    rc = s_camp_open(&cp, &co, &sc, &g.spec);
+    if (mpi && (rc = vafm_cli_mpi_agree(mpi, rc, NULL, NULL)) != 0 && cp.rec)
+        vafm_recorder_close(&cp.rec, NULL, NULL);
+    if (rc) {
+        s_grid_free(&g);
+        return rc;
+    }
+    uint64_t first = vafm_recorder_count(cp.rec);
+    uint64_t total = g.spec.curves_per_point * (uint64_t)vafm_campaign_points(&g.spec);
+    g.spec.first_curve = first < total ? first : total;
+    g.spec.keep_samples = 1;
+    cp.total = total - g.spec.first_curve;
+    if (co.resume && !a->on[O_QUIET])
+        fprintf(stderr, "vafm: %s holds %" PRIu64 " of the campaign's %" PRIu64 " curves; running the rest\n", co.out,
+                first, total);
+
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = mpi ? vafm_cli_mpi_run(mpi, &sc.p, &g.spec, s_camp_curve, &cp, &err)
+                : vafm_campaign_run(&sc.p, &g.spec, s_camp_curve, &cp, &err);
+    vafm_cli_progress_end(&cp.pg);
+
+    /* A clean close merges the ground truth into one table; the file holds every curve delivered. */
+    vafm_error cerr;
+    memset(&cerr, 0, sizeof cerr);
+    vafm_recorder_report rep;
+    int cr = vafm_recorder_close(&cp.rec, &rep, &cerr);
+    double wall = vafm_cli_now() - t_start;
+
+    if (cp.fail_status) {
+        vafm_cli_error("curve %" PRIu64 " failed: %s; %s holds the %" PRIu64 " curve(s) before it", cp.fail_index,
+                vafm_strerror(cp.fail_status), co.out, first + cp.done);
+        rc = VAFM_CLI_EXIT_RUNTIME;
+    } else if (cp.werr_code) {
+        vafm_cli_error("%s", cp.werr.message[0] ? cp.werr.message : vafm_strerror(cp.werr_code));
+        rc = VAFM_CLI_EXIT_RUNTIME;
+    } else if (r && r != VAFM_EABORT) {
+        rc = vafm_cli_report(&err, r);
+    } else if (cr) {
+        vafm_cli_error("%s", cerr.message[0] ? cerr.message : vafm_strerror(cr));
+        rc = VAFM_CLI_EXIT_RUNTIME;
+    }
+    if (!rc) {
+        s_camp_summary(stdout, &sc, &g.spec, &co, &cp, &rep, first, wall);
+        vafm_cli_mpi_describe(mpi, stdout);
+    }
+    s_grid_free(&g);
+    return rc;
+}
+
+/* MPI starts only under an MPI launcher or with --mpi: plain `vafm campaign` never touches it. */
+int vafm_cli_cmd_campaign(const vafm_cli_args *a)
+{
+    vafm_cli_mpi *mpi = NULL;
+    int rc = vafm_cli_mpi_begin(a->on[O_MPI], &mpi);
+    if (!rc)
+        rc = s_campaign(a, mpi);
+    return vafm_cli_mpi_end(&mpi, rc);
+}

@@ -1,0 +1,96 @@
+/* SPDX-License-Identifier: MIT */
+/* `vafm run` (one curve, a readable summary) and `vafm samples` (one curve or tune as CSV). */
+#include "cli/cli.h"
+
+/* ---- vafm run ------------------------------------------------------------------------------------ */
+
+static int s_index_arg(const vafm_cli_args *a, uint64_t *index)
+{
+    *index = 0;
+    return a->val[O_INDEX] ? vafm_cli_parse_u64("--index", a->val[O_INDEX], 0, UINT64_MAX, index) : 0;
+}
+
+/* The scene, the --index and a simulation for it: the common start of vafm run and vafm samples. */
+static int s_open_sim(const vafm_cli_args *a, vafm_cli_scene *sc, uint64_t *index, vafm_sim **sim)
+{
+    int rc = vafm_cli_resolve_scene(a, sc, 1);
+    if (rc || (rc = s_index_arg(a, index)) != 0)
+        return rc;
+    return vafm_cli_new_sim(&sc->p, sim);
+}
+
+int vafm_cli_cmd_run(const vafm_cli_args *a)
+{
+    vafm_cli_scene sc;
+    uint64_t index;
+    vafm_sim *sim = NULL;
+    int rc = s_open_sim(a, &sc, &index, &sim);
+    if (rc)
+        return rc;
+    vafm_cli_print_provenance(stdout, &sc);
+    vafm_cli_print_scene_si(stdout, &sc.p);
+    vafm_cli_print_scene_reduced(stdout, &sc.p, vafm_sim_dt(sim));
+    fflush(stdout);
+    vafm_cli_progress pg;
+    vafm_cli_progress_init(&pg, a);
+    int r = vafm_sim_curve_begin(sim, index);
+    if (!r)
+        r = vafm_cli_advance_all(sim, NULL, NULL, &pg);
+    double wall = vafm_cli_now() - pg.t0;
+    vafm_curve_result res;
+    vafm_sim_result(sim, &res);
+    if (r) {
+        const vafm_error *e = vafm_sim_error(sim);
+        vafm_cli_error("curve %" PRIu64 " failed after %.6g s simulated: %s", index, res.duration_s,
+                e ? e->message : vafm_strerror(r));
+        vafm_sim_destroy(&sim);
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
+    vafm_sim_destroy(&sim);
+    vafm_cli_print_run_result(stdout, &sc.p, &res, wall);
+    return VAFM_CLI_EXIT_OK;
+}
+
+/* ---- vafm samples ------------------------------------------------------------------------------ */
+
+static int s_write_samples(void *user, const vafm_samples *b)
+{
+    FILE *f = user;
+    for (size_t i = 0; i < b->n; i++)
+        if (fprintf(f, "%.17g,%.17g,%.17g,%.17g,%.17g,%u\n", b->time_s[i], b->height_m[i], b->deflection_m[i],
+                    b->force_N[i], b->tip_m[i], (unsigned)b->segment[i]) < 0)
+            return 1; /* stop: the output is broken */
+    return 0;
+}
+
+int vafm_cli_cmd_samples(const vafm_cli_args *a)
+{
+    vafm_cli_scene sc;
+    uint64_t index;
+    vafm_sim *sim = NULL;
+    int rc = s_open_sim(a, &sc, &index, &sim);
+    if (rc)
+        return rc;
+    FILE *f = vafm_cli_open_out(a->val[O_CSV]);
+    if (!f) {
+        vafm_sim_destroy(&sim);
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
+    vafm_cli_progress pg;
+    vafm_cli_progress_init(&pg, a);
+    int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : vafm_sim_curve_begin(sim, index);
+    int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
+    fputs("time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
+    if (!r)
+        r = vafm_cli_advance_all(sim, s_write_samples, f, &pg);
+    rc = vafm_cli_close_out(f, a->val[O_CSV], r == VAFM_EABORT);
+    if (r && r != VAFM_EABORT) {
+        const vafm_error *e = vafm_sim_error(sim);
+        vafm_cli_error("%s %" PRIu64 " failed: %s", a->on[O_TUNE] ? "tune" : "curve", index,
+                e && e->message[0] ? e->message : vafm_strerror(r));
+        vafm_sim_destroy(&sim);
+        return began ? VAFM_CLI_EXIT_RUNTIME : vafm_cli_exit_of(r);
+    }
+    vafm_sim_destroy(&sim);
+    return rc;
+}
