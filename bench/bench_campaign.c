@@ -186,7 +186,7 @@ int main(int argc, char **argv)
     }
     const char *dir = argv[1], *vafm = argv[2];
     vafm_params p;
-    if (vafm_params_preset(&p, "paper-fig4", NULL)) {
+    if (vafm_preset_apply(&p, "paper-fig4", NULL)) {
         fprintf(stderr, "bench_campaign: no paper-fig4 preset\n");
         return 1;
     }

@@ -94,7 +94,7 @@ static s_meas s_measure(s_work_fn work, void *ctx)
  * In-contact steps are ~98% of a curve's steps. */
 static void s_scene_fig4_pressed(vafm_params *p, const vafm_integrator_type *it)
 {
-    vafm_params_preset(p, "paper-fig4", NULL);
+    vafm_preset_apply(p, "paper-fig4", NULL);
     const double R = p->R_m;
     p->start_height_m = -0.1 * R;
     p->trigger = VAFM_TRIGGER_HEIGHT;

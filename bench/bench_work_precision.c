@@ -117,7 +117,7 @@ static void s_label(const s_row *r, char *buf, size_t len)
 
 static void s_scene(vafm_params *p, const s_row *r)
 {
-    vafm_params_preset(p, "paper-fig4", NULL);
+    vafm_preset_apply(p, "paper-fig4", NULL);
     const double R = p->R_m;
     p->start_in_contact = 1;
     p->start_height_m = -r->uspr_start * R;

@@ -85,7 +85,7 @@ static uint64_t t_ref_hash[T_TOTAL];
 static void t_setup(void)
 {
     vafm_error err = { 0 };
-    ENSURE(vafm_params_preset(&t_base, "paper-fig4", &err) == 0);
+    ENSURE(vafm_preset_apply(&t_base, "paper-fig4", &err) == 0);
     /* fast ramps: ~1 ms per curve; two speeds so workers switch scenes */
     t_v[0] = 6.4e-4;
     t_v[1] = 1.28e-3;

@@ -10,6 +10,7 @@
 #include "harness.h"
 
 #include "vafm/contact.h"
+#include "core/internal.h"
 
 #include <float.h>
 #include <time.h>

@@ -335,7 +335,7 @@ static void test_energy_events(void)
 static void t_mechanics(int antialias)
 {
     vafm_params p;
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     vafm_reduced rd;
     vafm_units_reduce(&p, &rd);
     rd.v_approach = 1e-2;

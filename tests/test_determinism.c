@@ -109,7 +109,7 @@ static int t_result_same(const vafm_curve_result *a, const vafm_curve_result *b)
 
 static void t_scene(vafm_params *p)
 {
-    vafm_params_preset(p, "paper-fig4", NULL);
+    vafm_preset_apply(p, "paper-fig4", NULL);
     vafm_reduced r;
     vafm_units_reduce(p, &r);
     r.v_approach = r.v_retract = 1e-2;
@@ -230,7 +230,7 @@ static void test_step_budget(void)
         vafm_params p;
         t_scene(&p);
         if (its[k] == vafm_integrator_brownian)
-            vafm_params_preset(&p, "paper-fig4-bd", NULL);
+            vafm_preset_apply(&p, "paper-fig4-bd", NULL);
         else
             p.integrator = its[k];
         if (k == 1)

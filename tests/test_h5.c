@@ -266,7 +266,7 @@ static void syn_free(syn *s)
 
 static void s_fig4(vafm_params *p)
 {
-    vafm_params_preset(p, "paper-fig4", NULL);
+    vafm_preset_apply(p, "paper-fig4", NULL);
     p->seed = 20240501;
 }
 

@@ -210,7 +210,7 @@ static void test_overdamped_limit(void)
     t_refused(&p, VAFM_EUNSTABLE, "dt_s", "paper-vv at eta*dt = 2");
 
     /* the same huge-η·dt scene with a JKR contact: a full curve runs and stays finite */
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     vafm_reduced r;
     vafm_units_reduce(&p, &r);
     r.m = 100.0;
@@ -304,7 +304,7 @@ static void test_fast_pull(void)
     const int N = 64;
     for (int j = 0; j < 2; j++) {
         vafm_params p;
-        vafm_params_preset(&p, "paper-fig4", NULL);
+        vafm_preset_apply(&p, "paper-fig4", NULL);
         vafm_reduced r;
         vafm_units_reduce(&p, &r);
         r.v_approach = r.v_retract = vs[j];
@@ -596,7 +596,7 @@ static void test_at_u_min(void)
 static void test_near_limit(void)
 {
     vafm_params p;
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     p.omega_dt = 1.99;
     ENSURE(vafm_params_validate(&p, NULL) == 0);
     p.omega_dt = 2.0;
@@ -631,7 +631,7 @@ static void test_near_limit(void)
     ENSURE(vafm_params_validate(&q, NULL) == 0);
 
     /* JKR curves with noise at omega_dt = 1.9 (paper-fig4 at ṽ = 1e-2) */
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     vafm_reduced r;
     vafm_units_reduce(&p, &r);
     r.v_approach = r.v_retract = 1e-2;

@@ -76,7 +76,7 @@ static void test_table_accuracy(void)
 
 static void s_fig4(vafm_params *p, double k_red, int table)
 {
-    vafm_params_preset(p, "paper-fig4", NULL);
+    vafm_preset_apply(p, "paper-fig4", NULL);
     vafm_reduced r;
     vafm_units_reduce(p, &r);
     r.kT = 0.0;
@@ -295,7 +295,7 @@ static int s_collect_dwell(void *user, const vafm_samples *blk)
 static void s_dwell_stats(int well, int n_samples, double *mean, double *var, long *n, uint64_t *steps)
 {
     vafm_params p;
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     p.well_exact = well;
     p.trigger = VAFM_TRIGGER_HEIGHT;
     vafm_scale sc = vafm_units_scale(&p);
@@ -349,7 +349,7 @@ static void test_contact_channel_fdt(void)
     const double eta_c[2] = { 0.0, 4.0 };
     for (int j = 0; j < 2; j++) {
         vafm_params p;
-        vafm_params_preset(&p, "paper-fig4", NULL);
+        vafm_preset_apply(&p, "paper-fig4", NULL);
         vafm_reduced r;
         vafm_units_reduce(&p, &r);
         r.kT = 1e-4;
@@ -438,7 +438,7 @@ static void test_well_pull_thermal(void)
     double mean[2][2], var[2][2];
     for (int w = 0; w < 2; w++) {
         vafm_params p;
-        vafm_params_preset(&p, "paper-fig4", NULL);
+        vafm_preset_apply(&p, "paper-fig4", NULL);
         vafm_reduced rd;
         vafm_units_reduce(&p, &rd);
         rd.v_approach = rd.v_retract = 1e-2;
@@ -532,7 +532,7 @@ static void test_well_few_steps_dwell(void)
     uint64_t steps[2];
     for (int w = 0; w < 2; w++) {
         vafm_params p;
-        vafm_params_preset(&p, "paper-fig4", NULL);
+        vafm_preset_apply(&p, "paper-fig4", NULL);
         p.well_exact = w;
         if (!w) /* the reference at a quarter step: its box-car (a 40-point Riemann sum) is then exact to
                  * ~0.02%, at the paper's step it is ~0.3% high in the variance */

@@ -41,21 +41,21 @@ static double t_get_real(const vafm_params *p, const char *name)
 
 static void test_field_table(void)
 {
-    const int n = vafm_param_count();
+    const int n = vafm_params_field_count();
     ENSURE(n >= 20);
-    ENSURE(vafm_param_at(-1) == NULL);
-    ENSURE(vafm_param_at(n) == NULL);
+    ENSURE(vafm_params_field_at(-1) == NULL);
+    ENSURE(vafm_params_field_at(n) == NULL);
     for (int i = 0; i < n; i++) {
-        const vafm_param_info *f = vafm_param_at(i);
+        const vafm_param_info *f = vafm_params_field_at(i);
         ENSURE(f != NULL);
         if (!f)
             continue;
         ENSURE_MSG(f->name && f->name[0], "row %d has no name", i);
         ENSURE_MSG(f->doc && strlen(f->doc) >= 10, "%s: doc missing", f->name);
         ENSURE_MSG(f->unit != NULL, "%s: unit is NULL", f->name);
-        ENSURE_MSG(vafm_param_find(f->name) == f, "%s: find does not return its own row", f->name);
+        ENSURE_MSG(vafm_params_field_find(f->name) == f, "%s: find does not return its own row", f->name);
         for (int j = 0; j < i; j++)
-            ENSURE_MSG(strcmp(vafm_param_at(j)->name, f->name) != 0, "duplicate field %s", f->name);
+            ENSURE_MSG(strcmp(vafm_params_field_at(j)->name, f->name) != 0, "duplicate field %s", f->name);
         switch (f->kind) {
         case VAFM_PARAM_REAL:
             ENSURE_MSG(f->min <= f->max, "%s: min %g > max %g", f->name, f->min, f->max);
@@ -76,15 +76,15 @@ static void test_field_table(void)
         default: ENSURE_MSG(0, "%s: unknown kind %d", f->name, f->kind);
         }
     }
-    ENSURE(vafm_param_find("no_such_field") == NULL);
-    ENSURE(vafm_param_find(NULL) == NULL);
+    ENSURE(vafm_params_field_find("no_such_field") == NULL);
+    ENSURE(vafm_params_field_find(NULL) == NULL);
     /* the fields the rest of the code relies on exist */
     const char *must[] = {"E_star_Pa", "R_m", "gamma_J_per_m2", "contact", "k_N_per_m", "m_kg", "eta_per_s",
                           "T_K", "v_approach_m_per_s", "v_retract_m_per_s", "start_height_m", "trigger",
                           "setpoint_N", "dwell_s", "sample_rate_Hz", "integrator", "noise", "dt_s",
                           "omega_dt", "free_exact", "seed", "antialias"};
     for (size_t i = 0; i < sizeof must / sizeof must[0]; i++)
-        ENSURE_MSG(vafm_param_find(must[i]) != NULL, "field %s missing", must[i]);
+        ENSURE_MSG(vafm_params_field_find(must[i]) != NULL, "field %s missing", must[i]);
 }
 
 static void test_presets(void)
@@ -98,12 +98,12 @@ static void test_presets(void)
         ENSURE(vafm_preset_description(i) && vafm_preset_description(i)[0]);
         vafm_params p;
         vafm_error err = {0};
-        ENSURE(vafm_params_preset(&p, name, &err) == 0);
+        ENSURE(vafm_preset_apply(&p, name, &err) == 0);
         int r = vafm_params_validate(&p, &err);
         ENSURE_MSG(r == 0, "preset %s does not validate: %s (%s)", name, err.field, err.message);
         /* every REAL value of the preset lies in its field's range */
-        for (int j = 0; j < vafm_param_count(); j++) {
-            const vafm_param_info *f = vafm_param_at(j);
+        for (int j = 0; j < vafm_params_field_count(); j++) {
+            const vafm_param_info *f = vafm_params_field_at(j);
             if (f->kind != VAFM_PARAM_REAL)
                 continue;
             double v = t_get_real(&p, f->name);
@@ -113,12 +113,12 @@ static void test_presets(void)
     }
     vafm_params d, f1;
     vafm_params_default(&d);
-    ENSURE(vafm_params_preset(&f1, "paper-fig1", NULL) == 0);
+    ENSURE(vafm_preset_apply(&f1, "paper-fig1", NULL) == 0);
     ENSURE(memcmp(&d, &f1, sizeof d) == 0); /* the default is paper-fig1 */
     ENSURE(vafm_params_validate(&d, NULL) == 0);
 
     vafm_error err = {0};
-    ENSURE(vafm_params_preset(&d, "no-such-preset", &err) == VAFM_ENOTFOUND);
+    ENSURE(vafm_preset_apply(&d, "no-such-preset", &err) == VAFM_ENOTFOUND);
     ENSURE(err.code == VAFM_ENOTFOUND);
     ENSURE(strstr(err.message, "no-such-preset") != NULL);
     ENSURE(strstr(err.message, "paper-fig1") != NULL); /* names the known ones */
@@ -130,10 +130,10 @@ static void test_set_get_roundtrip(void)
 {
     for (int i = 0; i < vafm_preset_count(); i++) {
         vafm_params p, q;
-        vafm_params_preset(&p, vafm_preset_name(i), NULL);
-        vafm_params_preset(&q, "paper-fig1", NULL);
-        for (int j = 0; j < vafm_param_count(); j++) {
-            const vafm_param_info *f = vafm_param_at(j);
+        vafm_preset_apply(&p, vafm_preset_name(i), NULL);
+        vafm_preset_apply(&q, "paper-fig1", NULL);
+        for (int j = 0; j < vafm_params_field_count(); j++) {
+            const vafm_param_info *f = vafm_params_field_at(j);
             char a[128], b[128];
             ENSURE(vafm_params_get(&p, f->name, a, sizeof a) == 0);
             vafm_error err = {0};
@@ -148,8 +148,8 @@ static void test_set_get_roundtrip(void)
     /* every choice of every CHOICE field round-trips */
     vafm_params p;
     vafm_params_default(&p);
-    for (int j = 0; j < vafm_param_count(); j++) {
-        const vafm_param_info *f = vafm_param_at(j);
+    for (int j = 0; j < vafm_params_field_count(); j++) {
+        const vafm_param_info *f = vafm_params_field_at(j);
         if (f->kind != VAFM_PARAM_CHOICE)
             continue;
         char list[256], got[64];
@@ -204,13 +204,13 @@ static void test_json(void)
 {
     for (int i = 0; i < vafm_preset_count(); i++) {
         vafm_params p;
-        vafm_params_preset(&p, vafm_preset_name(i), NULL);
+        vafm_preset_apply(&p, vafm_preset_name(i), NULL);
         char json[8192];
         int n = vafm_params_to_json(&p, json, sizeof json);
         ENSURE(n > 0 && (size_t)n == strlen(json));
         ENSURE(json[0] == '{' && json[n - 1] == '}');
-        for (int j = 0; j < vafm_param_count(); j++) {
-            const vafm_param_info *f = vafm_param_at(j);
+        for (int j = 0; j < vafm_params_field_count(); j++) {
+            const vafm_param_info *f = vafm_params_field_at(j);
             char a[128], b[128];
             vafm_params_get(&p, f->name, a, sizeof a);
             ENSURE_MSG(t_json_value(json, f->name, b, sizeof b) == 0, "%s missing from JSON", f->name);
@@ -248,8 +248,8 @@ static void t_bad(const vafm_param_info *f, const char *value, int want_range)
 
 static void test_bad_text_values(void)
 {
-    for (int j = 0; j < vafm_param_count(); j++) {
-        const vafm_param_info *f = vafm_param_at(j);
+    for (int j = 0; j < vafm_params_field_count(); j++) {
+        const vafm_param_info *f = vafm_params_field_at(j);
         char buf[64];
         switch (f->kind) {
         case VAFM_PARAM_REAL:
@@ -340,7 +340,7 @@ static double *t_member(vafm_params *p, const char *name)
 static void t_validate_bad(const vafm_param_info *f, double v)
 {
     vafm_params p;
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     double *slot = t_member(&p, f->name);
     ENSURE_MSG(slot != NULL, "%s: not in the test's member map", f->name);
     if (!slot)
@@ -361,12 +361,12 @@ static void t_validate_bad(const vafm_param_info *f, double v)
 static void test_validate_fields(void)
 {
     int n_real = 0;
-    for (int j = 0; j < vafm_param_count(); j++)
-        n_real += vafm_param_at(j)->kind == VAFM_PARAM_REAL;
+    for (int j = 0; j < vafm_params_field_count(); j++)
+        n_real += vafm_params_field_at(j)->kind == VAFM_PARAM_REAL;
     ENSURE_MSG(n_real == (int)T_NREAL, "field table has %d REAL fields, the test knows %zu", n_real, T_NREAL);
     /* the member map really addresses the named fields: set through text, read the member */
     for (size_t i = 0; i < T_NREAL; i++) {
-        const vafm_param_info *f = vafm_param_find(t_real_members[i].name);
+        const vafm_param_info *f = vafm_params_field_find(t_real_members[i].name);
         ENSURE_MSG(f && f->kind == VAFM_PARAM_REAL, "%s is not a REAL field", t_real_members[i].name);
         if (!f)
             continue;
@@ -377,8 +377,8 @@ static void test_validate_fields(void)
         ENSURE(vafm_params_set(&p, f->name, buf, NULL) == 0);
         ENSURE_MSG(*t_member(&p, f->name) == f->max, "%s: member map wrong", f->name);
     }
-    for (int j = 0; j < vafm_param_count(); j++) {
-        const vafm_param_info *f = vafm_param_at(j);
+    for (int j = 0; j < vafm_params_field_count(); j++) {
+        const vafm_param_info *f = vafm_params_field_at(j);
         if (f->kind != VAFM_PARAM_REAL)
             continue;
         t_validate_bad(f, nextafter(f->min, -INFINITY));
@@ -436,7 +436,7 @@ static void test_units_roundtrip(void)
         const vafm_reduced *r = &cases[i];
         for (int pre = 0; pre < vafm_preset_count(); pre++) {
             vafm_params p;
-            vafm_params_preset(&p, vafm_preset_name(pre), NULL);
+            vafm_preset_apply(&p, vafm_preset_name(pre), NULL);
             vafm_units_from_reduced(&p, r);
             vafm_reduced b;
             vafm_units_reduce(&p, &b);
@@ -459,7 +459,7 @@ static void test_units_roundtrip(void)
     }
     /* the scale factors are the notes' units: length R, time 1/η, force E*R², energy E*R³ */
     vafm_params p;
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     vafm_scale s = vafm_units_scale(&p);
     ENSURE_REL(s.length_m, p.R_m, 1e-15);
     ENSURE_REL(s.time_s, 1.0 / p.eta_per_s, 1e-15);
@@ -475,7 +475,7 @@ static void test_units_roundtrip(void)
 static void test_paper_fig1(void)
 {
     vafm_params p;
-    ENSURE(vafm_params_preset(&p, "paper-fig1", NULL) == 0);
+    ENSURE(vafm_preset_apply(&p, "paper-fig1", NULL) == 0);
     ENSURE_REL(p.E_star_Pa, 20e9, 1e-15);
     ENSURE_REL(p.R_m, 15.7e-9, 1e-15);
     ENSURE_REL(p.m_kg, 1e-12, 1e-15);
@@ -499,14 +499,14 @@ static void test_paper_fig1(void)
     ENSURE_REL(p.eta_per_s, sqrt(5e-5 * ER / 1e-12), 1e-14);
 
     /* paper-fig4: γ̃ = 0.229, k̃ = 0.1, m̃ = 0.01, k_BT̃ = 0.01, ṽ = 1e-3 (E* = 1 GPa, R = 16 nm) */
-    ENSURE(vafm_params_preset(&p, "paper-fig4", NULL) == 0);
+    ENSURE(vafm_preset_apply(&p, "paper-fig4", NULL) == 0);
     vafm_units_reduce(&p, &r);
     ENSURE_REL(r.gamma, 0.229, 1e-14);
     ENSURE_REL(r.k, 0.1, 1e-14);
     ENSURE_REL(r.m, 0.01, 1e-14);
     ENSURE_REL(r.kT, 0.01, 1e-14);
     ENSURE_REL(r.v_retract, 1e-3, 1e-14);
-    ENSURE(vafm_params_preset(&p, "paper-fig4-bd", NULL) == 0);
+    ENSURE(vafm_preset_apply(&p, "paper-fig4-bd", NULL) == 0);
     vafm_units_reduce(&p, &r);
     ENSURE(p.integrator == vafm_integrator_brownian);
     ENSURE_REL(r.m, 1.0, 1e-14); /* ζ = mη = 1 reduced */
@@ -537,7 +537,7 @@ static void test_cost_estimate(void)
     static const char *presets[] = { "paper-fig4", "paper-fig4-bd" };
     for (size_t k = 0; k < sizeof presets / sizeof presets[0]; k++) {
         vafm_params p;
-        vafm_params_preset(&p, presets[k], NULL);
+        vafm_preset_apply(&p, presets[k], NULL);
         p.v_approach_m_per_s = p.v_retract_m_per_s = 6.4e-5; /* fast: a few ms a curve */
         vafm_sim_estimate est;
         vafm_error e;
@@ -555,18 +555,18 @@ static void test_cost_estimate(void)
         ENSURE(est.steps >= (double)r.steps * 0.5); /* the plain-step count bounds the shortcut run's */
     }
     vafm_params p;
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     vafm_error e;
     memset(&e, 0, sizeof e);
     p.sample_rate_Hz = 1e10;
     ENSURE(vafm_params_validate(&p, &e) == VAFM_EINVAL && !strcmp(e.field, "sample_rate_Hz"));
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     p.dwell_s = 1e4;
     ENSURE(vafm_params_validate(&p, &e) == VAFM_EINVAL && !strcmp(e.field, "dwell_s"));
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     p.v_retract_m_per_s = 1e-12;
     ENSURE(vafm_params_validate(&p, &e) == VAFM_EINVAL && !strcmp(e.field, "v_retract_m_per_s"));
-    vafm_params_preset(&p, "paper-fig1", NULL);
+    vafm_preset_apply(&p, "paper-fig1", NULL);
     p.sample_rate_Hz = 8e6; /* the highest rate the daemon is benchmarked at stays allowed */
     ENSURE(vafm_params_validate(&p, &e) == 0);
 }

@@ -31,7 +31,7 @@
 /* The scene in SI from its reduced values; the retract and approach speeds are set separately. */
 static void s_scene(vafm_params *p, double kT, double v_approach, double v_retract)
 {
-    ENSURE(vafm_params_preset(p, "paper-fig4-bd", NULL) == 0);
+    ENSURE(vafm_preset_apply(p, "paper-fig4-bd", NULL) == 0);
     vafm_reduced r = { .m = 1.0, .k = S_K, .kT = kT, .gamma = S_GAMMA, .v_approach = v_approach,
                        .v_retract = v_retract };
     p->E_star_Pa = 1e9;

@@ -112,7 +112,7 @@ static void s_on_durable(void *user, uint64_t n)
 
 static void s_scene(vafm_params *p)
 {
-    vafm_params_preset(p, "paper-fig4", NULL);
+    vafm_preset_apply(p, "paper-fig4", NULL);
     p->T_K = 0; /* deterministic and fast */
     p->v_approach_m_per_s = p->v_retract_m_per_s = 1e-3;
 }
@@ -229,7 +229,7 @@ static void test_recorder(void)
 static void test_campaign_validate(void)
 {
     vafm_params p;
-    vafm_params_preset(&p, "paper-fig4", NULL);
+    vafm_preset_apply(&p, "paper-fig4", NULL);
     double T[3] = { 10, -5, 20 };
     vafm_campaign_spec sp;
     memset(&sp, 0, sizeof sp);
@@ -253,7 +253,7 @@ static void test_scene_json(void)
     vafm_params_default(&p);
     ENSURE(vafm_scene_parse(&p, "{\"k_N_per_m\": 0.2, \"preset\": \"paper-fig4\", \"seed\": \"18446744073709551615\"}",
                             "t", &e) == 0);
-    vafm_params_preset(&q, "paper-fig4", NULL);
+    vafm_preset_apply(&q, "paper-fig4", NULL);
     ENSURE(p.k_N_per_m == 0.2 && p.seed == UINT64_MAX && p.R_m == q.R_m);
     /* the stricter rules: booleans are true/false, seeds non-negative whole numbers, choices strings */
     static const char *bad[] = { "{\"free_exact\": 1}", "{\"seed\": -1}", "{\"seed\": 1.5}", "{\"seed\": \"12a\"}",
@@ -269,7 +269,7 @@ static void test_scene_json(void)
     ENSURE(strstr(e.message, "true or false") != NULL);
     ENSURE(vafm_scene_parse(&p, "{\"nope\": 1}", "t", &e) == VAFM_ENOTFOUND && !strcmp(e.field, "nope"));
     /* params → JSON → params is exact */
-    vafm_params_preset(&q, "paper-fig1", NULL);
+    vafm_preset_apply(&q, "paper-fig1", NULL);
     q.k_N_per_m = 0.1 + 0.2; /* not a short decimal */
     static char js[16384];
     vafm_params_default(&p);

@@ -1006,7 +1006,7 @@ static int s_rec(void *user, const vafm_samples *b)
 static void test_athermal_no_draws(void)
 {
     vafm_params p;
-    ENSURE(vafm_params_preset(&p, "paper-fig4", NULL) == 0);
+    ENSURE(vafm_preset_apply(&p, "paper-fig4", NULL) == 0);
     p.T_K = 0.0;
     s_curve_rec rec[2] = { { 0 }, { 0 } };
     vafm_curve_result res[2];

@@ -60,9 +60,6 @@ VAFM_API int vafm_contact_init(vafm_contact *c, const vafm_contact_type *type, d
 /** Evaluate a, F, dF/du on the contact branch (u ≥ u_detach); VAFM_EINVAL below u_detach. */
 VAFM_API int vafm_contact_eval_at(const vafm_contact *c, double u, vafm_contact_eval *out);
 
-/** JKR a(u) on the physical branch (reduced), for u ≥ u_min; NaN below. s_guess ≤ 0: cold start. */
-VAFM_API double vafm_jkr_sqrt_a(double c, double s_m, double u, double s_guess);
-
 /** @return the contact type named `name`, or NULL. */
 VAFM_API const vafm_contact_type *vafm_contact_type_find(const char *name);
 

@@ -89,7 +89,7 @@ VAFM_API const char *vafm_preset_name(int i);
 VAFM_API const char *vafm_preset_description(int i);
 
 /** Overwrite p with preset `name`. @return 0 or VAFM_ENOTFOUND (err names the known presets). */
-VAFM_API int vafm_params_preset(vafm_params *p, const char *name, vafm_error *err);
+VAFM_API int vafm_preset_apply(vafm_params *p, const char *name, vafm_error *err);
 
 /** Check every field and the combination (e.g. time step against the stability limit).
  *  @return 0 or VAFM_EINVAL / VAFM_EUNSTABLE with err naming the field, its value and the range. */
@@ -114,11 +114,11 @@ typedef struct vafm_param_info {
 } vafm_param_info;
 
 /** @return the number of rows of the field table. */
-VAFM_API int vafm_param_count(void);
+VAFM_API int vafm_params_field_count(void);
 /** @return row i, or NULL. */
-VAFM_API const vafm_param_info *vafm_param_at(int i);
+VAFM_API const vafm_param_info *vafm_params_field_at(int i);
 /** @return the row named `name`, or NULL. */
-VAFM_API const vafm_param_info *vafm_param_find(const char *name);
+VAFM_API const vafm_param_info *vafm_params_field_find(const char *name);
 
 /** Set a field from text ("6.3e-3", "gjf", "true"). Checks the field's own range.
  *  @return 0, VAFM_ENOTFOUND (no such field) or VAFM_EINVAL, with err filled. */

@@ -91,7 +91,7 @@ int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int valid
     memset(&err, 0, sizeof err);
     memset(sc, 0, sizeof *sc);
     const char *preset = a->val[O_PRESET] ? a->val[O_PRESET] : VAFM_CLI_DEFAULT_PRESET;
-    int r = vafm_params_preset(&sc->p, preset, &err);
+    int r = vafm_preset_apply(&sc->p, preset, &err);
     if (r)
         return vafm_cli_report(&err, r);
     snprintf(sc->preset, sizeof sc->preset, "%s", preset);

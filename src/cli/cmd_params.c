@@ -31,8 +31,8 @@ int vafm_cli_cmd_params(const vafm_cli_args *a)
         return s_print_json(&sc.p);
     vafm_cli_print_provenance(stdout, &sc);
     char val[128];
-    for (int i = 0; i < vafm_param_count(); i++) {
-        const vafm_param_info *f = vafm_param_at(i);
+    for (int i = 0; i < vafm_params_field_count(); i++) {
+        const vafm_param_info *f = vafm_params_field_at(i);
         vafm_params_get(&sc.p, f->name, val, sizeof val);
         printf("  %-20s %-24s %-6s %s\n", f->name, val, f->unit[0] ? f->unit : "-", f->doc);
     }

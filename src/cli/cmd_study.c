@@ -239,7 +239,7 @@ static size_t s_flagged(const s_run *r, size_t pt)
  * retract only from an equilibrium 1 R pressed in, sampled every 0.05 R of travel. */
 static void s_fig4_scene(vafm_params *p, int brownian, double v_red)
 {
-    vafm_params_preset(p, brownian ? "paper-fig4-bd" : "paper-fig4", NULL);
+    vafm_preset_apply(p, brownian ? "paper-fig4-bd" : "paper-fig4", NULL);
     vafm_scale sc = vafm_units_scale(p);
     if (!brownian)
         p->omega_dt = 0.6;
@@ -345,7 +345,7 @@ static int s_distribution(s_ctx *ctx)
     size_t nT = ctx->quick ? 2 : 5;
     s_run r;
     memset(&r, 0, sizeof r);
-    vafm_params_preset(&r.base, "paper-fig1", NULL);
+    vafm_preset_apply(&r.base, "paper-fig1", NULL);
     r.base.omega_dt = 0.6;
     vafm_reduced red;
     vafm_units_reduce(&r.base, &red);
@@ -949,7 +949,7 @@ static int s_hysteresis(s_ctx *ctx)
 {
     s_run r;
     memset(&r, 0, sizeof r);
-    vafm_params_preset(&r.base, "paper-fig1", NULL);
+    vafm_preset_apply(&r.base, "paper-fig1", NULL);
     r.base.omega_dt = 0.6;
     r.v = r.base.v_retract_m_per_s;
     r.N = 1;

@@ -28,7 +28,7 @@ int vafm_study_scene_arg(int argc, char **argv, int *i, vafm_params *p, char *de
             return 2;
         }
         const char *val = argv[++*i];
-        int r = !strcmp(a, "--preset") ? vafm_params_preset(p, val, &err)
+        int r = !strcmp(a, "--preset") ? vafm_preset_apply(p, val, &err)
                                        : vafm_scene_load_file(p, val, NULL, 0, &err);
         if (r) {
             fprintf(stderr, "vafm %s: %s\n", argv[0], err.message);
@@ -47,7 +47,7 @@ int vafm_study_scene_arg(int argc, char **argv, int *i, vafm_params *p, char *de
         return 0;
     memcpy(name, a + 2, n);
     name[n] = 0;
-    if (!vafm_param_find(name))
+    if (!vafm_params_field_find(name))
         return 0;
     if (eq) {
         val = eq + 1;

@@ -72,7 +72,7 @@ static int s_parse_override(vafm_cli_args *a, const char *arg, size_t len, const
     }
     memcpy(o->name, name, nlen);
     o->name[nlen] = '\0';
-    if (!vafm_param_find(o->name)) {
+    if (!vafm_params_field_find(o->name)) {
         vafm_cli_error("unknown option or parameter '%.*s' (see vafm --help for the PARAMETERS list)", (int)len, arg);
         return VAFM_CLI_EXIT_USAGE;
     }
@@ -192,8 +192,8 @@ static void s_print_param_help(FILE *o)
                "  name                 unit   allowed                          default (%s)\n",
             VAFM_CLI_DEFAULT_PRESET);
     char allowed[160], val[128], shown[64];
-    for (int i = 0; i < vafm_param_count(); i++) {
-        const vafm_param_info *f = vafm_param_at(i);
+    for (int i = 0; i < vafm_params_field_count(); i++) {
+        const vafm_param_info *f = vafm_params_field_at(i);
         vafm_params_get(&def, f->name, val, sizeof val);
         if (f->kind == VAFM_PARAM_REAL) {
             snprintf(allowed, sizeof allowed, "[%.6g, %.6g]", f->min, f->max);

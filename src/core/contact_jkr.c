@@ -22,8 +22,9 @@
 #include <string.h>
 
 #include "core/jkr_inline.h"
+#include "core/internal.h"
 
-VAFM_API double vafm_jkr_sqrt_a(double c, double s_m, double u, double s_guess)
+double vafm_jkr_sqrt_a(double c, double s_m, double u, double s_guess)
 {
     if (!(c >= 0.0) || !(s_m >= 0.0))
         return NAN;

@@ -49,6 +49,10 @@ typedef struct vafm_numerics {
  *  out may be NULL. @return 0 or VAFM_EUNSTABLE / VAFM_EINVAL with err filled. */
 int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err);
 
+/** The JKR solver (contact_jkr.c): √a(u) on the physical branch (reduced), for u ≥ u_min; NaN below.
+ *  s_guess ≤ 0: cold start. Internal (the tests reach it through the static core). */
+double vafm_jkr_sqrt_a(double c, double s_m, double u, double s_guess);
+
 /** A thermal tune of the scene within VAFM_SIM_MAX_SAMPLES and VAFM_SIM_MAX_STEPS? @return 0 or
  *  VAFM_EINVAL naming tune_duration_s. (Checked when a tune starts, not by validation: a scene for fast
  *  curves at a high sample rate is valid though its default tune would not be.) */

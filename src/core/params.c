@@ -209,7 +209,7 @@ const char *vafm_preset_description(int i)
     return i >= 0 && i < S_NPRESETS ? s_presets[i].description : NULL;
 }
 
-int vafm_params_preset(vafm_params *p, const char *name, vafm_error *err)
+int vafm_preset_apply(vafm_params *p, const char *name, vafm_error *err)
 {
     for (int i = 0; i < S_NPRESETS; i++)
         if (name && !strcmp(name, s_presets[i].name)) {
@@ -223,12 +223,12 @@ int vafm_params_preset(vafm_params *p, const char *name, vafm_error *err)
 
 /* ---- field table ------------------------------------------------------------------------------ */
 
-int vafm_param_count(void)
+int vafm_params_field_count(void)
 {
     return S_NFIELDS;
 }
 
-const vafm_param_info *vafm_param_at(int i)
+const vafm_param_info *vafm_params_field_at(int i)
 {
     return i >= 0 && i < S_NFIELDS ? &s_fields[i].info : NULL;
 }
@@ -241,7 +241,7 @@ static const s_field *s_find(const char *name)
     return NULL;
 }
 
-const vafm_param_info *vafm_param_find(const char *name)
+const vafm_param_info *vafm_params_field_find(const char *name)
 {
     const s_field *f = s_find(name);
     return f ? &f->info : NULL;

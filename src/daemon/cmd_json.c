@@ -469,7 +469,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
             vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "duration_s", "\"duration_s\" must be a number (s)");
             return -1;
         }
-        const vafm_param_info *f = vafm_param_find("tune_duration_s");
+        const vafm_param_info *f = vafm_params_field_find("tune_duration_s");
         double x = json_number_value(v);
         if (f && !(x >= f->min && x <= f->max)) {
             vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s", "duration_s = %.17g is outside [%g, %g] s", x,
@@ -596,7 +596,7 @@ int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd
     if (c->preset) {
         vafm_error verr = { 0 };
         if (strlen(c->preset) != json_string_length(json_object_get(c->root, "preset")) ||
-            vafm_params_preset(&np, c->preset, &verr)) {
+            vafm_preset_apply(&np, c->preset, &verr)) {
             vafmd_err_set(e, VAFMD_E_NOT_FOUND, "preset", "%s", verr.message[0] ? verr.message : "unknown preset");
             return -1;
         }
@@ -605,7 +605,7 @@ int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd
         const char *key;
         json_t *v;
         json_object_foreach(c->values, key, v) {
-            const vafm_param_info *f = vafm_param_find(key);
+            const vafm_param_info *f = vafm_params_field_find(key);
             const s_setting *st = f ? NULL : s_setting_find(key);
             if (f) {
                 if (s_param_apply(&np, f, v, e))
@@ -669,7 +669,7 @@ json_t *vafmd_get_values(const vafm_params *p, const vafmd_settings *s, const va
         json_t *n;
         json_array_foreach(c->names, i, n) {
             const char *name = json_string_value(n);
-            const vafm_param_info *f = vafm_param_find(name);
+            const vafm_param_info *f = vafm_params_field_find(name);
             const s_setting *st = f ? NULL : s_setting_find(name);
             if (!f && !st) {
                 vafmd_err_set(e, VAFMD_E_UNKNOWN_FIELD, name, "no parameter or setting named '%.64s'", name);
@@ -682,8 +682,8 @@ json_t *vafmd_get_values(const vafm_params *p, const vafmd_settings *s, const va
                 json_object_set_new(info, name, f ? s_info_param(f) : s_info_setting(st));
         }
     } else {
-        for (int i = 0; i < vafm_param_count(); i++) {
-            const vafm_param_info *f = vafm_param_at(i);
+        for (int i = 0; i < vafm_params_field_count(); i++) {
+            const vafm_param_info *f = vafm_params_field_at(i);
             json_object_set_new(vals, f->name, vafmd_param_value(p, f));
             if (info)
                 json_object_set_new(info, f->name, s_info_param(f));

@@ -17,7 +17,10 @@
 #include "vafm/sim.h"
 #include "daemon/spsc_ring.h"
 
-#define VAFMD_VERSION "0.3.0"
+#ifndef VAFM_PROJECT_VERSION
+#define VAFM_PROJECT_VERSION "unknown"
+#endif
+#define VAFMD_VERSION VAFM_PROJECT_VERSION /* one version, from meson.build */
 #define VAFMD_DEFAULT_REP "tcp://127.0.0.1:5555"
 #define VAFMD_DEFAULT_PUB "tcp://127.0.0.1:5556"
 #define VAFMD_MAX_CMD_BYTES 65536 /* larger requests get a "too_large" error reply */

@@ -106,7 +106,7 @@ void vafm_scene_json_allowed(const vafm_param_info *info, char *buf, size_t len)
 static int s_apply_key(vafm_params *p, const char *path, const char *key, const json_t *v, vafm_error *err)
 {
     char what[sizeof err->message];
-    const vafm_param_info *info = vafm_param_find(key);
+    const vafm_param_info *info = vafm_params_field_find(key);
     if (!info) {
         snprintf(what, sizeof what, "unknown key '%.64s' (not a parameter; see vafm --help)", key);
         s_fail(err, VAFM_ENOTFOUND, key, path, what);
@@ -144,7 +144,7 @@ static int s_apply_preset(vafm_params *p, const char *path, const json_t *root, 
     }
     vafm_error e;
     memset(&e, 0, sizeof e);
-    int r = vafm_params_preset(p, json_string_value(v), &e);
+    int r = vafm_preset_apply(p, json_string_value(v), &e);
     if (r) {
         snprintf(what, sizeof what, "key 'preset': %.200s", e.message);
         s_fail(err, r, "preset", path, what);
