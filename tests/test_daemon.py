@@ -1210,8 +1210,8 @@ def test_lookahead_never_early_and_stream_unchanged(fig4):
         # block index, first sample, n, channels, segment, flags but LATE (a loaded machine may be late)
         assert ha[5:10] == hb[5:10] and ha[12] & ~1 == hb[12] & ~1
         assert ca == cb  # the channel payloads, byte for byte
-    def ev(r):
-        return [{k: v for k, v in e.items() if k != "run_id"} for e in r[2]]
+    def ev(r):  # "overrun" says a block was late: that depends on the machine's load, not on lookahead
+        return [{k: v for k, v in e.items() if k != "run_id"} for e in r[2] if e["kind"] != "overrun"]
     assert ev(runs[0]) == ev(runs[1.0]) and "segment" in [e["kind"] for e in ev(runs[0])]
     assert bool(b[-1][0][12] & 4) and not any(h[12] & 4 for h, _, _ in b[:-1])  # LAST on the last block only
     if VAFM_CLI:

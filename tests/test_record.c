@@ -151,13 +151,19 @@ static int s_run_campaign(const char *path, int mode, double interval, uint64_t 
     return rc ? rc : cr;
 }
 
+/* A new file of a 2-point campaign with n curves a point, flushed after every curve. */
+static int s_fresh_campaign(const char *path, uint64_t n, s_rec_run *rr)
+{
+    unlink(path);
+    memset(rr, 0, sizeof *rr);
+    return s_run_campaign(path, VAFM_RECORD_CREATE, 0.0, n, 0, rr);
+}
+
 static void test_recorder(void)
 {
     const char *path = "t_record.h5";
-    unlink(path);
     s_rec_run a;
-    memset(&a, 0, sizeof a);
-    ENSURE(s_run_campaign(path, VAFM_RECORD_CREATE, 0.0, 3, 0, &a) == 0);
+    ENSURE(s_fresh_campaign(path, 3, &a) == 0);
     ENSURE(a.appended == 6 && a.durable == 6);
     /* create refuses an existing file; resume of a complete file appends nothing */
     s_rec_run b;
@@ -283,10 +289,8 @@ static void test_scene_json(void)
 static void test_scene_from_h5(void)
 {
     const char *path = "t_record_scene.h5";
-    unlink(path);
     s_rec_run a;
-    memset(&a, 0, sizeof a);
-    ENSURE(s_run_campaign(path, VAFM_RECORD_CREATE, 0.0, 2, 0, &a) == 0);
+    ENSURE(s_fresh_campaign(path, 2, &a) == 0);
     vafm_h5_reader *r = NULL;
     vafm_error e;
     ENSURE(vafm_h5_reader_open(&r, path, &e) == 0);

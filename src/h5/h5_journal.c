@@ -261,7 +261,6 @@ typedef struct s_file {
     uint64_t eof;       /* logical end of file (without a journal being replayed in memory) */
     uint64_t committed; /* [0, committed) is the last committed state */
     s_pages pages;      /* writer: pending pages; reader: a replayed journal */
-    int closed;         /* a close failed (disk full): the descriptor is gone, only the struct remains */
 } s_file;
 
 static void s_push(H5E_major_t maj, H5E_minor_t min, const char *msg)
@@ -421,18 +420,13 @@ static H5FD_t *s_open(const char *name, unsigned flags, hid_t fapl, haddr_t maxa
     return &f->pub;
 }
 
-/* As HDF5's own drivers: a failed close keeps the struct, because HDF5 keeps the file open and closes it
- * again later (at the latest when the library shuts down at exit); freeing it here made that second close
- * read freed memory (a full disk ended in a segfault at exit). The descriptor is closed at once: the
- * committed state [0, committed) is on disk, the uncommitted pages could not be written and are dropped,
- * so the file holds the last completed flush, as after a kill. */
+/* A failed close (a full disk during the final commit) still releases everything: the committed state
+ * [0, committed) is on disk and the uncommitted pages could not be written, so the file holds the last
+ * completed flush, as after a kill. HDF5 does not call close again (the library is never shut down at
+ * exit, h5_common.c: it would re-close the half-destroyed file and crash). */
 static herr_t s_close(H5FD_t *_f)
 {
     s_file *f = (s_file *)_f;
-    if (f->closed) {
-        free(f);
-        return 0;
-    }
     herr_t rc = 0;
     if (!f->rdonly && s_commit(f)) {
         char msg[160];
@@ -442,13 +436,8 @@ static herr_t s_close(H5FD_t *_f)
     }
     s_pages_free(&f->pages);
     close(f->fd);
-    f->fd = -1;
-    if (rc) {
-        f->closed = 1;
-        return rc;
-    }
     free(f);
-    return 0;
+    return rc;
 }
 
 static int s_cmp(const H5FD_t *_a, const H5FD_t *_b)

@@ -728,10 +728,11 @@ size_t vafm_h5_reader_count(const vafm_h5_reader *r)
     return r ? r->n : 0;
 }
 
-int vafm_h5_reader_curve(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_error *err)
+/* Curve i, with its data (read_data) or only its metadata and length. */
+static int s_reader_read(vafm_h5_reader *r, size_t i, int read_data, vafm_h5_curve *out, vafm_error *err)
 {
     if (!r || r->tag != S_TAG || !out) {
-        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_reader_curve: no reader or output given");
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_reader_curve%s: no reader or output given", read_data ? "" : "_info");
         return VAFM_EINVAL;
     }
     if (i >= r->n) {
@@ -740,9 +741,14 @@ int vafm_h5_reader_curve(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_e
     }
     vafm_h5i_quiet q;
     vafm_h5i_quiet_begin(&q);
-    int rc = vafm_h5i_curve_read(r->file, r->path, r->groups[i], 1, r->file_size, &r->buf, out, err);
+    int rc = vafm_h5i_curve_read(r->file, r->path, r->groups[i], read_data, r->file_size, &r->buf, out, err);
     vafm_h5i_quiet_end(&q);
     return rc;
+}
+
+int vafm_h5_reader_curve(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_error *err)
+{
+    return s_reader_read(r, i, 1, out, err);
 }
 
 uint64_t vafm_h5_reader_group(const vafm_h5_reader *r, size_t i)
@@ -770,19 +776,7 @@ int vafm_h5_reader_find(const vafm_h5_reader *r, uint64_t group, size_t *i)
 
 int vafm_h5_reader_curve_info(vafm_h5_reader *r, size_t i, vafm_h5_curve *out, vafm_error *err)
 {
-    if (!r || r->tag != S_TAG || !out) {
-        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_reader_curve_info: no reader or output given");
-        return VAFM_EINVAL;
-    }
-    if (i >= r->n) {
-        vafm_h5i_err(err, VAFM_EINVAL, "", "%s: curve %zu requested, the file holds %zu", r->path, i, r->n);
-        return VAFM_EINVAL;
-    }
-    vafm_h5i_quiet q;
-    vafm_h5i_quiet_begin(&q);
-    int rc = vafm_h5i_curve_read(r->file, r->path, r->groups[i], 0, r->file_size, &r->buf, out, err);
-    vafm_h5i_quiet_end(&q);
-    return rc;
+    return s_reader_read(r, i, 0, out, err);
 }
 
 int vafm_h5_reader_provenance(const vafm_h5_reader *r, vafm_h5_provenance *out)
