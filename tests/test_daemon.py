@@ -102,8 +102,8 @@ def test_bad_inputs_get_errors_and_daemon_survives(fig4):
     assert fig4.proc.poll() is None
 
 
-def read_cli_samples(index):
-    out = subprocess.run([VAFM_CLI, "samples", "--preset", "paper-fig4", "--index", str(index), "--csv", "-"],
+def read_cli_samples(index, *extra):
+    out = subprocess.run([VAFM_CLI, "samples", "--preset", "paper-fig4", "--index", str(index), "--csv", "-", *extra],
                          check=True, capture_output=True, text=True).stdout
     lines = out.strip().split("\n")
     assert lines[0] == "time_s,height_m,deflection_m,force_N,tip_m,segment"
@@ -1062,6 +1062,42 @@ def test_log_on_a_full_disk_fails_cleanly(tmp_path):
     with h5py.File(path, "r") as f:
         assert sorted(int(k) for k in f.keys()) == sorted(logged.values())
     vafm_info_ok(path)
+
+
+def test_detector_chain_shared_with_the_cli(fig4, tmp_path):
+    """Issue #19: the detector chain (noise, ADC, offset, InvOLS) is one stage of the library and part of the
+    scene: `vafm samples` with the same settings gives the stream's measured deflection and force bit for
+    bit, and `vafm campaign` records what the daemon's log records (measured force, no tip position, the
+    sensitivity attribute)."""
+    h5py = pytest.importorskip("h5py")
+    if not VAFM_CLI:
+        pytest.skip("VAFM_CLI not set")
+    det = {"noise_V_rms": 2e-3, "adc_bits": 12, "adc_range_V": 4.0, "baseline_offset_V": 0.05,
+           "sensitivity_m_per_V": 40e-9}
+    assert fig4.cmd({"cmd": "set", "values": det})["status"] == "ok"
+    g = fig4.cmd({"cmd": "get", "names": list(det)})
+    assert all(g["values"][k] == v for k, v in det.items()), g
+    s = fig4.sub()
+    settle(fig4, s)
+    start, blocks, _, end = run_once(fig4, s, {"cmd": "curve", "index": 4})
+    assert start["detector"]["on"] is True and start["sensitivity_m_per_V"] == 40e-9
+    extra = [f"--{k}={v!r}" for k, v in det.items()]
+    ref = read_cli_samples(4, *extra)
+    for chan, col in (("deflection_m", 2), ("force_N", 3)):
+        got = stream_channel(blocks, chan)
+        assert np.array_equal(got.view(np.uint64), ref[:, col].view(np.uint64)), chan
+    volts = stream_channel(blocks, "vDeflection_V")
+    q = 4.0 / 2 ** 12
+    assert np.allclose(volts / q, np.round(volts / q), atol=1e-9)  # on the ADC's grid
+    # a campaign file records the same measured chain
+    path = tmp_path / "det.h5"
+    p = subprocess.run([VAFM_CLI, "campaign", "-n", "5", "--preset", "paper-fig4", "--out", str(path), "-q", *extra],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    with h5py.File(path, "r") as f:
+        g4 = f["4"]
+        assert "tip position" not in g4 and g4.attrs["sensitivity"] == 40e-9
+        assert np.array_equal(g4["force"][:].view(np.uint64), ref[:, 3].view(np.uint64))
 
 
 EXAMPLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "protocol", "examples")

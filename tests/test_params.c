@@ -73,6 +73,10 @@ static void test_field_table(void)
         case VAFM_PARAM_BOOL:
             ENSURE_MSG(f->min <= f->max, "%s: min > max", f->name);
             break;
+        case VAFM_PARAM_INT:
+            ENSURE_MSG(f->min <= f->max && f->min == floor(f->min) && f->max == floor(f->max), "%s: range", f->name);
+            ENSURE_MSG(f->unit[0] != '\0', "%s has no unit", f->name);
+            break;
         default: ENSURE_MSG(0, "%s: unknown kind %d", f->name, f->kind);
         }
     }
@@ -285,6 +289,13 @@ static void test_bad_text_values(void)
             t_bad(f, "", 0);
             t_bad(f, "-1", 0);
             break;
+        case VAFM_PARAM_INT:
+            t_bad(f, "8.5", 0); /* not a whole number */
+            t_bad(f, "25", 0);  /* above the range */
+            t_bad(f, "-1", 0);
+            t_bad(f, "", 0);
+            t_bad(f, "12x", 0);
+            break;
         case VAFM_PARAM_SEED:
             t_bad(f, "-1", 0);
             t_bad(f, " -1", 0); /* strtoull would wrap a negated value to 2^64 - 1 */
@@ -322,7 +333,8 @@ static const struct {
     M(E_star_Pa), M(R_m), M(gamma_J_per_m2), M(k_N_per_m), M(m_kg), M(eta_per_s), M(eta_cont_per_s), M(T_K),
     M(v_approach_m_per_s), M(v_retract_m_per_s), M(start_height_m), M(setpoint_N), M(trigger_height_m),
     M(z_range_m), M(dwell_s), M(retract_margin_m), M(retract_max_m), M(sample_rate_Hz), M(tune_duration_s),
-    M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT),
+    M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT), M(sensitivity_m_per_V), M(noise_V_rms),
+    M(adc_range_V), M(baseline_offset_V),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])

@@ -77,6 +77,12 @@ typedef struct vafm_params {
     int well_exact;        /**< 1: far from the instability, propagate the contact well exactly (linearised);
                                 used where a sample spans ≥ 8 integrator steps (cheaper there) */
     uint64_t seed;         /**< random seed; (seed, curve index) reproduces a curve bit for bit */
+    /* the measured chain (vafm/detector.h): off while noise_V_rms = 0, adc_bits = 0, baseline_offset_V = 0 */
+    double sensitivity_m_per_V; /**< deflection sensitivity (InvOLS), m/V: vDeflection = deflection / it */
+    double noise_V_rms;    /**< white noise floor of the deflection signal, V rms (0: none) */
+    int adc_bits;          /**< ADC resolution, bits (0: no ADC; 4–24) */
+    double adc_range_V;    /**< ADC full range, V (peak to peak; codes saturate beyond ±range/2) */
+    double baseline_offset_V; /**< offset of the deflection signal, V */
     uint8_t reserved[32];
 } vafm_params;
 
@@ -101,6 +107,7 @@ enum vafm_param_kind {
     VAFM_PARAM_CHOICE,   /**< one of a list of names (integrator, contact, noise, trigger, ...) */
     VAFM_PARAM_SEED,     /**< unsigned 64-bit integer */
     VAFM_PARAM_BOOL,     /**< 0 or 1 */
+    VAFM_PARAM_INT,      /**< int, with unit and range (min, max) */
 };
 
 /** One row of the field table. */
@@ -108,7 +115,7 @@ typedef struct vafm_param_info {
     const char *name;    /**< field name as used in JSON, CLI (--name=value) and files */
     int kind;            /**< enum vafm_param_kind */
     const char *unit;    /**< SI unit ("N/m"), "" if dimensionless */
-    double min, max;     /**< allowed closed range (REAL) */
+    double min, max;     /**< allowed closed range (REAL, INT) */
     const char *choices; /**< CHOICE: names separated by '|' */
     const char *doc;     /**< one line of documentation */
 } vafm_param_info;

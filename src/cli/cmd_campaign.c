@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* `vafm curves` (N curves per grid point: statistics, CSV) and `vafm campaign` (the same into one HDF5 file, resumable, on MPI too). */
 #include "cli/cli.h"
+#include "vafm/detector.h"
 
 /* ---- vafm curves: the campaign ----------------------------------------------------------------- */
 
@@ -203,6 +204,8 @@ int vafm_cli_cmd_curves(const vafm_cli_args *a)
 
 typedef struct s_camp {
     vafm_recorder *rec;
+    double *mdefl, *mforce; /* measured deflection and force of the curve being recorded (detector on) */
+    size_t mcap;
     int werr_code; /* the first recorder error */
     vafm_error werr;
     vafm_cli_progress pg; /* the fields below belong to the delivering worker */
@@ -210,6 +213,29 @@ typedef struct s_camp {
     int fail_status;
     uint64_t fail_index;
 } s_camp;
+
+/* The curve's samples through the scene's measured chain (vafm/detector.h) into cp's buffers. */
+static int s_measure(s_camp *cp, const vafm_campaign_curve *c, vafm_samples *out)
+{
+    const vafm_samples *s = &c->samples;
+    if (s->n > cp->mcap) {
+        double *d = realloc(cp->mdefl, s->n * sizeof *d), *f = d ? realloc(cp->mforce, s->n * sizeof *f) : NULL;
+        if (d)
+            cp->mdefl = d;
+        if (!f)
+            return -1;
+        cp->mforce = f;
+        cp->mcap = s->n;
+    }
+    vafm_detector det;
+    vafm_detector_begin(&det, c->params, c->index);
+    for (size_t i = 0; i < s->n; i++)
+        vafm_detector_apply(&det, s->deflection_m[i], NULL, &cp->mdefl[i], &cp->mforce[i]);
+    *out = *s;
+    out->deflection_m = cp->mdefl;
+    out->force_N = cp->mforce;
+    return 0;
+}
 
 /* Called in index order, one at a time. A failed curve stops the campaign, as in vafm curves. */
 static int s_camp_curve(void *user, const vafm_campaign_curve *c)
@@ -221,7 +247,20 @@ static int s_camp_curve(void *user, const vafm_campaign_curve *c)
         return 1;
     }
     vafm_record_curve rc = { .samples = &c->samples, .params = c->params, .result = &c->result,
-                             .point = c->point, .sensitivity_m_per_V = NAN };
+                             .point = c->point, .sensitivity_m_per_V = c->params->sensitivity_m_per_V };
+    vafm_samples measured;
+    if (vafm_detector_on(c->params)) {
+        /* the measured chain, as vafmd streams it: force and deflection are the instrument's, the file then
+         * has no tip position = height + force/k column (hdf5.md L14); the ground truth stays physical */
+        if (s_measure(cp, c, &measured)) {
+            cp->werr_code = VAFM_ENOMEM;
+            snprintf(cp->werr.message, sizeof cp->werr.message, "out of memory for curve %" PRIu64 "'s samples",
+                     c->index);
+            return 1;
+        }
+        rc.samples = &measured;
+        rc.measured_force = 1;
+    }
     int r = vafm_recorder_append(cp->rec, &rc, &cp->werr);
     if (r) {
         cp->werr_code = r;
@@ -441,6 +480,8 @@ static int s_campaign(const vafm_cli_args *a, vafm_cli_mpi *mpi)
     memset(&cerr, 0, sizeof cerr);
     vafm_recorder_report rep;
     int cr = vafm_recorder_close(&cp.rec, &rep, &cerr);
+    free(cp.mdefl);
+    free(cp.mforce);
     double wall = vafm_cli_now() - t_start;
 
     if (cp.fail_status) {

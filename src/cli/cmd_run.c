@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* `vafm run` (one curve, a readable summary) and `vafm samples` (one curve or tune as CSV). */
 #include "cli/cli.h"
+#include "vafm/detector.h"
 
 /* ---- vafm run ------------------------------------------------------------------------------------ */
 
@@ -53,13 +54,22 @@ int vafm_cli_cmd_run(const vafm_cli_args *a)
 
 /* ---- vafm samples ------------------------------------------------------------------------------ */
 
+typedef struct s_out {
+    FILE *f;
+    vafm_detector det; /* the scene's measured chain: deflection and force as the instrument records them */
+} s_out;
+
 static int s_write_samples(void *user, const vafm_samples *b)
 {
-    FILE *f = user;
-    for (size_t i = 0; i < b->n; i++)
-        if (fprintf(f, "%.17g,%.17g,%.17g,%.17g,%.17g,%u\n", b->time_s[i], b->height_m[i], b->deflection_m[i],
-                    b->force_N[i], b->tip_m[i], (unsigned)b->segment[i]) < 0)
+    s_out *o = user;
+    for (size_t i = 0; i < b->n; i++) {
+        double defl = b->deflection_m[i], force = b->force_N[i];
+        if (o->det.on)
+            vafm_detector_apply(&o->det, b->deflection_m[i], NULL, &defl, &force);
+        if (fprintf(o->f, "%.17g,%.17g,%.17g,%.17g,%.17g,%u\n", b->time_s[i], b->height_m[i], defl, force,
+                    b->tip_m[i], (unsigned)b->segment[i]) < 0)
             return 1; /* stop: the output is broken */
+    }
     return 0;
 }
 
@@ -81,8 +91,10 @@ int vafm_cli_cmd_samples(const vafm_cli_args *a)
     int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : vafm_sim_curve_begin(sim, index);
     int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
     fputs("time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
+    s_out o = { .f = f };
+    vafm_detector_begin(&o.det, &sc.p, index);
     if (!r)
-        r = vafm_cli_advance_all(sim, s_write_samples, f, &pg);
+        r = vafm_cli_advance_all(sim, s_write_samples, &o, &pg);
     rc = vafm_cli_close_out(f, a->val[O_CSV], r == VAFM_EABORT);
     if (r && r != VAFM_EABORT) {
         const vafm_error *e = vafm_sim_error(sim);

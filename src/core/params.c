@@ -93,6 +93,12 @@ static const s_field s_fields[] = {
     { { "seed", VAFM_PARAM_SEED, "", 0, 18446744073709551615.0, NULL,
         "random seed: (seed, curve index) reproduces a curve bit for bit" },
       offsetof(vafm_params, seed), S_NONE },
+    REAL(sensitivity_m_per_V, "m/V", 1e-12, 1e-3, "deflection sensitivity (InvOLS): vDeflection = deflection / it"),
+    REAL(noise_V_rms, "V", 0, 10, "detector: white noise floor of the deflection signal (0: none)"),
+    { { "adc_bits", VAFM_PARAM_INT, "bits", 0, 24, NULL, "detector: ADC resolution (0: no ADC, else 4-24)" },
+      offsetof(vafm_params, adc_bits), S_NONE },
+    REAL(adc_range_V, "V", 1e-3, 100, "detector: ADC full range, peak to peak (codes saturate beyond it)"),
+    REAL(baseline_offset_V, "V", -100, 100, "detector: offset of the deflection signal"),
 };
 #undef REAL
 
@@ -123,6 +129,8 @@ static void s_common(vafm_params *p)
     p->contact_table = 1;
     p->well_exact = 1;
     p->seed = 1;
+    p->sensitivity_m_per_V = 50e-9; /* a typical optical lever: 50 nm/V */
+    p->adc_range_V = 20.0;          /* ±10 V, a typical controller input */
 }
 
 /* The paper's Fig. 1/2 scene: m̃ = 5e-5, ṽ = 1e-4, k̃ = 2e-5, k_BT̃ = 5e-8, γ̃ = 1.2e-4 with
@@ -269,6 +277,21 @@ static int s_check_real(const s_field *f, double v, vafm_error *err)
     return 0;
 }
 
+/* An INT field's range; adc_bits also excludes 1-3 (0 means "no ADC"). */
+static int s_check_int(const s_field *f, int v, vafm_error *err)
+{
+    if (v < (int)f->info.min || v > (int)f->info.max) {
+        vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s = %d is outside [%.0f, %.0f] %s", f->info.name, v,
+                     f->info.min, f->info.max, f->info.unit);
+        return VAFM_EINVAL;
+    }
+    if (!strcmp(f->info.name, "adc_bits") && v > 0 && v < 4) {
+        vafm_err_set(err, VAFM_EINVAL, f->info.name, "adc_bits = %d: 0 (no ADC) or 4 to 24 bits", v);
+        return VAFM_EINVAL;
+    }
+    return 0;
+}
+
 int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_error *err)
 {
     const s_field *f = s_find(name);
@@ -310,6 +333,20 @@ int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_er
     bad_seed:
         vafm_err_set(err, VAFM_EINVAL, f->info.name, "seed: '%s' is not an integer in [0, 2^64 - 1]", value);
         return VAFM_EINVAL;
+    }
+    case VAFM_PARAM_INT: {
+        errno = 0;
+        long v = strtol(value, &end, 10);
+        if (end == value || *end != '\0' || errno == ERANGE || v < (long)f->info.min || v > (long)f->info.max) {
+            vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s: '%s' is not a whole number in [%.0f, %.0f] %s",
+                         f->info.name, value, f->info.min, f->info.max, f->info.unit);
+            return VAFM_EINVAL;
+        }
+        int r = s_check_int(f, (int)v, err);
+        if (r)
+            return r;
+        *(int *)((char *)p + f->offset) = (int)v;
+        return 0;
     }
     case VAFM_PARAM_BOOL: {
         int v;
@@ -384,6 +421,7 @@ int vafm_params_get(const vafm_params *p, const char *name, char *buf, size_t le
     case VAFM_PARAM_REAL: snprintf(buf, len, "%.17g", *(const double *)((const char *)p + f->offset)); break;
     case VAFM_PARAM_SEED: snprintf(buf, len, "%" PRIu64, p->seed); break;
     case VAFM_PARAM_BOOL: snprintf(buf, len, "%s", *(const int *)((const char *)p + f->offset) ? "true" : "false"); break;
+    case VAFM_PARAM_INT: snprintf(buf, len, "%d", *(const int *)((const char *)p + f->offset)); break;
     default: snprintf(buf, len, "%s", s_choice_value(p, f)); break;
     }
     return 0;
@@ -432,6 +470,10 @@ int vafm_params_validate(const vafm_params *p, vafm_error *err)
                              f->info.choices);
                 return VAFM_EINVAL;
             }
+        } else if (f->info.kind == VAFM_PARAM_INT) {
+            int r = s_check_int(f, *(const int *)((const char *)p + f->offset), err);
+            if (r)
+                return r;
         } else if (f->info.kind == VAFM_PARAM_BOOL) {
             int v = *(const int *)((const char *)p + f->offset);
             if (v != 0 && v != 1) {

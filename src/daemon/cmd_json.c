@@ -17,14 +17,9 @@ void vafmd_settings_default(vafmd_settings *s)
 {
     s->speed = 1.0;
     s->free_run = 0;
-    s->sensitivity_m_per_V = 50e-9;
     s->block_s = 5e-3;
     s->hwm = 1000;
     s->lookahead_s = 1.0;
-    s->noise_V_rms = 0;
-    s->adc_bits = 0;
-    s->adc_range_V = 20;
-    s->baseline_offset_V = 0;
 }
 
 void vafmd_err_set(vafmd_err *e, const char *code, const char *field, const char *fmt, ...)
@@ -52,19 +47,10 @@ typedef struct s_setting {
 static const s_setting s_settings[] = {
     { "speed", S_SET_REAL, "", 0.01, 1000, 0, "pacing speed factor (1: real time; applies from the next run)" },
     { "free_run", S_SET_BOOL, "", 0, 1, 0, "true: no pacing, blocks are released as fast as computed" },
-    { "sensitivity_m_per_V", S_SET_REAL, "m/V", 1e-12, 1e-3, 0,
-      "detector sensitivity (InvOLS): vDeflection_V = deflection_m / sensitivity" },
     { "block_s", S_SET_REAL, "s", 1e-3, 1e-2, 0, "duration of the samples of one data block" },
     { "hwm", S_SET_INT, "messages", 1, 1e7, 1, "stream send high-water mark per subscriber (--hwm; read-only)" },
     { "lookahead_s", S_SET_REAL, "s", 0, 10, 0,
       "compute ahead: seconds of samples computed before their release (0: none); at most 256 MiB per run" },
-    { "noise_V_rms", S_SET_REAL, "V", 0, 10, 0,
-      "detector noise floor on vDeflection, V rms (0: off); white, Gaussian, its own random stream" },
-    { "adc_bits", S_SET_INT, "bits", 0, 24, 0,
-      "ADC resolution of vDeflection, bits: 0 (off) or 4 to 24; step = adc_range_V / 2^adc_bits" },
-    { "adc_range_V", S_SET_REAL, "V", 1e-3, 100, 0,
-      "ADC input range (full span), V: codes cover [-adc_range_V/2, adc_range_V/2); beyond it clips" },
-    { "baseline_offset_V", S_SET_REAL, "V", -100, 100, 0, "baseline offset added to vDeflection, V" },
 };
 #define S_N_SETTINGS (sizeof s_settings / sizeof s_settings[0])
 
@@ -82,18 +68,8 @@ static json_t *s_setting_value(const vafmd_settings *s, const s_setting *f)
         return json_real(s->speed);
     if (!strcmp(f->name, "free_run"))
         return json_boolean(s->free_run);
-    if (!strcmp(f->name, "sensitivity_m_per_V"))
-        return json_real(s->sensitivity_m_per_V);
     if (!strcmp(f->name, "block_s"))
         return json_real(s->block_s);
-    if (!strcmp(f->name, "noise_V_rms"))
-        return json_real(s->noise_V_rms);
-    if (!strcmp(f->name, "adc_bits"))
-        return json_integer(s->adc_bits);
-    if (!strcmp(f->name, "adc_range_V"))
-        return json_real(s->adc_range_V);
-    if (!strcmp(f->name, "baseline_offset_V"))
-        return json_real(s->baseline_offset_V);
     if (!strcmp(f->name, "lookahead_s"))
         return json_real(s->lookahead_s);
     return json_integer(s->hwm);
@@ -127,22 +103,8 @@ static int s_setting_apply(vafmd_settings *s, const s_setting *f, json_t *v, vaf
                       f->max, f->unit);
         return -1;
     }
-    if (!strcmp(f->name, "adc_bits")) {
-        if (x != 0 && x < 4) {
-            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, f->name, "adc_bits = %.17g: 0 (off) or 4 to 24 bits", x);
-            return -1;
-        }
-        s->adc_bits = (int)x;
-    } else if (!strcmp(f->name, "noise_V_rms"))
-        s->noise_V_rms = x;
-    else if (!strcmp(f->name, "adc_range_V"))
-        s->adc_range_V = x;
-    else if (!strcmp(f->name, "baseline_offset_V"))
-        s->baseline_offset_V = x;
     if (!strcmp(f->name, "speed"))
         s->speed = x;
-    else if (!strcmp(f->name, "sensitivity_m_per_V"))
-        s->sensitivity_m_per_V = x;
     else if (!strcmp(f->name, "block_s"))
         s->block_s = x;
     else if (!strcmp(f->name, "lookahead_s"))
@@ -159,6 +121,7 @@ json_t *vafmd_param_value(const vafm_params *p, const vafm_param_info *f)
         return json_null();
     switch (f->kind) {
     case VAFM_PARAM_REAL: return json_real(strtod(buf, NULL));
+    case VAFM_PARAM_INT: return json_integer((json_int_t)strtol(buf, NULL, 10));
     case VAFM_PARAM_BOOL: return json_boolean(!strcmp(buf, "true"));
     default: return json_string(buf); /* CHOICE names; SEED as decimal text (JSON numbers lose 2^64) */
     }

@@ -30,27 +30,16 @@
 typedef struct vafmd_settings {
     double speed;               /* pacing speed factor, [0.01, 1000] (1: real time) */
     int free_run;               /* 1: no pacing, as fast as possible */
-    double sensitivity_m_per_V; /* InvOLS: vDeflection = deflection / sensitivity, m/V */
     double block_s;             /* samples per data block, as a duration, [1e-3, 1e-2] s */
     int hwm;                    /* PUB send high-water mark, messages per subscriber (set at start only) */
     double lookahead_s;         /* compute ahead: samples computed before their release, as a duration of
                                    samples, [0, 10] s (0: each block is computed just before its deadline);
                                    memory at most VAFMD_LOOKAHEAD_MAX_BYTES per run (fewer blocks then) */
-    /* The detector chain (off unless set; protocol/wire.md §3.1): vDeflection_V = ADC(deflection /
-     * sensitivity + baseline offset + noise); deflection_m = vDeflection_V · sensitivity; force_N =
-     * k · deflection_m. Height and tip position stay exact. */
-    double noise_V_rms;         /* detector noise floor, V rms, [0, 10] (0: off) */
-    int adc_bits;               /* ADC resolution, bits, 0 (off: no quantisation, no clipping) or [4, 24] */
-    double adc_range_V;         /* ADC input range (full span), V, [1e-3, 100]: codes cover [-range/2, range/2) */
-    double baseline_offset_V;   /* baseline offset added to vDeflection, V, [-100, 100] */
+    /* The detector chain (sensitivity, noise, ADC, offset) is part of the scene (vafm_params, applied by
+     * vafm/detector.h), so the CLI and the files have it too. */
 } vafmd_settings;
 
 /* 1 if any detector signal is on (else the samples are the simulation's, bit for bit). */
-static inline int vafmd_detector_on(const vafmd_settings *s)
-{
-    return s->noise_V_rms > 0 || s->adc_bits > 0 || s->baseline_offset_V != 0;
-}
-
 void vafmd_settings_default(vafmd_settings *s);
 
 enum vafmd_run_kind { VAFMD_RUN_CURVE = 0, VAFMD_RUN_TUNE = 1, VAFMD_RUN_REPLAY = 2 };

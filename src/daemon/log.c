@@ -111,7 +111,8 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
     res.index = c->begin->index;
     vafm_record_curve rc = { .samples = &s, .params = &c->begin->p, .result = &res, .point = c->begin->point,
                              .run_id = c->begin->run_id, .client_run_id = c->begin->client_run_id,
-                             .sensitivity_m_per_V = NAN, .measured_force = c->begin->detector };
+                             .sensitivity_m_per_V = c->begin->p.sensitivity_m_per_V,
+                             .measured_force = c->begin->detector };
     vafm_error e;
     memset(&e, 0, sizeof e);
     int r = vafm_recorder_append(L->w, &rc, &e);

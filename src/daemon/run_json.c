@@ -3,6 +3,7 @@
  * that it and "hello" share (design: run_json.h). */
 #include <stdlib.h>
 #include "daemon/run_json.h"
+#include "vafm/detector.h"
 #include "vafm/wire.h"
 
 static const char *const s_channels[VAFMD_N_CHANNELS][2] = {
@@ -38,11 +39,11 @@ char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int 
     json_object_set_new(start, "sample_rate_Hz", json_real(p->sample_rate_Hz));
     json_object_set_new(start, "block_samples", json_integer((json_int_t)block_n));
     json_object_set_new(start, "dt_s", json_real(dt_s));
-    json_object_set_new(start, "sensitivity_m_per_V", json_real(set->sensitivity_m_per_V));
-    json_object_set_new(start, "detector", json_pack("{s:b,s:f,s:i,s:f,s:f}", "on", vafmd_detector_on(set),
-                                                     "noise_V_rms", set->noise_V_rms, "adc_bits", set->adc_bits,
-                                                     "adc_range_V", set->adc_range_V, "baseline_offset_V",
-                                                     set->baseline_offset_V));
+    json_object_set_new(start, "sensitivity_m_per_V", json_real(p->sensitivity_m_per_V));
+    json_object_set_new(start, "detector", json_pack("{s:b,s:f,s:i,s:f,s:f}", "on", vafm_detector_on(p),
+                                                     "noise_V_rms", p->noise_V_rms, "adc_bits", p->adc_bits,
+                                                     "adc_range_V", p->adc_range_V, "baseline_offset_V",
+                                                     p->baseline_offset_V));
     json_object_set_new(start, "speed", json_real(set->speed));
     json_object_set_new(start, "free_run", json_boolean(set->free_run));
     json_object_set_new(start, "channels", ch);

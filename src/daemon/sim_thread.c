@@ -39,6 +39,7 @@
 #include "daemon/daemon.h"
 #include "daemon/replay.h"
 #include "daemon/run_json.h"
+#include "vafm/detector.h"
 #include "vafm/rng.h"
 #include "vafm/wire.h"
 
@@ -47,10 +48,6 @@
 #endif
 
 #define S_NS 1000000000LL
-/* The detector noise stream of curve (seed, index) is Philox stream `index` of the key seed ^ this
- * constant ("DETECTR"): distinct from the physics stream (key seed), so the physics samples do not
- * depend on whether the detector is on, and reproducible from (seed, index) alone. */
-#define S_DETECTOR_KEY UINT64_C(0x0044455445435452)
 #define S_MAX_EVENTS 16
 #define S_PIECE_NS 500000LL /* compute at most this long (plus one piece) before releasing or polling */
 /* a piece of computation bounds how long a due block can wait for its release: ~20 µs of work, sized
@@ -107,10 +104,8 @@ typedef struct s_run {
     uint8_t *lseg;
     int log_broken;        /* a log item was lost (full ring, empty pool): the writer drops the curve */
     /* detector chain (vafmd_settings): on, its noise stream, ADC step and code range, spring constant */
-    int det;
-    vafm_rng det_rng;
-    double adc_q, code_min, code_max, k_N_per_m;
-    int clipped;           /* a sample of the current block hit the ADC range */
+    vafm_detector det;     /* the measured chain (vafm/detector.h); det.clipped: a sample of the current
+                              block hit the ADC range */
     /* compute-ahead FIFO: qn complete blocks from q[qhead]; the block being filled (if filling) is
      * q[(qhead + qn) % qcap]; ch[], lt, lseg, fill, ev above describe that block while it fills */
     s_block *q;
@@ -250,32 +245,14 @@ static int s_sink(void *user, const vafm_samples *b)
         if (r->ch[1]) /* replays stream only the channels their file has */
             r->ch[1][k] = b->deflection_m[i];
         r->ch[2][k] = b->force_N[i];
-        /* a division, not a multiplication by the inverse: bit-exact with deflection / sensitivity */
-        if (r->ch[3])
+        if (r->det.on) /* the measured chain: detector volts, then deflection and force derived from them */
+            vafm_detector_apply(&r->det, b->deflection_m[i], &r->ch[3][k], &r->ch[1][k], &r->ch[2][k]);
+        else if (r->ch[3]) /* a division, not a multiplication by the inverse: bit-exact with deflection / sensitivity */
             r->ch[3][k] = b->deflection_m[i] / r->sens;
         if (r->ch[4])
             r->ch[4][k] = b->tip_m[i];
         if (r->ch[VAFMD_CH_TIME])
             r->ch[VAFMD_CH_TIME][k] = b->time_s[i];
-        if (r->det) { /* the measured chain: detector volts, then deflection and force derived from them */
-            double v = r->ch[3][k] + r->cmd.set.baseline_offset_V;
-            if (r->cmd.set.noise_V_rms > 0)
-                v += r->cmd.set.noise_V_rms * vafm_rng_normal(&r->det_rng);
-            if (r->cmd.set.adc_bits > 0) {
-                double code = floor(v / r->adc_q + 0.5);
-                if (code > r->code_max) {
-                    code = r->code_max;
-                    r->clipped = 1;
-                } else if (code < r->code_min) {
-                    code = r->code_min;
-                    r->clipped = 1;
-                }
-                v = code * r->adc_q;
-            }
-            r->ch[3][k] = v;
-            r->ch[1][k] = v * r->cmd.set.sensitivity_m_per_V;
-            r->ch[2][k] = r->k_N_per_m * r->ch[1][k];
-        }
         if (r->lt) { /* the log takes these and ch[0], ch[2], ch[4] at release: the stream's doubles */
             r->lt[k] = b->time_s[i];
             r->lseg[k] = b->segment[i];
@@ -679,19 +656,15 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     r->t_start = s_now();
     const vafm_params *p = c->replay ? NULL : vafm_sim_params(c->sim); /* a replay has no scene */
     r->block_n = vafmd_block_samples(p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay), c->set.block_s);
-    r->sens = c->set.sensitivity_m_per_V;
+    r->sens = p ? p->sensitivity_m_per_V : NAN; /* a replay sets its file's */
     r->first_seq = atomic_load_explicit(&sh->seq, memory_order_relaxed);
     r->dropped_at_start = atomic_load(&sh->dropped);
     r->active = 1;
     s_pool_prepare(x, c->log && c->kind == VAFMD_RUN_CURVE, r->block_n);
-    r->det = p && vafmd_detector_on(&c->set); /* replays stream the recorded signals */
-    if (r->det) {
-        vafm_rng_init(&r->det_rng, p->seed ^ S_DETECTOR_KEY, c->index);
-        r->adc_q = c->set.adc_bits > 0 ? ldexp(c->set.adc_range_V, -c->set.adc_bits) : 0;
-        r->code_max = c->set.adc_bits > 0 ? ldexp(1.0, c->set.adc_bits - 1) - 1 : 0;
-        r->code_min = c->set.adc_bits > 0 ? -ldexp(1.0, c->set.adc_bits - 1) : 0;
-        r->k_N_per_m = p->k_N_per_m;
-    }
+    if (p) /* replays stream the recorded signals: no detector */
+        vafm_detector_begin(&r->det, p, c->index);
+    else
+        memset(&r->det, 0, sizeof r->det);
     if (c->log && c->kind == VAFMD_RUN_CURVE) {
         r->log = &x->d->log;
         vafmd_log_begin *lb = calloc(1, sizeof *lb);
@@ -700,7 +673,7 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
             lb->run_id = c->run_id;
             lb->index = c->index;
             lb->point = c->camp ? c->camp->sim_point : 0;
-            lb->detector = vafmd_detector_on(&c->set);
+            lb->detector = r->det.on;
             memcpy(lb->client_run_id, c->client_run_id, sizeof lb->client_run_id);
         }
         s_log_push(r, VAFMD_LOG_BEGIN, lb);
@@ -788,7 +761,7 @@ static void s_compute(s_ctx *x)
         r->fill = 0;
         r->seg_change = 0;
         r->n_ev = 0;
-        r->clipped = 0;
+        r->det.clipped = 0;
         for (int i = 0; i <= VAFMD_CH_TIME; i++)
             r->ch[i] = b->ch[i];
         r->lt = b->log_t;
@@ -831,7 +804,7 @@ static void s_compute(s_ctx *x)
         return;
     b->n = r->fill;
     b->flags = (rc != 1 ? VAFM_WIRE_FLAG_LAST : 0) | (r->seg_change ? VAFM_WIRE_FLAG_SEG_CHANGE : 0) |
-               (r->clipped ? VAFM_WIRE_FLAG_CLIPPED : 0);
+               (r->det.clipped ? VAFM_WIRE_FLAG_CLIPPED : 0);
     b->first_seg = r->first_seg;
     b->n_ev = r->n_ev;
     memcpy(b->ev, r->ev, (size_t)r->n_ev * sizeof *r->ev);

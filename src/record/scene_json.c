@@ -28,6 +28,10 @@ void vafm_scene_param_allowed(const vafm_param_info *info, char *buf, size_t len
         break;
     case VAFM_PARAM_CHOICE: snprintf(buf, len, "one of %s", info->choices); break;
     case VAFM_PARAM_BOOL: snprintf(buf, len, "a boolean (true|false|1|0)"); break;
+    case VAFM_PARAM_INT:
+        snprintf(buf, len, "a whole number in [%.0f, %.0f]%s%s", info->min, info->max, info->unit[0] ? " " : "",
+                 info->unit);
+        break;
     case VAFM_PARAM_SEED: snprintf(buf, len, "an integer in [0, 2^64 - 1]"); break;
     default: snprintf(buf, len, "(unknown kind)"); break;
     }
@@ -77,6 +81,11 @@ const char *vafm_scene_value_text(const vafm_param_info *info, const json_t *v, 
             snprintf(buf, len, "%s", json_string_value(v));
         else
             return NULL;
+        return buf;
+    case VAFM_PARAM_INT:
+        if (!json_is_integer(v)) /* 8.5 bits is the wrong type, not an out-of-range number */
+            return NULL;
+        snprintf(buf, len, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
         return buf;
     case VAFM_PARAM_BOOL:
         if (!json_is_boolean(v))
