@@ -63,8 +63,11 @@ def test_logged_run_replays_bit_for_bit(fig4, tmp_path):
     fig4.wait_idle()
     assert end["status"] == "ok" and end["kind"] == "replay", end
     assert start["kind"] == "replay" and start["replay"]["selection"] == [0]
-    # a vafm log: no sensitivity attribute, so no vDeflection; its time column is streamed as time_s
-    assert [c["name"] for c in start["channels"]] == ["height_m", "deflection_m", "force_N", "tip_m", "time_s"]
+    # a vafm log records the sensitivity (InvOLS, since 0.4), so vDeflection is streamed too; its time column
+    # is streamed as time_s
+    assert [c["name"] for c in start["channels"]] == ["height_m", "deflection_m", "force_N", "vDeflection_V",
+                                                       "tip_m", "time_s"]
+    assert start["sensitivity_m_per_V"] == live[0]["sensitivity_m_per_V"]
     assert start["sample_rate_Hz"] == live[0]["sample_rate_Hz"]
     assert start["block_samples"] == live[0]["block_samples"]
     assert start["scene"] == live[0]["scene"]  # the file's provenance: the scene at log start
@@ -87,7 +90,9 @@ def test_logged_run_replays_bit_for_bit(fig4, tmp_path):
     d_ulp = np.abs(bits(got["deflection_m"]).astype(np.int64) - bits(ref["deflection_m"]).astype(np.int64))
     assert d_ulp.max() <= 4, d_ulp.max()
     # the same blocks: sizes, first samples, segments and the LAST flag
-    assert [h[6:10] for h, _ in blocks] == [h[6:10] for h, _ in live[1]]
+    # (the replay has one channel more: the file's time column)
+    assert [(h[6], h[7], h[9]) for h, _ in blocks] == [(h[6], h[7], h[9]) for h, _ in live[1]]
+    assert all(h[8] == 6 for h, _ in blocks) and all(h[8] == 5 for h, _ in live[1])
     assert (blocks[-1][0][12] & 4) and (live[1][-1][0][12] & 4)
     # segment events at the same samples, plus one curve event
     seg = [(e["sample"], e["from"], e["to"]) for e in events if e["kind"] == "segment"]
