@@ -5,7 +5,7 @@ ASAN   ?= build-asan
 MESON  ?= meson
 PY     ?= /usr/bin/python3
 
-.PHONY: all deps demo test test-release test-asan bench clean
+.PHONY: all deps demo test test-release test-asan bench install clean
 
 all: $(BUILD)/build.ninja
 	ninja -C $(BUILD)
@@ -42,6 +42,13 @@ test-asan: $(ASAN)/build.ninja
 # Benchmarks (speed and work-precision reports under $(BUILD)/bench/).
 bench: all
 	$(MESON) test -C $(BUILD) --benchmark --verbose
+
+# Install (meson install): `make install` into the build's prefix (default /usr/local), `make install
+# PREFIX=/opt/vafm`, `make install DESTDIR=/tmp/stage` (a staged root, as packagers do).
+PREFIX ?=
+install: all
+	$(if $(PREFIX),$(MESON) configure $(BUILD) -Dprefix=$(PREFIX) && ninja -C $(BUILD),)
+	$(MESON) install -C $(BUILD) $(if $(DESTDIR),--destdir $(DESTDIR),)
 
 clean:
 	rm -rf $(BUILD) $(ASAN)

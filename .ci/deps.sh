@@ -3,7 +3,7 @@
 # Install the Debian packages vafm needs, only those that are missing. Idempotent; used by `make`.
 set -eu
 pkgs=(meson ninja-build gcc pkg-config libjansson-dev python3 libhdf5-dev hdf5-tools python3-h5py python3-numpy libzmq3-dev python3-zmq
-      python3-pytest libgsl-dev python3-matplotlib python3-scipy libopenmpi-dev openmpi-bin)
+      python3-pytest libgsl-dev python3-matplotlib python3-scipy libopenmpi-dev openmpi-bin help2man)
 missing=()
 for p in "${pkgs[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

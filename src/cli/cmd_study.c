@@ -40,6 +40,9 @@ extern char **environ;
 #include "vafm/theory.h"
 #include "vafm/units.h"
 
+#ifndef VAFM_DATADIR_REL
+#define VAFM_DATADIR_REL "../share/vafm"
+#endif
 #ifndef VAFM_STUDY_PLOT
 #define VAFM_STUDY_PLOT "src/cli/study_plot.py"
 #endif
@@ -310,11 +313,35 @@ static int s_run_plotter(const char *script, const char *name, const char *out, 
     return st;
 }
 
+/* The plotter: $VAFM_STUDY_PLOT; else installed beside the binary (BINDIR/VAFM_DATADIR_REL/study_plot.py,
+ * e.g. /usr/bin/../share/vafm), so an installed vafm finds its own wherever the source tree went; else the
+ * source tree's (a build tree's vafm). */
+static const char *s_plot_script(char *buf, size_t len)
+{
+    const char *env = getenv("VAFM_STUDY_PLOT");
+    if (env && *env)
+        return env;
+    char exe[4096];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    if (n > 0) {
+        exe[n] = '\0';
+        char *slash = strrchr(exe, '/');
+        if (slash) {
+            *slash = '\0';
+            struct stat st;
+            int w = VAFM_DATADIR_REL[0] == '/' ? snprintf(buf, len, "%s/study_plot.py", VAFM_DATADIR_REL)
+                                               : snprintf(buf, len, "%s/%s/study_plot.py", exe, VAFM_DATADIR_REL);
+            if (w > 0 && w < (int)len && stat(buf, &st) == 0)
+                return buf;
+        }
+    }
+    return VAFM_STUDY_PLOT;
+}
+
 static void s_plot(s_ctx *ctx)
 {
-    const char *script = getenv("VAFM_STUDY_PLOT");
-    if (!script || !*script)
-        script = VAFM_STUDY_PLOT;
+    char found[4096];
+    const char *script = s_plot_script(found, sizeof found);
     struct stat st;
     if (stat(script, &st) || stat("/usr/bin/python3", &st)) {
         fprintf(ctx->rep, "\n**Figures: skipped** (plot script %s or /usr/bin/python3 not found).\n", script);

@@ -45,6 +45,7 @@ static const char s_usage[] =
     "  --sensitivity S    detector sensitivity (InvOLS), m/V (default 50e-9)\n"
     "  --hwm N            stream send high-water mark per subscriber, messages (default 1000)\n"
     "  -h, --help         this text\n"
+    "  --version          print the version\n"
     "\nSETTINGS (get/set like scene parameters): speed, free_run, block_s, hwm, lookahead_s (s of\n"
     "  samples computed ahead of their release, [0, 10], default 1; 0: off). The detector chain is part\n"
     "  of the scene (also in --config \"values\"): sensitivity_m_per_V (InvOLS), noise_V_rms (V rms),\n"
@@ -158,6 +159,9 @@ int main(int argc, char **argv)
         const char **dst = NULL;
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
             fputs(s_usage, stdout);
+            return 0;
+        } else if (!strcmp(a, "--version")) {
+            printf("vafmd %s (library %s)\n", VAFMD_VERSION, vafm_version());
             return 0;
         } else if (!strcmp(a, "--free-run"))
             free_run = 1;
