@@ -22,7 +22,8 @@
 /* REAL fields that are dimensionless by design (a ratio): everything else must carry an SI unit. */
 static int t_dimensionless(const char *name)
 {
-    return !strcmp(name, "omega_dt") || !strcmp(name, "omega_dt_far") || !strcmp(name, "near_barrier_kT");
+    return !strcmp(name, "omega_dt") || !strcmp(name, "omega_dt_far") || !strcmp(name, "near_barrier_kT") ||
+           !strcmp(name, "Q");
 }
 
 /* The range as the library formats it in its messages ("[%.6g, %.6g]"). */
@@ -330,7 +331,7 @@ static const struct {
     size_t off;
 } t_real_members[] = {
 #define M(x) {#x, offsetof(vafm_params, x)}
-    M(E_star_Pa), M(R_m), M(gamma_J_per_m2), M(k_N_per_m), M(m_kg), M(eta_per_s), M(eta_cont_per_s), M(T_K),
+    M(E_star_Pa), M(R_m), M(gamma_J_per_m2), M(k_N_per_m), M(m_kg), M(eta_per_s), M(f0_Hz), M(Q), M(eta_cont_per_s), M(T_K),
     M(v_approach_m_per_s), M(v_retract_m_per_s), M(start_height_m), M(setpoint_N), M(trigger_height_m),
     M(z_range_m), M(dwell_s), M(retract_margin_m), M(retract_max_m), M(sample_rate_Hz), M(tune_duration_s),
     M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT), M(sensitivity_m_per_V), M(noise_V_rms),
@@ -583,8 +584,42 @@ static void test_cost_estimate(void)
     ENSURE(vafm_params_validate(&p, &e) == 0);
 }
 
+/* An instrument's cantilever words (issue #16): f0 and Q give the mass k/(2π f0)² and the friction 2π f0/Q;
+ * the reduced scene equals the one given by m and η directly; 0 leaves m_kg and eta_per_s in charge. */
+static void test_f0_Q(void)
+{
+    vafm_params a, b;
+    vafm_preset_apply(&a, "paper-fig1", NULL);
+    b = a;
+    double w0 = sqrt(a.k_N_per_m / a.m_kg), f0 = w0 / (2.0 * M_PI), Q = w0 / a.eta_per_s;
+    ENSURE(vafm_params_set(&b, "f0_Hz", "0", NULL) == 0 && vafm_params_mass_kg(&b) == a.m_kg);
+    char t[64];
+    snprintf(t, sizeof t, "%.17g", f0);
+    ENSURE(vafm_params_set(&b, "f0_Hz", t, NULL) == 0);
+    snprintf(t, sizeof t, "%.17g", Q);
+    ENSURE(vafm_params_set(&b, "Q", t, NULL) == 0);
+    b.m_kg = 2e-12; /* unused now */
+    b.eta_per_s = 7.0;
+    ENSURE_REL(vafm_params_mass_kg(&b), a.m_kg, 1e-14);
+    ENSURE_REL(vafm_params_eta_per_s(&b), a.eta_per_s, 1e-14);
+    vafm_reduced ra, rb;
+    vafm_units_reduce(&a, &ra);
+    vafm_units_reduce(&b, &rb);
+    ENSURE_REL(rb.m, ra.m, 1e-13);
+    ENSURE_REL(rb.k, ra.k, 1e-15);
+    ENSURE_REL(rb.v_retract, ra.v_retract, 1e-14);
+    ENSURE(vafm_params_validate(&b, NULL) == 0);
+    /* a resonance that gives a mass outside m_kg's range is refused naming f0_Hz */
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    b.f0_Hz = 1e9;
+    b.k_N_per_m = 1e-6;
+    ENSURE(vafm_params_validate(&b, &e) == VAFM_EINVAL && !strcmp(e.field, "f0_Hz"));
+}
+
 int main(void)
 {
+    RUN_TEST(test_f0_Q);
     RUN_TEST(test_cost_estimate);
     RUN_TEST(test_field_table);
     RUN_TEST(test_presets);

@@ -47,6 +47,10 @@ typedef struct vafm_params {
     double k_N_per_m;      /**< spring constant k, N/m */
     double m_kg;           /**< effective mass m, kg */
     double eta_per_s;      /**< friction rate η of the cantilever in its medium (damping mη), 1/s */
+    double f0_Hz;          /**< resonance frequency of the free cantilever, Hz: when > 0 the mass is k/(2π f0)²
+                                (m_kg is not used); 0: from m_kg */
+    double Q;              /**< quality factor of the free cantilever in its medium: when > 0 the friction rate
+                                is 2π f0 / Q (eta_per_s is not used); 0: from eta_per_s */
     double eta_cont_per_s; /**< extra friction rate while in contact (the paper's Γ_cont channel), 1/s */
     double T_K;            /**< temperature, K (0: athermal, no random numbers drawn) */
     /* ramp protocol */
@@ -100,6 +104,11 @@ VAFM_API int vafm_preset_apply(vafm_params *p, const char *name, vafm_error *err
 /** Check every field and the combination (e.g. time step against the stability limit).
  *  @return 0 or VAFM_EINVAL / VAFM_EUNSTABLE with err naming the field, its value and the range. */
 VAFM_API int vafm_params_validate(const vafm_params *p, vafm_error *err);
+
+/** The cantilever's effective mass, kg: k/(2π f0_Hz)² when f0_Hz > 0, else m_kg. */
+VAFM_API double vafm_params_mass_kg(const vafm_params *p);
+/** The effective friction rate, 1/s: 2π f0 / Q when Q > 0 (f0 = f0_Hz, or √(k/m)/2π), else eta_per_s. */
+VAFM_API double vafm_params_eta_per_s(const vafm_params *p);
 
 /** Kind of a parameter in the field table. */
 enum vafm_param_kind {

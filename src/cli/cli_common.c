@@ -237,8 +237,18 @@ void vafm_cli_print_scene_si(FILE *o, const vafm_params *p)
     char b1[64], b2[64], b3[64];
     fprintf(o, "sample       E* = %.6g Pa, R = %.6g nm, gamma = %.6g J/m^2, contact %s\n", p->E_star_Pa,
             p->R_m * 1e9, p->gamma_J_per_m2, vafm_cli_get(p, "contact", b1, sizeof b1));
-    fprintf(o, "cantilever   k = %.6g N/m, m = %.6g kg, eta = %.6g 1/s, eta_cont = %.6g 1/s, T = %.6g K\n",
-            p->k_N_per_m, p->m_kg, p->eta_per_s, p->eta_cont_per_s, p->T_K);
+    /* the effective mass and friction (from f0 and Q when they are given), and f0 and Q they make */
+    double m = vafm_params_mass_kg(p), eta = vafm_params_eta_per_s(p), w0 = sqrt(p->k_N_per_m / m);
+    fprintf(o, "cantilever   k = %.6g N/m, f0 = %.6g kHz, Q = %.4g (m = %.6g kg, eta = %.6g 1/s%s), eta_cont = %.6g "
+               "1/s, T = %.6g K (%.2f C)\n",
+            p->k_N_per_m, w0 / (2.0 * M_PI) * 1e-3, w0 / eta, m, eta,
+            p->f0_Hz > 0 || p->Q > 0 ? ", from f0 and Q" : "", p->eta_cont_per_s, p->T_K, p->T_K - 273.15);
+    fprintf(o, "detector     InvOLS %.6g nm/V", p->sensitivity_m_per_V * 1e9);
+    if (p->noise_V_rms > 0 || p->adc_bits > 0 || p->baseline_offset_V != 0)
+        fprintf(o, ", noise %.6g mV rms, ADC %d bits over %.6g V, offset %.6g V\n", p->noise_V_rms * 1e3, p->adc_bits,
+                p->adc_range_V, p->baseline_offset_V);
+    else
+        fprintf(o, ", ideal (no noise, no ADC, no offset)\n");
     fprintf(o, "ramp         v_approach = %.6g m/s, v_retract = %.6g m/s, start %.6g nm, ", p->v_approach_m_per_s,
             p->v_retract_m_per_s, p->start_height_m * 1e9);
     if (p->trigger == VAFM_TRIGGER_HEIGHT)

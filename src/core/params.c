@@ -39,6 +39,8 @@ static const s_field s_fields[] = {
     REAL(k_N_per_m, "N/m", 1e-6, 1e4, "cantilever spring constant k"),
     REAL(m_kg, "kg", 1e-20, 1e-3, "effective mass m of the cantilever"),
     REAL(eta_per_s, "1/s", 1e-3, 1e13, "friction rate eta of the cantilever in its medium (damping m*eta)"),
+    REAL(f0_Hz, "Hz", 0, 1e9, "resonance frequency of the free cantilever (> 0: sets the mass k/(2 pi f0)^2; 0: m_kg)"),
+    REAL(Q, "", 0, 1e6, "quality factor of the free cantilever (> 0: sets the friction 2 pi f0/Q; 0: eta_per_s)"),
     REAL(eta_cont_per_s, "1/s", 0, 1e13, "extra friction rate while in contact (the paper's Gamma_cont)"),
     REAL(T_K, "K", 0, 1e9, "temperature (0: athermal, no random numbers drawn)"),
     REAL(v_approach_m_per_s, "m/s", 1e-12, 1e3, "piezo approach speed"),
@@ -187,13 +189,79 @@ static void s_fill_fig4_bd(vafm_params *p)
     p->tune_duration_s = 2e4 * s.time_s;
 }
 
+/* ---- instrument presets: real measurements at room temperature, in an instrument's words (issue #16).
+ * Typical values, each with its source; the cantilever is given by k, f0 and Q (the mass and friction
+ * follow), the detector by its InvOLS. E* is the contact modulus 1/E* = (1-ν1²)/E1 + (1-ν2²)/E2 and γ the
+ * work of adhesion of the JKR model (F_JKR = 3πγR/2). */
+
+static void s_instrument(vafm_params *p)
+{
+    s_common(p);
+    p->T_K = 298.15; /* 25 °C */
+    p->m_kg = 1e-12; /* not used: f0 sets the mass */
+    p->eta_per_s = 1e3; /* not used: Q sets the friction */
+    p->retract_margin_m = 100e-9;
+    p->tune_duration_s = 0.5;
+}
+
+/* A soft contact-mode cantilever on silica in air: k = 0.1 N/m, f0 = 13 kHz, Q = 30 (silicon contact
+ * levers in air: NanoWorld CONT 0.2 N/m, 13 kHz; Bruker MLCT 0.01-0.6 N/m, 7-125 kHz; Q ~ 10-100 in air),
+ * a silicon tip of 10 nm on fused silica (E = 169 and 73 GPa, ν = 0.27 and 0.17: E* = 53 GPa), work of
+ * adhesion 0.05 J/m² (silica in ambient air, tens of mJ/m²: F_JKR = 2.4 nN), InvOLS 60 nm/V; a 1 µm/s ramp
+ * from 100 nm above the surface to a 5 nN setpoint, 10 kHz sampling. */
+static void s_fill_contact_silica(vafm_params *p)
+{
+    s_instrument(p);
+    p->E_star_Pa = 53e9;
+    p->R_m = 10e-9;
+    p->gamma_J_per_m2 = 0.05;
+    p->k_N_per_m = 0.1;
+    p->f0_Hz = 13e3;
+    p->Q = 30;
+    p->v_approach_m_per_s = p->v_retract_m_per_s = 1e-6;
+    p->start_height_m = 100e-9;
+    p->setpoint_N = 5e-9;
+    p->trigger_height_m = -20e-9;
+    p->sample_rate_Hz = 10e3;
+    p->sensitivity_m_per_V = 60e-9;
+}
+
+/* A sharp tip on a living cell in buffer: k = 0.03 N/m, f0 = 3 kHz and Q = 2 in liquid (Bruker MLCT-C:
+ * 0.01 N/m, 7 kHz in air, about a third of it and Q ~ 1-3 in water), R = 20 nm, a cell of E = 5 kPa
+ * (1-10 kPa for fibroblasts and epithelial cells; ν = 0.5: E* = 6.7 kPa), no adhesion (Hertz: model only
+ * what it needs), 310 K; a 2 µm/s ramp from 300 nm above to a 0.5 nN setpoint, 5 kHz sampling. */
+static void s_fill_cell_liquid(vafm_params *p)
+{
+    s_instrument(p);
+    p->contact = vafm_contact_hertz;
+    p->T_K = 310.15; /* 37 °C */
+    p->E_star_Pa = 6.7e3;
+    p->R_m = 20e-9;
+    p->gamma_J_per_m2 = 0;
+    p->k_N_per_m = 0.03;
+    p->f0_Hz = 3e3;
+    p->Q = 2;
+    p->v_approach_m_per_s = p->v_retract_m_per_s = 2e-6;
+    p->start_height_m = 300e-9;
+    p->setpoint_N = 0.5e-9;
+    p->trigger_height_m = -500e-9;
+    p->z_range_m = 1.5e-6; /* the automatic limit leaves out the indentation: ~0.55 µm here at the setpoint */
+    p->retract_margin_m = 300e-9;
+    p->sample_rate_Hz = 5e3;
+    p->sensitivity_m_per_V = 40e-9;
+}
+
 static const s_preset s_presets[] = {
-    { "paper-fig1", "the paper's Fig. 1/2 scene in SI (default): 20 GPa, 15.7 nm tip, 6.3 mN/m, ~280 K, 196 nm/s",
-      s_fill_fig1 },
-    { "paper-fig4", "the paper's Fig. 4/5 scene, Langevin: reduced gamma 0.229, k 0.1, m 0.01, kT 0.01, v 1e-3",
-      s_fill_fig4 },
-    { "paper-fig4-bd", "the paper's Fig. 4/6 scene, Brownian dynamics with zeta = m*eta = 1 (reduced)",
+    { "paper-fig1", "the paper's reduced Fig. 1/2 scene in SI (default): 20 GPa, 15.7 nm tip, 6.3 mN/m, ~280 K, "
+                    "196 nm/s", s_fill_fig1 },
+    { "paper-fig4", "the paper's reduced Fig. 4/5 scene, Langevin: gamma 0.229, k 0.1, m 0.01, kT 0.01, v 1e-3 "
+                    "(in SI ~3e6 K: a theory scene, not an instrument)", s_fill_fig4 },
+    { "paper-fig4-bd", "the paper's reduced Fig. 4/6 scene, Brownian dynamics with zeta = m*eta = 1",
       s_fill_fig4_bd },
+    { "contact-silica", "instrument: soft contact lever (0.1 N/m, 13 kHz, Q 30) on silica in air, 10 nm Si tip, "
+                        "25 C, 1 um/s, 5 nN", s_fill_contact_silica },
+    { "cell-liquid", "instrument: soft lever in buffer (0.03 N/m, 3 kHz, Q 2), 20 nm tip on a 5 kPa cell (Hertz), "
+                     "37 C, 2 um/s, 0.5 nN", s_fill_cell_liquid },
 };
 #define S_NPRESETS ((int)(sizeof s_presets / sizeof s_presets[0]))
 
@@ -224,7 +292,7 @@ int vafm_preset_apply(vafm_params *p, const char *name, vafm_error *err)
             s_presets[i].fill(p);
             return 0;
         }
-    vafm_err_set(err, VAFM_ENOTFOUND, "preset", "unknown preset '%s' (known: paper-fig1, paper-fig4, paper-fig4-bd)",
+    vafm_err_set(err, VAFM_ENOTFOUND, "preset", "unknown preset '%s' (known: paper-fig1, paper-fig4, paper-fig4-bd, contact-silica, cell-liquid)",
                  name ? name : "(null)");
     return VAFM_ENOTFOUND;
 }
@@ -452,6 +520,24 @@ int vafm_params_to_json(const vafm_params *p, char *buf, size_t len)
     return (int)(n + (size_t)w);
 }
 
+double vafm_params_mass_kg(const vafm_params *p)
+{
+    if (p->f0_Hz > 0) {
+        double w = 2.0 * M_PI * p->f0_Hz;
+        return p->k_N_per_m / (w * w);
+    }
+    return p->m_kg;
+}
+
+double vafm_params_eta_per_s(const vafm_params *p)
+{
+    if (p->Q > 0) {
+        double f0 = p->f0_Hz > 0 ? p->f0_Hz : sqrt(p->k_N_per_m / p->m_kg) / (2.0 * M_PI);
+        return 2.0 * M_PI * f0 / p->Q;
+    }
+    return p->eta_per_s;
+}
+
 int vafm_params_validate(const vafm_params *p, vafm_error *err)
 {
     if (!p) {
@@ -486,6 +572,19 @@ int vafm_params_validate(const vafm_params *p, vafm_error *err)
         vafm_err_set(err, VAFM_EINVAL, "gamma_J_per_m2",
                      "gamma_J_per_m2 = %.6g J/m^2 must be 0 with contact = hertz (use jkr for adhesion)",
                      p->gamma_J_per_m2);
+        return VAFM_EINVAL;
+    }
+    /* f0 and Q set the mass and the friction: those must lie in m_kg's and eta_per_s's ranges */
+    const s_field *fm = s_find("m_kg"), *fe = s_find("eta_per_s");
+    double m = vafm_params_mass_kg(p), eta = vafm_params_eta_per_s(p);
+    if (p->f0_Hz > 0 && !(m >= fm->info.min && m <= fm->info.max)) {
+        vafm_err_set(err, VAFM_EINVAL, "f0_Hz", "f0_Hz = %.6g Hz with k = %.6g N/m gives a mass of %.6g kg, outside "
+                     "[%.3g, %.3g] kg", p->f0_Hz, p->k_N_per_m, m, fm->info.min, fm->info.max);
+        return VAFM_EINVAL;
+    }
+    if (p->Q > 0 && !(eta >= fe->info.min && eta <= fe->info.max)) {
+        vafm_err_set(err, VAFM_EINVAL, "Q", "Q = %.6g gives a friction rate of %.6g 1/s, outside [%.3g, %.3g] 1/s",
+                     p->Q, eta, fe->info.min, fe->info.max);
         return VAFM_EINVAL;
     }
     if (p->trigger == VAFM_TRIGGER_HEIGHT && !(p->trigger_height_m < p->start_height_m)) {
