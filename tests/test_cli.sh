@@ -106,7 +106,7 @@ if [ "$rc" -eq 0 ] && grep -q '"k_N_per_m": 2,' "$TMP/out"; then ok "overrides a
 # A file's "preset" key applies first wherever it stands; overrides come after the file.
 printf '{"T_K": 5, "preset": "paper-fig4", "dwell_s": 0.25}\n' >"$TMP/pre.json"
 run params --json --scene "$TMP/pre.json" --dwell_s 0.5
-if [ "$rc" -eq 0 ] && grep -q '"T_K": 5,' "$TMP/out" && grep -q '"E_star_Pa": 1000000000,' "$TMP/out" &&
+if [ "$rc" -eq 0 ] && grep -q '"T_K": 5,' "$TMP/out" && grep -q '"E_star_Pa": 1e+09,' "$TMP/out" &&
     grep -q '"dwell_s": 0.5,' "$TMP/out"; then ok "scene file: preset first, then keys, then overrides"; else bad "scene preset order" "exit $rc"; fi
 
 # ---- errors ------------------------------------------------------------------------------------

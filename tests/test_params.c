@@ -617,8 +617,31 @@ static void test_f0_Q(void)
     ENSURE(vafm_params_validate(&b, &e) == VAFM_EINVAL && !strcmp(e.field, "f0_Hz"));
 }
 
+/* Values print as the shortest text that reads back exactly (issue #16): 0.1, not 0.10000000000000001. */
+static void test_shortest_text(void)
+{
+    vafm_params p;
+    vafm_params_default(&p);
+    char buf[64];
+    p.k_N_per_m = 0.1;
+    ENSURE(vafm_params_get(&p, "k_N_per_m", buf, sizeof buf) == 0 && !strcmp(buf, "0.1"));
+    p.k_N_per_m = 0.1 + 0.2; /* 0.30000000000000004: every digit needed */
+    ENSURE(vafm_params_get(&p, "k_N_per_m", buf, sizeof buf) == 0 && strtod(buf, NULL) == p.k_N_per_m &&
+           !strcmp(buf, "0.30000000000000004"));
+    for (int i = 0; i < vafm_params_field_count(); i++) {
+        const vafm_param_info *f = vafm_params_field_at(i);
+        if (f->kind != VAFM_PARAM_REAL)
+            continue;
+        vafm_preset_apply(&p, "paper-fig4", NULL);
+        ENSURE(vafm_params_get(&p, f->name, buf, sizeof buf) == 0);
+        vafm_params q = p;
+        ENSURE_MSG(vafm_params_set(&q, f->name, buf, NULL) == 0 && !memcmp(&p, &q, sizeof p), "%s = %s", f->name, buf);
+    }
+}
+
 int main(void)
 {
+    RUN_TEST(test_shortest_text);
     RUN_TEST(test_f0_Q);
     RUN_TEST(test_cost_estimate);
     RUN_TEST(test_field_table);

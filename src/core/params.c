@@ -480,13 +480,25 @@ static const char *s_choice_value(const vafm_params *p, const s_field *f)
     }
 }
 
+/* The shortest %g text that reads back as exactly v (200000, not 199999.99999999997 … or 2e+05 when that is
+ * exact): people read it, and files and JSON still round-trip bit for bit. */
+static void s_fmt_shortest(char *buf, size_t len, double v)
+{
+    for (int prec = 1; prec <= 17; prec++) {
+        snprintf(buf, len, "%.*g", prec, v);
+        if (strtod(buf, NULL) == v)
+            return;
+    }
+    snprintf(buf, len, "%.17g", v); /* NaN, inf */
+}
+
 int vafm_params_get(const vafm_params *p, const char *name, char *buf, size_t len)
 {
     const s_field *f = s_find(name);
     if (!f)
         return VAFM_ENOTFOUND;
     switch (f->info.kind) {
-    case VAFM_PARAM_REAL: snprintf(buf, len, "%.17g", *(const double *)((const char *)p + f->offset)); break;
+    case VAFM_PARAM_REAL: s_fmt_shortest(buf, len, *(const double *)((const char *)p + f->offset)); break;
     case VAFM_PARAM_SEED: snprintf(buf, len, "%" PRIu64, p->seed); break;
     case VAFM_PARAM_BOOL: snprintf(buf, len, "%s", *(const int *)((const char *)p + f->offset) ? "true" : "false"); break;
     case VAFM_PARAM_INT: snprintf(buf, len, "%d", *(const int *)((const char *)p + f->offset)); break;
