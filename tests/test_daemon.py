@@ -37,6 +37,7 @@ def settle(d, s):
 def test_hello(fig4):
     r = fig4.cmd({"cmd": "hello", "id": "h1"})
     assert r["status"] == "ok" and r["id"] == "h1"
+    assert r["stream"] == fig4.pub and r["security"] == "none"  # a client given only the command endpoint
     assert r["protocol_version"] == 1
     assert r["daemon"] == "vafmd" and r["daemon_version"]
     assert {"curve", "tune", "campaign", "status", "get", "set", "log"} <= set(r["capabilities"])

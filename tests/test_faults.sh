@@ -205,4 +205,14 @@ else bad "a second vafmd names the endpoint it cannot bind" "$(cat "$TMP/d2.err"
 "$VAFM" ctl --endpoint "tcp://localhost:$port" shutdown >/dev/null 2>&1
 wait "$DAEMON"
 
+# vafm listen given only an ipc:// command endpoint follows the stream endpoint the daemon names in hello
+"$VAFMD" --preset paper-fig4 --free-run --rep "ipc://$TMP/rep" --pub "ipc://$TMP/stream" 2>/dev/null &
+DAEMON=$!
+for _ in $(seq 1 100); do "$VAFM" ctl --endpoint "ipc://$TMP/rep" --timeout 200 hello >/dev/null 2>&1 && break; sleep 0.1; done
+run listen --endpoint "ipc://$TMP/rep" --start curve --index 1 --out "$TMP/derived.csv" --timeout 20000
+if [ "$rc" -eq 0 ] && [ "$(grep -c "" "$TMP/derived.csv")" -gt 1000 ]; then ok "vafm listen follows hello's stream endpoint (ipc://, no --pub)"
+else bad "vafm listen follows hello's stream endpoint" "exit $rc: $(head -c 300 "$TMP/err")"; fi
+"$VAFM" ctl --endpoint "ipc://$TMP/rep" shutdown >/dev/null 2>&1
+wait "$DAEMON"
+
 harness_done

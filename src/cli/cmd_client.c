@@ -46,7 +46,8 @@ typedef struct s_conn {
 static const char *s_conn_help =
     "connection options:\n"
     "  --endpoint E   command endpoint (default " VAFM_CLIENT_DEFAULT_REP "; --rep is the same)\n"
-    "  --pub E        stream endpoint (default: for tcp://HOST:PORT the next port, else " VAFM_CLIENT_DEFAULT_PUB ")\n"
+    "  --pub E        stream endpoint (default: for tcp://HOST:PORT the next port, else the one the daemon\n"
+    "                 names in its hello)\n"
     "  --timeout MS   reply timeout (default 10000)\n"
     "  --curve FILE   CURVE keys for a daemon with curve_secret_key: JSON {\"server_public_key\": Z85,\n"
     "                 \"public_key\": Z85, \"secret_key\": Z85} (a file, so the secret is not in `ps`)\n"
@@ -141,6 +142,33 @@ static int s_set_curve(s_conn *x)
     return 0;
 }
 
+/* Without --pub and with nothing to guess from (an ipc:// command endpoint; for tcp the next port is the
+ * daemon's default), the stream endpoint comes from the daemon itself: hello's "stream". */
+static void s_stream_from_hello(s_conn *x)
+{
+    char *reply = NULL;
+    vafm_error e = {0};
+    int t = x->timeout_ms > 0 && x->timeout_ms < 2000 ? x->timeout_ms : 2000;
+    if (vafm_client_request(x->c, "{\"cmd\": \"hello\"}", t, &reply, &e) || !reply)
+        return;
+    json_t *j = json_loads(reply, 0, NULL);
+    free(reply);
+    const char *stream = json_string_value(json_object_get(j, "stream"));
+    if (stream && (!x->pub_default || strcmp(stream, x->pub_default))) {
+        char *dup = strdup(stream);
+        vafm_client *c = NULL;
+        if (dup && !vafm_client_new(&c, x->rep, dup, &e)) {
+            vafm_client_destroy(&x->c);
+            x->c = c;
+            free(x->pub_default);
+            x->pub_default = dup;
+            dup = NULL;
+        }
+        free(dup);
+    }
+    json_decref(j);
+}
+
 static int s_connect(s_conn *x)
 {
     x->pub_default = x->pub ? NULL : s_default_pub(x->rep);
@@ -149,7 +177,13 @@ static int s_connect(s_conn *x)
         s_err(x, "%s", e.message);
         return S_RUNTIME;
     }
-    return x->curve ? s_set_curve(x) : 0;
+    int rc = x->curve ? s_set_curve(x) : 0;
+    if (!rc && !x->pub && !x->pub_default) { /* no tcp port to guess from (ipc://): ask the daemon */
+        s_stream_from_hello(x);
+        if (x->curve && x->c)
+            rc = s_set_curve(x); /* the new client needs its keys too */
+    }
+    return rc;
 }
 
 static void s_disconnect(s_conn *x)

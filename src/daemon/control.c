@@ -72,6 +72,8 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
                                   "status", "log", "shutdown", "campaign", "replay"));
     json_object_set_new(r, "not_implemented", json_array());
     json_object_set_new(r, "security", json_string(d->auth.on ? "curve" : "none"));
+    json_t *stream = json_string(d->pub_endpoint); /* NULL for an endpoint that is not UTF-8 */
+    json_object_set_new(r, "stream", stream ? stream : json_null());
     json_object_set_new(r, "channels", vafmd_channels_json());
     json_object_set_new(r, "max_request_bytes", json_integer(VAFMD_MAX_CMD_BYTES));
     return r;

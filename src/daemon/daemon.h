@@ -229,6 +229,7 @@ typedef struct vafmd_auth {
 typedef struct vafmd {
     void *zctx;
     void *rep, *pub;
+    char pub_endpoint[512]; /* the stream endpoint as configured (hello tells clients) */
     vafmd_ring ring;
     vafmd_sim_cmd ring_store[VAFMD_RING_CAP];
     vafmd_shared sh;

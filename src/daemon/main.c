@@ -298,6 +298,7 @@ int main(int argc, char **argv)
     }
 
     d.zctx = zmq_ctx_new();
+    snprintf(d.pub_endpoint, sizeof d.pub_endpoint, "%s", pub_ep);
     d.rep = zmq_socket(d.zctx, ZMQ_REP);
     d.pub = zmq_socket(d.zctx, ZMQ_XPUB);
     int64_t maxmsg = 1 << 20; /* beyond 1 MiB the connection is dropped; 64 KiB..1 MiB get "too_large" */
