@@ -34,9 +34,15 @@ check "theory: MFPT and DHS columns" "grep -q 'MFPT <y>' '$TMP/th' && grep -q 'D
 check "theory: T = 0 prints the quasi-static part only" "[ $? -eq 0 ] && grep -q 'thermal references: none' '$TMP/th0'"
 # the notes' DHS example: γ̃ = 0.229, k̃ = 0.1, k_BT̃ = 0.003, ṽ = 1e-4, ζ = 1 (paper-fig4-bd: m̃ = 1)
 KT=$(/usr/bin/python3 -c 'print(0.003 * 1e9 * (16e-9)**3 / 1.380649e-23)')
-"$VAFM" theory --preset paper-fig4-bd --T_K "$KT" --v 1e-4 >"$TMP/th1" 2>&1
+"$VAFM" theory --preset paper-fig4-bd --T_K "$KT" --v-reduced 1e-4 >"$TMP/th1" 2>&1
 check "theory: DHS <y> of the notes' example (0.641 + zeta*v/k = 0.642)" \
     "awk '\$1 == \"0.0001\" { y = \$4 } END { exit !(y > 0.636 && y < 0.648) }' '$TMP/th1'" "$(tail -5 "$TMP/th1")"
+# --v is m/s as for vafm curves (one meaning per flag name); --v-reduced the paper's units: paper-fig4's
+# speed unit R*eta is 6.4e-3 m/s, so 6.4e-5 m/s is reduced 0.01
+"$VAFM" theory --preset paper-fig4 --v 6.4e-5 >"$TMP/thsi" 2>&1
+"$VAFM" theory --preset paper-fig4 --v-reduced 0.01 >"$TMP/thred" 2>&1
+check "theory: --v in m/s equals --v-reduced in R*eta" "cmp -s '$TMP/thsi' '$TMP/thred' && grep -q '^ *0.01 ' '$TMP/thsi'" \
+    "$(diff "$TMP/thsi" "$TMP/thred" | head -5)"
 "$VAFM" theory --bogus >/dev/null 2>&1
 check "theory: unknown option exits 2" "[ $? -eq 2 ]"
 "$VAFM" study >/dev/null 2>&1

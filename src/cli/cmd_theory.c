@@ -68,13 +68,15 @@ int vafm_study_scene_arg(int argc, char **argv, int *i, vafm_params *p, char *de
 
 static void s_help(FILE *o)
 {
-    fputs("vafm theory [SCENE] [--v LIST]\n"
+    fputs("vafm theory [SCENE] [--v LIST | --v-reduced LIST]\n"
           "  Quasi-static and thermal references for a scene, without simulating (reduced and SI units):\n"
           "  the quasi-static jump (instability) force and spring position, the force at detachment, the\n"
           "  maximum tensile force along the quasi-static path (F_JKR), the overdamped Dudko-Hummer-Szabo\n"
           "  prediction and the exact 1D mean-first-passage rate integrated along the pull.\n"
           "  SCENE: --preset NAME, --scene FILE.json, --NAME=VALUE overrides (as vafm run).\n"
-          "  --v LIST             reduced pulling speeds to tabulate (default: the scene's retract speed)\n",
+          "  --v LIST             pulling speeds to tabulate, m/s, as for vafm curves and campaign (default:\n"
+          "                       the scene's retract speed)\n"
+          "  --v-reduced LIST     the same in reduced units (R*eta), as the paper quotes them\n",
           o);
 }
 
@@ -85,23 +87,28 @@ int vafm_cmd_theory(int argc, char **argv)
     char desc[1024] = "";
     double vlist[64];
     size_t n_v = 0;
+    int v_si = 1; /* vlist in m/s (--v) or reduced (--v-reduced) */
     for (int i = 1; i < argc;) {
         if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
             s_help(stdout);
             return 0;
         }
-        if (!strcmp(argv[i], "--v") && i + 1 < argc) {
+        /* one meaning per flag name: --v is m/s everywhere in vafm; reduced speeds have their own flag */
+        if ((!strcmp(argv[i], "--v") || !strcmp(argv[i], "--v-reduced")) && i + 1 < argc) {
+            v_si = !strcmp(argv[i], "--v");
             char *s = argv[i + 1], *end;
+            n_v = 0;
             while (*s && n_v < 64) {
                 double x = strtod(s, &end);
                 if (end == s || !(x > 0.0)) {
-                    fprintf(stderr, "vafm theory: --v: '%s' is not a list of positive reduced speeds\n", argv[i + 1]);
+                    fprintf(stderr, "vafm theory: %s: '%s' is not a list of positive %s\n", argv[i], argv[i + 1],
+                            v_si ? "speeds in m/s" : "reduced speeds");
                     return 2;
                 }
                 vlist[n_v++] = x;
                 s = *end == ',' ? end + 1 : end;
                 if (*end && *end != ',') {
-                    fprintf(stderr, "vafm theory: --v: '%s' is not a comma-separated list\n", argv[i + 1]);
+                    fprintf(stderr, "vafm theory: %s: '%s' is not a comma-separated list\n", argv[i], argv[i + 1]);
                     return 2;
                 }
             }
@@ -131,6 +138,9 @@ int vafm_cmd_theory(int argc, char **argv)
     vafm_scale sc = vafm_units_scale(&p);
     if (!n_v)
         vlist[n_v++] = r.v_retract;
+    else if (v_si)
+        for (size_t k = 0; k < n_v; k++)
+            vlist[k] /= sc.speed_m_per_s; /* m/s → reduced */
     const double zeta = r.m; /* ζ = mη in reduced units (η = 1) */
     const double mass = p.integrator == vafm_integrator_brownian ? 0.0 : r.m; /* 0: overdamped */
     vafm_quasistatic q;
