@@ -565,8 +565,177 @@ static void test_instrument_presets(void)
     t_curve_free(&c);
 }
 
+static int t_run(const vafm_params *p, uint64_t index, t_curve *c, vafm_curve_result *r)
+{
+    vafm_sim *s = NULL;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    memset(c, 0, sizeof *c);
+    int rc = vafm_sim_new(&s, p, &err);
+    ENSURE_MSG(rc == 0, "scene refused: %s", err.message);
+    if (rc)
+        return rc;
+    rc = vafm_sim_curve(s, index, t_collect, c, r);
+    vafm_sim_destroy(&s);
+    ENSURE(rc == 0);
+    return rc;
+}
+
+/* Index of the last approach sample (where the trigger fired). */
+static size_t t_turn(const t_curve *c)
+{
+    size_t i = 0;
+    while (i + 1 < c->n && c->seg[i + 1] == VAFM_SEG_APPROACH)
+        i++;
+    return i;
+}
+
+/* A fixed ramp (issue #16): the approach starts at the start height and travels at most ramp_size_m, the
+ * retract returns to the start height (a long baseline on both segments), within one sample's travel. */
+static void test_fixed_ramp(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.ramp_size_m = 300e-9; /* the 5 nN setpoint lies ~150 nm below the 100 nm start */
+    double step = p.v_approach_m_per_s / p.sample_rate_Hz;
+    t_curve c;
+    vafm_curve_result r;
+    if (t_run(&p, 0, &c, &r))
+        return;
+    ENSURE_MSG(r.flags == 0, "flags %d", r.flags);
+    ENSURE_MSG(fabs(c.h[0] - p.start_height_m) <= step, "first height %g m", c.h[0]);
+    ENSURE_MSG(fabs(c.h[c.n - 1] - p.start_height_m) <= step, "last height %g m, start %g m", c.h[c.n - 1],
+               p.start_height_m);
+    size_t it = t_turn(&c);
+    ENSURE_MSG(c.f[it] >= p.setpoint_N && c.f[it - 1] < p.setpoint_N, "trigger at %g N", c.f[it]);
+    /* the retract's free baseline: from the detachment (~ -25 nm at 2.4 nN) back to +100 nm */
+    size_t free_ret = 0;
+    for (size_t i = it; i < c.n; i++)
+        free_ret += c.seg[i] == VAFM_SEG_RETRACT && fabs(c.f[i]) < 0.2e-9 && c.h[i] > 20e-9; /* thermal: 20 pN rms */
+    ENSURE_MSG(free_ret * step > 70e-9, "retract baseline %g m", free_ret * step);
+    t_curve_free(&c);
+
+    /* a ramp shorter than the way to the setpoint: the approach ends at its full size, flagged, and the
+     * retract still returns to the start */
+    p.ramp_size_m = 80e-9;
+    if (t_run(&p, 0, &c, &r))
+        return;
+    ENSURE_MSG(r.flags & VAFM_CURVE_NO_TRIGGER, "flags %d", r.flags);
+    it = t_turn(&c);
+    ENSURE_MSG(fabs(c.h[it] - (p.start_height_m - p.ramp_size_m)) <= step, "turn at %g m", c.h[it]);
+    ENSURE_MSG(fabs(c.h[c.n - 1] - p.start_height_m) <= step, "last height %g m", c.h[c.n - 1]);
+    t_curve_free(&c);
+
+    /* the ramp starts ramp_size_m above the quasi-static trigger point: athermal and slow (1 um/s against a
+     * 13 kHz lever, a lag of ~1e-14 m), the turn lies one ramp below the start to within a sample's travel */
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.T_K = 0;
+    p.ramp_size_m = 200e-9;
+    p.ramp_start = VAFM_RAMP_START_TRIGGER;
+    if (t_run(&p, 0, &c, &r))
+        return;
+    ENSURE_MSG(r.flags == 0, "flags %d", r.flags);
+    it = t_turn(&c);
+    ENSURE_MSG(fabs(c.h[0] - c.h[it] - p.ramp_size_m) <= 1.5 * step, "start %g m, turn %g m: travel %g m", c.h[0],
+               c.h[it], c.h[0] - c.h[it]);
+    ENSURE_MSG(fabs(c.h[c.n - 1] - c.h[0]) <= step, "returns to %g m of %g m", c.h[c.n - 1], c.h[0]);
+    t_curve_free(&c);
+}
+
+/* A relative setpoint counts from the baseline of the approach's first 64 samples, as instruments do; a
+ * setpoint in volts is k·InvOLS·V, less the signal's offset when absolute. The test replays the rule on the
+ * curve's own (thermal) samples: the trigger fires at the first sample that meets it. */
+static void t_check_trigger(const vafm_params *p, const t_curve *c, double F_set, int relative)
+{
+    size_t it = t_turn(c);
+    double sum = 0.0;
+    size_t first = c->n;
+    for (size_t j = 0; j <= it; j++) {
+        double base = relative ? (j ? sum / (double)(j < VAFM_BASELINE_SAMPLES ? j : VAFM_BASELINE_SAMPLES) : 0.0) : 0.0;
+        int armed = !relative || j > 0;
+        if (armed && c->f[j] - base >= F_set && first == c->n)
+            first = j;
+        if (j < VAFM_BASELINE_SAMPLES)
+            sum += c->f[j];
+    }
+    ENSURE_MSG(first == it, "trigger at sample %zu, the rule says %zu (setpoint %g N, %s)", it, first, F_set,
+               relative ? "relative" : "absolute");
+    (void)p;
+}
+
+static void test_setpoint_modes(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.ramp_size_m = 300e-9;
+    t_curve c;
+    vafm_curve_result r;
+    for (int rel = 0; rel <= 1; rel++) {
+        p.setpoint_mode = rel;
+        if (t_run(&p, 3, &c, &r))
+            return;
+        t_check_trigger(&p, &c, p.setpoint_N, rel);
+        t_curve_free(&c);
+    }
+    p.baseline_offset_V = 0.2;
+    p.setpoint_V = 0.5;
+    for (int rel = 0; rel <= 1; rel++) {
+        p.setpoint_mode = rel;
+        ENSURE(vafm_params_resolve(&p, NULL) == 0);
+        double want = p.k_N_per_m * p.sensitivity_m_per_V * (rel ? 0.5 : 0.3);
+        ENSURE_REL(p.setpoint_N, want, 1e-15);
+        if (t_run(&p, 3, &c, &r))
+            return;
+        t_check_trigger(&p, &c, want, rel);
+        t_curve_free(&c);
+    }
+}
+
+/* Dwell at constant force: a fast approach (10 nm per sample) overshoots the setpoint; at constant height
+ * the force stays at the overshoot, at constant force the feedback brings it back to the setpoint (20 loop
+ * time constants: e^-20) by moving the piezo back by overshoot / k_eff. Athermal: exact to the loop's residue. */
+static void test_dwell_force(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.T_K = 0;
+    p.ramp_size_m = 300e-9;
+    p.v_approach_m_per_s = 100e-6;
+    p.dwell_s = 0.02; /* 200 samples, the loop's default time constant is 10 */
+    t_curve c;
+    vafm_curve_result r;
+    double hold[2], h_move[2];
+    for (int mode = 0; mode <= 1; mode++) {
+        p.dwell_mode = mode;
+        if (t_run(&p, 0, &c, &r))
+            return;
+        size_t i0 = c.n, i1 = 0;
+        for (size_t i = 0; i < c.n; i++)
+            if (c.seg[i] == VAFM_SEG_DWELL) {
+                i0 = i < i0 ? i : i0;
+                i1 = i;
+            }
+        ENSURE(i0 < c.n && i1 - i0 + 1 == 200);
+        if (i0 >= c.n)
+            return;
+        hold[mode] = c.f[i1];
+        h_move[mode] = c.h[i1] - c.h[i0];
+        t_curve_free(&c);
+    }
+    double over = hold[0] - p.setpoint_N;
+    ENSURE_MSG(over > 0.05 * p.setpoint_N, "constant height: overshoot %g N", over);
+    ENSURE_MSG(fabs(h_move[0]) < 1e-15, "constant height: the piezo moved %g m", h_move[0]);
+    ENSURE_MSG(fabs(hold[1] - p.setpoint_N) < 1e-6 * p.setpoint_N, "constant force: %g N held, setpoint %g N",
+               hold[1], p.setpoint_N);
+    ENSURE_MSG(h_move[1] > 0.5 * over / p.k_N_per_m && h_move[1] < 1.5 * over / p.k_N_per_m,
+               "constant force: the piezo moved back %g m for an overshoot of %g N", h_move[1], over);
+}
+
 int main(void)
 {
+    RUN_TEST(test_fixed_ramp);
+    RUN_TEST(test_setpoint_modes);
+    RUN_TEST(test_dwell_force);
     RUN_TEST(test_instrument_presets);
     RUN_TEST(test_mechanics);
     RUN_TEST(test_hertz);

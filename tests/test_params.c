@@ -292,7 +292,8 @@ static void test_bad_text_values(void)
             break;
         case VAFM_PARAM_INT:
             t_bad(f, "8.5", 0); /* not a whole number */
-            t_bad(f, "25", 0);  /* above the range */
+            snprintf(buf, sizeof buf, "%.0f", f->max + 1); /* above the range */
+            t_bad(f, buf, 0);
             t_bad(f, "-1", 0);
             t_bad(f, "", 0);
             t_bad(f, "12x", 0);
@@ -335,7 +336,8 @@ static const struct {
     M(v_approach_m_per_s), M(v_retract_m_per_s), M(start_height_m), M(setpoint_N), M(trigger_height_m),
     M(z_range_m), M(dwell_s), M(retract_margin_m), M(retract_max_m), M(sample_rate_Hz), M(tune_duration_s),
     M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT), M(sensitivity_m_per_V), M(noise_V_rms),
-    M(adc_range_V), M(baseline_offset_V),
+    M(adc_range_V), M(baseline_offset_V), M(ramp_size_m), M(ramp_rate_Hz), M(extend_time_s), M(retract_time_s),
+    M(setpoint_V), M(dwell_feedback_s),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])
@@ -639,8 +641,106 @@ static void test_shortest_text(void)
     }
 }
 
+/* Values typed with their units: each accepted spelling gives the SI value exactly as the decimal in SI
+ * would (the prefix is one multiplication: compared to that product), each wrong unit is refused with the
+ * field named. */
+static void test_units_parse(void)
+{
+    static const struct {
+        const char *unit, *text;
+        double want;
+    } ok[] = {
+        { "N", "1nN", 1.0 * 1e-9 },       { "N", "1e-9", 1e-9 },          { "N", "2.5 pN", 2.5 * 1e-12 },
+        { "m", "1um", 1.0 * 1e-6 },       { "m", "1\xc2\xb5m", 1.0 * 1e-6 }, { "m", "1m", 1.0 },
+        { "m", "300mm", 300.0 * 1e-3 },   { "m/s", "2um/s", 2.0 * 1e-6 }, { "m/s", "-1e3nm/s", -1e3 * 1e-9 },
+        { "Hz", "70kHz", 70.0 * 1e3 },    { "Hz", "1.5MHz", 1.5 * 1e6 },  { "K", "25C", 25.0 + 273.15 },
+        { "K", "300K", 300.0 },           { "K", "-10degC", -10.0 + 273.15 }, { "J/m^2", "50mJ/m^2", 50.0 * 1e-3 },
+        { "J/m^2", "50mJ/m2", 50.0 * 1e-3 }, { "Pa", "1MPa", 1.0 * 1e6 }, { "Pa", "5kPa", 5.0 * 1e3 },
+        { "s", "10ms", 10.0 * 1e-3 },     { "m/V", "60nm/V", 60.0 * 1e-9 }, { "", "30", 30.0 },
+    };
+    for (size_t i = 0; i < sizeof ok / sizeof ok[0]; i++) {
+        double v = NAN;
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        int r = vafm_units_parse("f", ok[i].text, ok[i].unit, &v, &err);
+        ENSURE_MSG(r == 0 && v == ok[i].want, "'%s' in %s: %d, %.17g (want %.17g) %s", ok[i].text, ok[i].unit, r, v,
+                   ok[i].want, err.message);
+    }
+    static const struct {
+        const char *unit, *text;
+    } bad[] = {
+        { "N", "1nm" },  { "N", "1 nN " }, { "N", "1  nN" }, { "N", "1cN" },   { "m", "1um/s" }, { "m/s", "2um" },
+        { "Hz", "70k" }, { "K", "25F" },   { "Pa", "1MPA" }, { "", "30m" },    { "N", "nan" },   { "N", "inf" },
+        { "N", "0x10" }, { "N", "" },      { "N", "nN" },    { "K", "25kC" },  { "m", "1e" },    { "N", "1e400" },
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        double v = 7.0;
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        int r = vafm_units_parse("setpoint_N", bad[i].text, bad[i].unit, &v, &err);
+        ENSURE_MSG(r == VAFM_EINVAL && v == 7.0 && !strcmp(err.field, "setpoint_N") &&
+                       strstr(err.message, "setpoint_N") != NULL,
+                   "'%s' in %s accepted or badly refused: %d '%s'", bad[i].text, bad[i].unit, r, err.message);
+    }
+    /* through the field table: the field's own unit decides */
+    vafm_params p;
+    vafm_params_default(&p);
+    ENSURE(vafm_params_set(&p, "setpoint_N", "2nN", NULL) == 0 && p.setpoint_N == 2.0 * 1e-9);
+    ENSURE(vafm_params_set(&p, "T_K", "25C", NULL) == 0 && p.T_K == 298.15);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_set(&p, "setpoint_N", "2nm", &err) == VAFM_EINVAL && !strcmp(err.field, "setpoint_N") &&
+           strstr(err.message, "[0, 1] N") != NULL);
+}
+
+/* The instrument's ramp settings derive the fields underneath; a field changed afterwards is caught. */
+static void test_resolve(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    p.ramp_rate_Hz = 1.0;
+    ENSURE(vafm_params_resolve(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "ramp_rate_Hz")); /* no ramp size */
+    p.ramp_size_m = 500e-9;
+    ENSURE(vafm_params_resolve(&p, &err) == 0);
+    ENSURE(p.v_approach_m_per_s == 2.0 * 500e-9 * 1.0 && p.v_retract_m_per_s == p.v_approach_m_per_s);
+    ENSURE(vafm_params_validate(&p, NULL) == 0);
+    p.v_approach_m_per_s *= 2; /* a campaign axis over v while the ramp rate is set */
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_validate(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "v_approach_m_per_s") &&
+           strstr(err.message, "ramp_rate_Hz") != NULL);
+    p.extend_time_s = 0.25;
+    ENSURE(vafm_params_resolve(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "ramp_rate_Hz")); /* both given */
+    p.ramp_rate_Hz = 0;
+    p.retract_time_s = 0.5;
+    p.segment_samples = 1000;
+    ENSURE(vafm_params_resolve(&p, &err) == 0);
+    ENSURE(p.v_approach_m_per_s == 500e-9 / 0.25 && p.v_retract_m_per_s == 500e-9 / 0.5);
+    ENSURE_MSG(fabs(p.sample_rate_Hz - 1000 / 0.25) < 1e-9, "segment_samples: %.17g Hz", p.sample_rate_Hz);
+    ENSURE(vafm_params_validate(&p, NULL) == 0);
+    /* setpoint in volts: absolute less the offset, relative not */
+    p.setpoint_V = 0.5;
+    p.baseline_offset_V = 0.1;
+    ENSURE(vafm_params_resolve(&p, NULL) == 0);
+    ENSURE(fabs(p.setpoint_N - p.k_N_per_m * p.sensitivity_m_per_V * 0.4) < 1e-24);
+    p.setpoint_mode = VAFM_SETPOINT_RELATIVE;
+    ENSURE(vafm_params_resolve(&p, NULL) == 0);
+    ENSURE(fabs(p.setpoint_N - p.k_N_per_m * p.sensitivity_m_per_V * 0.5) < 1e-24);
+    p.setpoint_mode = VAFM_SETPOINT_ABSOLUTE;
+    p.baseline_offset_V = 0.6; /* the absolute setpoint below the signal's offset would fire at once */
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_resolve(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "setpoint_V"));
+    /* the constant-force loop must not act faster than twice per sample */
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.dwell_feedback_s = 1.5 / p.sample_rate_Hz;
+    ENSURE(vafm_params_validate(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "dwell_feedback_s"));
+}
+
 int main(void)
 {
+    RUN_TEST(test_units_parse);
+    RUN_TEST(test_resolve);
     RUN_TEST(test_shortest_text);
     RUN_TEST(test_f0_Q);
     RUN_TEST(test_cost_estimate);

@@ -30,6 +30,29 @@ enum vafm_noise {
     VAFM_NOISE_UNIFORM = 1,  /**< uniform deviates of matched variance (the paper's Eq. 7) */
 };
 
+/** Where a fixed-length ramp (ramp_size_m > 0) starts. */
+enum vafm_ramp_start {
+    VAFM_RAMP_START_SURFACE = 0, /**< start_height_m above the contact point */
+    VAFM_RAMP_START_TRIGGER = 1, /**< ramp_size_m above the quasi-static trigger point (as instruments that
+                                      find the surface first and then ramp from above it) */
+};
+
+/** What the setpoint is measured against. */
+enum vafm_setpoint_mode {
+    VAFM_SETPOINT_ABSOLUTE = 0, /**< the force (or the deflection signal, setpoint_V) itself */
+    VAFM_SETPOINT_RELATIVE = 1, /**< relative to the baseline measured over the approach's first
+                                     VAFM_BASELINE_SAMPLES samples */
+};
+
+/** Samples of the approach that measure the baseline of a relative setpoint. */
+#define VAFM_BASELINE_SAMPLES 64
+
+/** What the piezo does during the dwell. */
+enum vafm_dwell_mode {
+    VAFM_DWELL_HEIGHT = 0, /**< constant height: the piezo stands still */
+    VAFM_DWELL_FORCE = 1,  /**< constant force: a feedback loop moves the piezo to hold the trigger force */
+};
+
 /** How output samples are formed from the simulation steps. */
 enum vafm_antialias {
     VAFM_ANTIALIAS_MEAN = 0,  /**< average over the sample interval (a box-car anti-alias filter) */
@@ -87,6 +110,24 @@ typedef struct vafm_params {
     int adc_bits;          /**< ADC resolution, bits (0: no ADC; 4–24) */
     double adc_range_V;    /**< ADC full range, V (peak to peak; codes saturate beyond ±range/2) */
     double baseline_offset_V; /**< offset of the deflection signal, V */
+    /* the instrument's ramp settings (vafm_params_resolve derives the speeds, the sample rate and
+     * setpoint_N from them; 0 leaves the field underneath in charge) */
+    double ramp_size_m;    /**< fixed-length symmetric ramp, m: the approach travels at most this far, the
+                                retract returns to the start height (a long baseline on both segments);
+                                0: adaptive (z_range_m, retract_margin_m, retract_max_m) */
+    int ramp_start;        /**< enum vafm_ramp_start (with ramp_size_m > 0) */
+    double ramp_rate_Hz;   /**< ramp frequency, Hz: an approach and a retract of ramp_size_m per period
+                                (both speeds 2·ramp_size_m·ramp_rate_Hz); 0: speeds or times */
+    double extend_time_s;  /**< approach (extend) time of ramp_size_m, s (v_approach = ramp/time); 0: speed */
+    double retract_time_s; /**< retract time of ramp_size_m, s (v_retract = ramp/time); 0: speed */
+    int segment_samples;   /**< samples per approach segment of ramp_size_m (sample_rate_Hz = samples /
+                                extend time); 0: sample_rate_Hz */
+    int setpoint_mode;     /**< enum vafm_setpoint_mode */
+    double setpoint_V;     /**< setpoint in volts of deflection signal (setpoint_N = k·InvOLS·V, absolute:
+                                less the baseline_offset_V); 0: setpoint_N */
+    int dwell_mode;        /**< enum vafm_dwell_mode */
+    double dwell_feedback_s; /**< constant-force dwell: time constant of the feedback loop, s (0: 10 sample
+                                  intervals; else at least 2) */
     uint8_t reserved[32];
 } vafm_params;
 
@@ -100,6 +141,12 @@ VAFM_API const char *vafm_preset_description(int i);
 
 /** Overwrite p with preset `name`. @return 0 or VAFM_ENOTFOUND (err names the known presets). */
 VAFM_API int vafm_preset_apply(vafm_params *p, const char *name, vafm_error *err);
+
+/** Derive the fields underneath from the instrument's settings: the speeds from ramp_rate_Hz or
+ *  extend_time_s / retract_time_s (with ramp_size_m), sample_rate_Hz from segment_samples, setpoint_N from
+ *  setpoint_V. Call it after the last setting and before validation (the time-based settings win over
+ *  speeds given as well); idempotent. @return 0 or VAFM_EINVAL (err names the setting that cannot apply). */
+VAFM_API int vafm_params_resolve(vafm_params *p, vafm_error *err);
 
 /** Check every field and the combination (e.g. time step against the stability limit).
  *  @return 0 or VAFM_EINVAL / VAFM_EUNSTABLE with err naming the field, its value and the range. */

@@ -9,6 +9,7 @@
 #ifndef VAFM_UNITS_H
 #define VAFM_UNITS_H
 
+#include "vafm/common.h"
 #include "vafm/params.h"
 
 #ifdef __cplusplus
@@ -46,6 +47,15 @@ VAFM_API void vafm_units_reduce(const vafm_params *p, vafm_reduced *out);
 /** Set the SI fields of p (γ, k, m, η, T, speeds) from reduced values, keeping E*, R and m_kg.
  *  η follows from m̃ and m_kg: η = √(m̃E*R/m). */
 VAFM_API void vafm_units_from_reduced(vafm_params *p, const vafm_reduced *r);
+
+/** Read a value typed with its unit, as people type it where a field has a fixed SI unit: a number alone
+ *  (already in `unit`), or a number followed by `unit` with an optional SI prefix (f p n u µ m k M G T)
+ *  and at most one space: "1nN" for N, "2um/s" for m/s, "70kHz" for Hz, "50mJ/m^2" (also "J/m2") for
+ *  J/m^2. Temperatures (unit "K") also take Celsius: "25C" or "25degC" is 298.15 K. Strict: any other
+ *  suffix is an error, so a value meant for another field (a length typed as a force) never passes.
+ *  @return 0 with *out in SI, or VAFM_EINVAL (err names `field`, the unit and the prefixes allowed). */
+VAFM_API int vafm_units_parse(const char *field, const char *text, const char *unit, double *out,
+                              vafm_error *err);
 
 #ifdef __cplusplus
 }

@@ -33,6 +33,13 @@ void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_
                                  : fmax(0.0, -uspr_start) + 2.0 * (p->setpoint_N / nm->sc.force_N) / r->k + 20.0 * sigma + 1.0;
     double ret = p->retract_max_m > 0 ? p->retract_max_m / L : 4.0 * fmax(zr + uspr_start - (nm->u_spr_turn - nm->u_c), 0.0) + margin + 1.0;
     double tmax = zr / r->v_approach + p->dwell_s / T + (zr + ret) / r->v_retract;
+    if (p->ramp_size_m > 0) {
+        /* a fixed ramp: the ramp down (to the trigger, here taken at its end) and back up; from the trigger
+         * point up to twice the ramp */
+        double ramp = p->ramp_size_m / L, span = p->ramp_start == VAFM_RAMP_START_TRIGGER ? 2.0 * ramp : ramp;
+        t = ramp / r->v_approach + p->dwell_s / T + ramp / r->v_retract;
+        tmax = span / r->v_approach + p->dwell_s / T + span / r->v_retract;
+    }
     out->duration_s = t * T;
     out->duration_max_s = fmax(t, tmax) * T;
     out->samples = t / nm->Ts;
@@ -52,7 +59,8 @@ static int s_check_cost(const vafm_params *p, const vafm_numerics *nm, vafm_erro
     /* the part of the typical curve's time that dominates names the field */
     double t_dwell = p->dwell_s, t_ret = est.duration_s - t_dwell, t_app = 0.0;
     double uspr_start = -p->start_height_m / nm->sc.length_m;
-    t_app = fmax(0.0, nm->u_spr_turn - uspr_start) / nm->r.v_approach * T;
+    t_app = p->ramp_size_m > 0 ? p->ramp_size_m / nm->sc.length_m / nm->r.v_approach * T
+                               : fmax(0.0, nm->u_spr_turn - uspr_start) / nm->r.v_approach * T;
     t_ret -= t_app;
     const char *slow = t_dwell >= t_app && t_dwell >= t_ret ? "dwell_s"
                        : t_app >= t_ret                       ? "v_approach_m_per_s"

@@ -19,7 +19,8 @@
 #include "vafm/units.h"
 #include "core/internal.h"
 
-enum s_choice { S_NONE = 0, S_CONTACT, S_INTEGRATOR, S_TRIGGER, S_NOISE, S_ANTIALIAS };
+enum s_choice { S_NONE = 0, S_CONTACT, S_INTEGRATOR, S_TRIGGER, S_NOISE, S_ANTIALIAS, S_RAMP_START, S_SETPOINT_MODE,
+                S_DWELL_MODE };
 
 typedef struct s_field {
     vafm_param_info info;
@@ -59,6 +60,30 @@ static const s_field s_fields[] = {
     REAL(dwell_s, "s", 0, 1e4, "pause between approach and retract (rounded to whole samples)"),
     REAL(retract_margin_m, "m", 0, 1e-2, "retract distance after the detachment before the curve ends"),
     REAL(retract_max_m, "m", 0, 1e-1, "retract travel limit (0: automatic, 4x the quasi-static travel)"),
+    REAL(ramp_size_m, "m", 0, 1e-3,
+         "ramp size (z length) of a fixed symmetric ramp: the approach travels at most this far, the retract "
+         "returns to the start height (0: adaptive ramp, ending retract_margin_m after the detachment)"),
+    { { "ramp_start", VAFM_PARAM_CHOICE, "", 0, 0, "surface|trigger",
+        "fixed ramp: start start_height_m above the surface, or ramp_size_m above the quasi-static trigger point" },
+      offsetof(vafm_params, ramp_start), S_RAMP_START },
+    REAL(ramp_rate_Hz, "Hz", 0, 1e6,
+         "ramp rate: one approach and one retract of ramp_size_m per period, speeds 2*ramp_size*rate (0: speeds)"),
+    REAL(extend_time_s, "s", 0, 1e5, "extend (approach) time of ramp_size_m: sets v_approach (0: the speed)"),
+    REAL(retract_time_s, "s", 0, 1e5, "retract time of ramp_size_m: sets v_retract (0: the speed)"),
+    { { "segment_samples", VAFM_PARAM_INT, "samples", 0, 16777216, NULL,
+        "samples per approach of ramp_size_m: sets sample_rate_Hz (0: sample_rate_Hz)" },
+      offsetof(vafm_params, segment_samples), S_NONE },
+    { { "setpoint_mode", VAFM_PARAM_CHOICE, "", 0, 0, "absolute|relative",
+        "force trigger: absolute, or relative to the baseline of the approach's first 64 samples" },
+      offsetof(vafm_params, setpoint_mode), S_SETPOINT_MODE },
+    REAL(setpoint_V, "V", 0, 100,
+         "force trigger in volts of deflection signal: setpoint_N = k*InvOLS*V (absolute: V less "
+         "baseline_offset_V) (0: setpoint_N)"),
+    { { "dwell_mode", VAFM_PARAM_CHOICE, "", 0, 0, "height|force",
+        "dwell at constant height (piezo still) or constant force (feedback on the deflection)" },
+      offsetof(vafm_params, dwell_mode), S_DWELL_MODE },
+    REAL(dwell_feedback_s, "s", 0, 1e3,
+         "constant-force dwell: time constant of the feedback loop (0: 10 sample intervals; else >= 2)"),
     REAL(sample_rate_Hz, "Hz", 1e-3, 1e10, "output sample rate"),
     { { "antialias", VAFM_PARAM_CHOICE, "", 0, 0, "mean|point",
         "output samples: mean over the sample interval (box-car anti-alias) or point samples" },
@@ -326,6 +351,9 @@ const vafm_param_info *vafm_params_field_find(const char *name)
 static const char *const s_trigger_names[] = { "force", "height" };
 static const char *const s_noise_names[] = { "gaussian", "uniform" };
 static const char *const s_antialias_names[] = { "mean", "point" };
+static const char *const s_ramp_start_names[] = { "surface", "trigger" };
+static const char *const s_setpoint_mode_names[] = { "absolute", "relative" };
+static const char *const s_dwell_mode_names[] = { "height", "force" };
 
 static int s_index_of(const char *const *names, int n, const char *v)
 {
@@ -373,14 +401,15 @@ int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_er
     char *end = NULL;
     switch (f->info.kind) {
     case VAFM_PARAM_REAL: {
-        errno = 0;
-        double v = strtod(value, &end);
-        if (end == value || *end != '\0') {
-            vafm_err_set(err, VAFM_EINVAL, f->info.name, "%s: '%s' is not a number (unit %s, range [%.6g, %.6g])",
-                         f->info.name, value, f->info.unit, f->info.min, f->info.max);
-            return VAFM_EINVAL;
+        double v = 0.0;
+        vafm_error perr;
+        int r = vafm_units_parse(f->info.name, value, f->info.unit, &v, &perr); /* "1e-9", "1nN", "25C" */
+        if (r) {
+            vafm_err_set(err, r, f->info.name, "%s (allowed range [%.6g, %.6g] %s)", perr.message, f->info.min,
+                         f->info.max, f->info.unit);
+            return r;
         }
-        int r = s_check_real(f, v, err);
+        r = s_check_real(f, v, err);
         if (r)
             return r;
         *(double *)((char *)p + f->offset) = v;
@@ -453,6 +482,9 @@ int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_er
         case S_TRIGGER: idx = s_index_of(s_trigger_names, 2, value); break;
         case S_NOISE: idx = s_index_of(s_noise_names, 2, value); break;
         case S_ANTIALIAS: idx = s_index_of(s_antialias_names, 2, value); break;
+        case S_RAMP_START: idx = s_index_of(s_ramp_start_names, 2, value); break;
+        case S_SETPOINT_MODE: idx = s_index_of(s_setpoint_mode_names, 2, value); break;
+        case S_DWELL_MODE: idx = s_index_of(s_dwell_mode_names, 2, value); break;
         default: break;
         }
         if (idx >= 0) {
@@ -476,6 +508,9 @@ static const char *s_choice_value(const vafm_params *p, const s_field *f)
     case S_TRIGGER: v = p->trigger; return v >= 0 && v < 2 ? s_trigger_names[v] : "(invalid)";
     case S_NOISE: v = p->noise; return v >= 0 && v < 2 ? s_noise_names[v] : "(invalid)";
     case S_ANTIALIAS: v = p->antialias; return v >= 0 && v < 2 ? s_antialias_names[v] : "(invalid)";
+    case S_RAMP_START: v = p->ramp_start; return v >= 0 && v < 2 ? s_ramp_start_names[v] : "(invalid)";
+    case S_SETPOINT_MODE: v = p->setpoint_mode; return v >= 0 && v < 2 ? s_setpoint_mode_names[v] : "(invalid)";
+    case S_DWELL_MODE: v = p->dwell_mode; return v >= 0 && v < 2 ? s_dwell_mode_names[v] : "(invalid)";
     default: return "";
     }
 }
@@ -550,6 +585,92 @@ double vafm_params_eta_per_s(const vafm_params *p)
     return p->eta_per_s;
 }
 
+/* ---- the instrument's settings → the fields underneath --------------------------------------- */
+
+/* The speed and sample rate that ramp_rate_Hz / extend_time_s / retract_time_s / segment_samples imply
+ * (NaN where the setting is off), and setpoint_N from setpoint_V. */
+typedef struct s_derived {
+    double v_approach, v_retract, sample_rate, setpoint_N;
+} s_derived;
+
+static int s_derive(const vafm_params *p, s_derived *d, vafm_error *err)
+{
+    d->v_approach = d->v_retract = d->sample_rate = d->setpoint_N = NAN;
+    const char *need = p->ramp_rate_Hz > 0     ? "ramp_rate_Hz"
+                       : p->extend_time_s > 0  ? "extend_time_s"
+                       : p->retract_time_s > 0 ? "retract_time_s"
+                       : p->segment_samples > 0 ? "segment_samples"
+                                                : NULL;
+    if (need && !(p->ramp_size_m > 0)) {
+        vafm_err_set(err, VAFM_EINVAL, need, "%s needs a ramp: set ramp_size_m (the z length, > 0 m)", need);
+        return VAFM_EINVAL;
+    }
+    if (p->ramp_rate_Hz > 0 && (p->extend_time_s > 0 || p->retract_time_s > 0)) {
+        vafm_err_set(err, VAFM_EINVAL, "ramp_rate_Hz",
+                     "ramp_rate_Hz = %.6g Hz and extend_time_s/retract_time_s both set the speeds: give one of them",
+                     p->ramp_rate_Hz);
+        return VAFM_EINVAL;
+    }
+    if (p->ramp_rate_Hz > 0)
+        d->v_approach = d->v_retract = 2.0 * p->ramp_size_m * p->ramp_rate_Hz;
+    if (p->extend_time_s > 0)
+        d->v_approach = p->ramp_size_m / p->extend_time_s;
+    if (p->retract_time_s > 0)
+        d->v_retract = p->ramp_size_m / p->retract_time_s;
+    if (p->segment_samples > 0) {
+        double va = isnan(d->v_approach) ? p->v_approach_m_per_s : d->v_approach;
+        d->sample_rate = (double)p->segment_samples * va / p->ramp_size_m;
+    }
+    if (p->setpoint_V > 0) {
+        double volts = p->setpoint_mode == VAFM_SETPOINT_RELATIVE ? p->setpoint_V
+                                                                  : p->setpoint_V - p->baseline_offset_V;
+        d->setpoint_N = p->k_N_per_m * p->sensitivity_m_per_V * volts;
+        if (!(d->setpoint_N > 0)) {
+            vafm_err_set(err, VAFM_EINVAL, "setpoint_V",
+                         "setpoint_V = %.6g V is at or below the signal's baseline_offset_V = %.6g V: an absolute "
+                         "setpoint must lie above it (or use setpoint_mode = relative)",
+                         p->setpoint_V, p->baseline_offset_V);
+            return VAFM_EINVAL;
+        }
+    }
+    return 0;
+}
+
+int vafm_params_resolve(vafm_params *p, vafm_error *err)
+{
+    if (!p) {
+        vafm_err_set(err, VAFM_EINVAL, "", "no parameters given");
+        return VAFM_EINVAL;
+    }
+    s_derived d;
+    int r = s_derive(p, &d, err);
+    if (r)
+        return r;
+    if (!isnan(d.v_approach))
+        p->v_approach_m_per_s = d.v_approach;
+    if (!isnan(d.v_retract))
+        p->v_retract_m_per_s = d.v_retract;
+    if (!isnan(d.sample_rate))
+        p->sample_rate_Hz = d.sample_rate;
+    if (!isnan(d.setpoint_N))
+        p->setpoint_N = d.setpoint_N;
+    return 0;
+}
+
+/* A derived field that disagrees with its setting: resolve was not called after the last change, or a field
+ * underneath was changed afterwards (a campaign axis over v with a ramp rate set). */
+static int s_check_derived(const char *field, double have, const char *setting, double want, const char *unit,
+                           vafm_error *err)
+{
+    if (isnan(want) || fabs(have - want) <= 1e-12 * fabs(want))
+        return 0;
+    vafm_err_set(err, VAFM_EINVAL, field,
+                 "%s = %.9g %s disagrees with %s, which makes it %.9g %s: set %s to 0 to give %s directly "
+                 "(or resolve the scene after the last setting)",
+                 field, have, unit, setting, want, unit, setting, field);
+    return VAFM_EINVAL;
+}
+
 int vafm_params_validate(const vafm_params *p, vafm_error *err)
 {
     if (!p) {
@@ -597,6 +718,37 @@ int vafm_params_validate(const vafm_params *p, vafm_error *err)
     if (p->Q > 0 && !(eta >= fe->info.min && eta <= fe->info.max)) {
         vafm_err_set(err, VAFM_EINVAL, "Q", "Q = %.6g gives a friction rate of %.6g 1/s, outside [%.3g, %.3g] 1/s",
                      p->Q, eta, fe->info.min, fe->info.max);
+        return VAFM_EINVAL;
+    }
+    s_derived d;
+    int rd = s_derive(p, &d, err);
+    if (rd)
+        return rd;
+    const char *vset = p->ramp_rate_Hz > 0 ? "ramp_rate_Hz" : "extend_time_s";
+    if ((rd = s_check_derived("v_approach_m_per_s", p->v_approach_m_per_s, vset, d.v_approach, "m/s", err)) ||
+        (rd = s_check_derived("v_retract_m_per_s", p->v_retract_m_per_s,
+                              p->ramp_rate_Hz > 0 ? "ramp_rate_Hz" : "retract_time_s", d.v_retract, "m/s", err)) ||
+        (rd = s_check_derived("sample_rate_Hz", p->sample_rate_Hz, "segment_samples", d.sample_rate, "Hz", err)) ||
+        (rd = s_check_derived("setpoint_N", p->setpoint_N, "setpoint_V", d.setpoint_N, "N", err)))
+        return rd;
+    if (p->dwell_feedback_s > 0 && p->dwell_feedback_s * p->sample_rate_Hz < 2.0) {
+        vafm_err_set(err, VAFM_EINVAL, "dwell_feedback_s",
+                     "dwell_feedback_s = %.6g s is shorter than 2 sample intervals (%.6g s): the constant-force "
+                     "loop acts once per sample and would ring (0: automatic, 10 intervals)",
+                     p->dwell_feedback_s, 2.0 / p->sample_rate_Hz);
+        return VAFM_EINVAL;
+    }
+    if (p->ramp_size_m > 0 && p->ramp_start == VAFM_RAMP_START_TRIGGER &&
+        (p->start_in_contact || p->contact == vafm_contact_none)) {
+        vafm_err_set(err, VAFM_EINVAL, "ramp_start",
+                     "ramp_start = trigger needs a surface to find (contact jkr or hertz) and a free start "
+                     "(start_in_contact = false)");
+        return VAFM_EINVAL;
+    }
+    if (p->setpoint_mode == VAFM_SETPOINT_RELATIVE && p->start_in_contact) {
+        vafm_err_set(err, VAFM_EINVAL, "setpoint_mode",
+                     "setpoint_mode = relative measures the baseline at the start of the approach: it needs a free "
+                     "start (start_in_contact = false)");
         return VAFM_EINVAL;
     }
     if (p->trigger == VAFM_TRIGGER_HEIGHT && !(p->trigger_height_m < p->start_height_m)) {

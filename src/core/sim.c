@@ -67,6 +67,10 @@ struct vafm_sim {
     uint64_t index, sample_index, tune_samples;
     long dwell_left;
     double uspr_start, uspr_turn, uspr_trigger, uspr_zlimit, retract_travel_max, margin, F_set;
+    double base_sum;    /* relative setpoint: sum of the baseline samples so far */
+    int base_n;         /* ... and their number (≤ VAFM_BASELINE_SAMPLES) */
+    double F_hold;      /* constant-force dwell: the force the feedback holds (reduced) */
+    double fb_gain;     /* constant-force dwell: piezo speed per unit force error, 1/(k·τ) (reduced) */
     int touched, detached_in_retract, flags, retract_samples;
     double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
     double touch_t, touch_uspr;
@@ -210,6 +214,29 @@ static double s_contact_equilibrium(const vafm_sim *s, double uspr, double *K_lo
     return ueq;
 }
 
+/* The support position at which the quasi-static tip reaches the trigger (ramp_start = trigger): the height
+ * trigger's own, or, for the force trigger, u + F_set/k where the contact branch carries F_set. On the JKR
+ * branch F(u) falls from u_detach to the force-controlled pull-off and rises after it, so a positive F_set
+ * is met once: a bisection on [u_detach, u_hi] with F(u_detach) < F_set ≤ F(u_hi) finds it. */
+static double s_trigger_point(const vafm_sim *s)
+{
+    const vafm_kernel *K = &s->K;
+    if (s->p.trigger == VAFM_TRIGGER_HEIGHT)
+        return s->uspr_trigger;
+    double sq = 0.0, lo = fmin(K->contact.u_detach, 0.0), hi = fmax(1.0, fabs(lo));
+    for (int i = 0; i < 200 && K->cforce(&K->contact, hi, &sq, NULL) < s->F_set; i++)
+        hi *= 2.0;
+    for (int i = 0; i < 200 && hi - lo > 1e-14 * fmax(1.0, fabs(hi)); i++) {
+        double mid = 0.5 * (lo + hi);
+        sq = 0.0;
+        if (K->cforce(&K->contact, mid, &sq, NULL) < s->F_set)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return hi + s->F_set / K->k;
+}
+
 static void s_begin(vafm_sim *s, uint64_t index, int scene)
 {
     vafm_kernel *K = &s->K;
@@ -243,7 +270,21 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->margin = s->p.retract_margin_m / L;
     double zr = s->p.z_range_m > 0 ? s->p.z_range_m / L
                                    : fmax(0.0, -s->uspr_start) + 2.0 * s->F_set / rd->k + 20.0 * s->sigma_free + 1.0;
+    if (s->p.ramp_size_m > 0) {
+        /* a fixed ramp: from the start height down by at most the ramp size (from the trigger point's ramp
+         * size above it, up to twice that: the thermal tip meets the setpoint earlier or later) */
+        zr = s->p.ramp_size_m / L;
+        if (scene == S_SCENE_CURVE && s->p.ramp_start == VAFM_RAMP_START_TRIGGER) {
+            s->uspr_start = s_trigger_point(s) - zr;
+            zr *= 2.0;
+        }
+    }
     s->uspr_zlimit = s->uspr_start + zr;
+    s->base_sum = 0.0;
+    s->base_n = 0;
+    s->F_hold = s->F_set;
+    double tau = s->p.dwell_feedback_s > 0 ? s->p.dwell_feedback_s : 10.0 / s->p.sample_rate_Hz;
+    s->fb_gain = 1.0 / (rd->k * tau / s->nm.sc.time_s);
 
     K->t = 0.0;
     K->u_spr = s->uspr_start;
@@ -642,7 +683,20 @@ static void s_phase_logic(vafm_sim *s, double force)
     vafm_kernel *K = &s->K;
     switch (s->phase) {
     case S_PH_APPROACH: {
-        int trig = s->p.trigger == VAFM_TRIGGER_FORCE ? force >= s->F_set : K->u_spr >= s->uspr_trigger;
+        /* a relative setpoint counts from the baseline: the mean of the approach's first samples (before this
+         * one); the first sample has no baseline yet and cannot trigger */
+        double base = 0.0;
+        int armed = 1;
+        if (s->p.setpoint_mode == VAFM_SETPOINT_RELATIVE) {
+            armed = s->base_n > 0;
+            base = armed ? s->base_sum / s->base_n : 0.0;
+            if (s->base_n < VAFM_BASELINE_SAMPLES) {
+                s->base_sum += force;
+                s->base_n++;
+            }
+        }
+        int trig = s->p.trigger == VAFM_TRIGGER_FORCE ? armed && force - base >= s->F_set : K->u_spr >= s->uspr_trigger;
+        s->F_hold = s->p.trigger == VAFM_TRIGGER_FORCE ? s->F_set + base : force;
         if (!trig && K->u_spr >= s->uspr_zlimit) {
             s->flags |= VAFM_CURVE_NO_TRIGGER;
             trig = 1;
@@ -650,7 +704,7 @@ static void s_phase_logic(vafm_sim *s, double force)
         if (trig) {
             s->dwell_left = lround(s->p.dwell_s * s->p.sample_rate_Hz);
             if (s->dwell_left > 0) {
-                s_kernel_phase(K, 0.0);
+                s_kernel_phase(K, s->p.dwell_mode == VAFM_DWELL_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0);
                 s->need_prepare = 1;
                 s->phase = S_PH_DWELL;
             } else {
@@ -662,10 +716,22 @@ static void s_phase_logic(vafm_sim *s, double force)
     case S_PH_DWELL:
         if (--s->dwell_left <= 0)
             s_start_retract(s);
+        else if (s->p.dwell_mode == VAFM_DWELL_FORCE) {
+            /* an integral loop on the filtered deflection, acting once per sample: dz/dt = (F_hold − F)/(k τ) */
+            s_kernel_phase(K, s->fb_gain * (s->F_hold - force));
+            s->need_prepare = 1;
+        }
         break;
     case S_PH_RETRACT: {
         double travel = s->uspr_turn - K->u_spr;
-        if (!K->in_contact && s->detached_in_retract && s->uspr_detach - K->u_spr >= s->margin)
+        if (s->p.ramp_size_m > 0) {
+            /* a fixed ramp returns to its start height, whatever the tip did on the way */
+            if (K->u_spr <= s->uspr_start) {
+                if (K->in_contact)
+                    s->flags |= VAFM_CURVE_NO_DETACH;
+                s->phase = S_PH_DONE;
+            }
+        } else if (!K->in_contact && s->detached_in_retract && s->uspr_detach - K->u_spr >= s->margin)
             s->phase = S_PH_DONE;
         else if (!K->in_contact && !s->detached_in_retract &&
                  K->u_spr <= fmin(s->uspr_start, s->uspr_turn) - s->margin)

@@ -1,9 +1,12 @@
 /* SPDX-License-Identifier: MIT */
 /* The only place where SI meets reduced units (physics notes, "Units"). */
 #include <math.h>
+#include <stdlib.h>
+#include <string.h>
 
 #include "vafm/params.h"
 #include "vafm/units.h"
+#include "core/internal.h"
 
 vafm_scale vafm_units_scale(const vafm_params *p)
 {
@@ -42,4 +45,113 @@ void vafm_units_from_reduced(vafm_params *p, const vafm_reduced *r)
     p->gamma_J_per_m2 = r->gamma * ER;
     p->v_approach_m_per_s = r->v_approach * p->R_m * p->eta_per_s;
     p->v_retract_m_per_s = r->v_retract * p->R_m * p->eta_per_s;
+}
+
+/* ---- values typed with their units ------------------------------------------------------------- */
+
+typedef struct s_prefix {
+    const char *text;
+    double factor;
+} s_prefix;
+
+/* The prefixes people use on an instrument's controls; no c, d, da, h (a "cN" or "dm/s" is a typo more often
+ * than a wish) and no E, P (no AFM quantity needs them). */
+static const s_prefix s_prefixes[] = {
+    { "f", 1e-15 }, { "p", 1e-12 }, { "n", 1e-9 }, { "u", 1e-6 }, { "\xc2\xb5", 1e-6 } /* µ */, { "m", 1e-3 },
+    { "k", 1e3 },   { "M", 1e6 },   { "G", 1e9 },  { "T", 1e12 },
+};
+
+/* suffix == unit, with the squared-metre spellings m^2, m2 and m² taken as one */
+static int s_unit_eq(const char *suffix, const char *unit)
+{
+    if (!strcmp(suffix, unit))
+        return 1;
+    const char *sq = strstr(unit, "m^2");
+    if (!sq)
+        return 0;
+    size_t head = (size_t)(sq - unit);
+    if (strncmp(suffix, unit, head))
+        return 0;
+    const char *rest = suffix + head;
+    return !strcmp(rest, "m2") || !strcmp(rest, "m\xc2\xb2") || !strcmp(rest, "m^2");
+}
+
+/* Length of the plain decimal number that starts text: [+-] digits [. digits] [e [+-] digits]; 0 if none.
+ * Hexadecimal, inf and nan (which strtod reads) are not what anybody types on an instrument. */
+static size_t s_number_length(const char *t)
+{
+    size_t i = 0, digits = 0;
+    if (t[i] == '+' || t[i] == '-')
+        i++;
+    while (t[i] >= '0' && t[i] <= '9')
+        i++, digits++;
+    if (t[i] == '.') {
+        i++;
+        while (t[i] >= '0' && t[i] <= '9')
+            i++, digits++;
+    }
+    if (!digits)
+        return 0;
+    if (t[i] == 'e' || t[i] == 'E') {
+        size_t j = i + 1;
+        if (t[j] == '+' || t[j] == '-')
+            j++;
+        if (t[j] >= '0' && t[j] <= '9') {
+            while (t[j] >= '0' && t[j] <= '9')
+                j++;
+            i = j;
+        }
+    }
+    return i;
+}
+
+int vafm_units_parse(const char *field, const char *text, const char *unit, double *out, vafm_error *err)
+{
+    if (!field)
+        field = "";
+    if (!unit)
+        unit = "";
+    size_t n = text ? s_number_length(text) : 0;
+    int ok = n > 0 && n < 64;
+    double v = 0.0;
+    const char *end = text ? text + n : NULL;
+    if (ok) {
+        char num[64];
+        memcpy(num, text, n);
+        num[n] = '\0';
+        v = strtod(num, NULL);
+        ok = isfinite(v);
+    }
+    if (ok) {
+        const char *sfx = end;
+        if (*sfx == ' ')
+            sfx++;
+        if (*sfx == '\0' && sfx == end) {
+            *out = v;
+            return 0;
+        }
+        if (*sfx && unit[0] && s_unit_eq(sfx, unit)) {
+            *out = v;
+            return 0;
+        }
+        if (!strcmp(unit, "K") && (!strcmp(sfx, "C") || !strcmp(sfx, "degC") || !strcmp(sfx, "\xc2\xb0" "C"))) {
+            *out = v + 273.15;
+            return 0;
+        }
+        for (size_t i = 0; unit[0] && *sfx && i < sizeof s_prefixes / sizeof s_prefixes[0]; i++) {
+            size_t n = strlen(s_prefixes[i].text);
+            if (!strncmp(sfx, s_prefixes[i].text, n) && s_unit_eq(sfx + n, unit)) {
+                *out = v * s_prefixes[i].factor;
+                return 0;
+            }
+        }
+    }
+    if (unit[0])
+        vafm_err_set(err, VAFM_EINVAL, field,
+                     "%s: '%s' is not a value in %s (a number in %s, or with the unit and an SI prefix f p n u m k M "
+                     "G T, e.g. '1n%s'%s)",
+                     field, text ? text : "", unit, unit, unit, !strcmp(unit, "K") ? " or Celsius, '25C'" : "");
+    else
+        vafm_err_set(err, VAFM_EINVAL, field, "%s: '%s' is not a number (dimensionless)", field, text ? text : "");
+    return VAFM_EINVAL;
 }
