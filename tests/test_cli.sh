@@ -121,6 +121,24 @@ expect_fail "unknown preset" 2 nope paper-fig4 -- params --preset nope
 expect_fail "parameter without a value" 2 k_N_per_m -- params --k_N_per_m
 expect_fail "run: unstable dt names dt_s" 2 dt_s stability -- run --preset paper-fig4 --dt_s=1e-3
 
+# the instrument's words and values with units (issue #16)
+run params --json --preset contact-silica --setpoint 2nN --speed 2um/s --T 25C --f0 15kHz --ramp-size 1um --invols 60nm/V
+miss=""
+for kv in '"setpoint_N": 2e-09' '"v_approach_m_per_s": 2e-06' '"v_retract_m_per_s": 2e-06' '"T_K": 298.15' \
+          '"f0_Hz": 15000' '"ramp_size_m": 1e-06' '"sensitivity_m_per_V": 6e-08'; do
+    grep -qF -- "$kv" "$TMP/out" || miss="$miss $kv"
+done
+if [ "$rc" -eq 0 ] && [ -z "$miss" ]; then ok "instrument words with units set their fields"; else bad "instrument words" "exit $rc, missing$miss"; fi
+run params --json --preset contact-silica --ramp-size 1um --ramp-rate 1Hz --segment_samples 1000
+if [ "$rc" -eq 0 ] && grep -qF '"v_approach_m_per_s": 2e-06' "$TMP/out" && grep -qF '"sample_rate_Hz": 2000' "$TMP/out"; then
+    ok "ramp rate and samples per segment derive speed and sample rate"
+else bad "ramp rate" "exit $rc: $(head -c 300 "$TMP/out")"; fi
+expect_fail "a value in the wrong unit names field and unit" 2 setpoint_N "'2nm'" "in N" -- params --setpoint 2nm
+expect_fail "a ramp rate needs a ramp size" 2 ramp_rate_Hz ramp_size_m -- params --ramp-rate 1Hz
+expect_fail "a list element in the wrong unit" 2 "--T" "element 2" -- curves -n 1 --preset paper-fig4 --T 300K,5nN
+printf '{"setpoint_N": "1nN"}\n' >"$TMP/unitjson.json"
+expect_fail "JSON scene files keep plain SI numbers" 2 "$TMP/unitjson.json" setpoint_N -- params --scene "$TMP/unitjson.json"
+
 printf '{"k_N_per_m": 0.1,\n' >"$TMP/trunc.json"
 expect_fail "malformed JSON: file, line, column" 2 "$TMP/trunc.json" "line 2" column -- params --scene "$TMP/trunc.json"
 printf '{"k_N_per_m": "abc"}\n' >"$TMP/type1.json"

@@ -641,22 +641,23 @@ static void test_shortest_text(void)
     }
 }
 
-/* Values typed with their units: each accepted spelling gives the SI value exactly as the decimal in SI
- * would (the prefix is one multiplication: compared to that product), each wrong unit is refused with the
- * field named. */
+/* Values typed with their units: each accepted spelling gives exactly the double of the same decimal written
+ * in SI ("60nm/V" is 60e-9, not 60 * 1e-9, which rounds twice), each wrong unit is refused with the field
+ * named. */
 static void test_units_parse(void)
 {
     static const struct {
         const char *unit, *text;
         double want;
     } ok[] = {
-        { "N", "1nN", 1.0 * 1e-9 },       { "N", "1e-9", 1e-9 },          { "N", "2.5 pN", 2.5 * 1e-12 },
-        { "m", "1um", 1.0 * 1e-6 },       { "m", "1\xc2\xb5m", 1.0 * 1e-6 }, { "m", "1m", 1.0 },
-        { "m", "300mm", 300.0 * 1e-3 },   { "m/s", "2um/s", 2.0 * 1e-6 }, { "m/s", "-1e3nm/s", -1e3 * 1e-9 },
-        { "Hz", "70kHz", 70.0 * 1e3 },    { "Hz", "1.5MHz", 1.5 * 1e6 },  { "K", "25C", 25.0 + 273.15 },
-        { "K", "300K", 300.0 },           { "K", "-10degC", -10.0 + 273.15 }, { "J/m^2", "50mJ/m^2", 50.0 * 1e-3 },
-        { "J/m^2", "50mJ/m2", 50.0 * 1e-3 }, { "Pa", "1MPa", 1.0 * 1e6 }, { "Pa", "5kPa", 5.0 * 1e3 },
-        { "s", "10ms", 10.0 * 1e-3 },     { "m/V", "60nm/V", 60.0 * 1e-9 }, { "", "30", 30.0 },
+        { "N", "1nN", 1e-9 },       { "N", "1e-9", 1e-9 },          { "N", "2.5 pN", 2.5e-12 },
+        { "m", "1um", 1e-6 },       { "m", "1\xc2\xb5m", 1e-6 },   { "m", "1m", 1.0 },
+        { "m", "300mm", 300e-3 },   { "m/s", "2um/s", 2e-6 },       { "m/s", "-1e3nm/s", -1e-6 },
+        { "Hz", "70kHz", 70e3 },    { "Hz", "1.5MHz", 1.5e6 },      { "K", "25C", 25.0 + 273.15 },
+        { "K", "300K", 300.0 },     { "K", "-10degC", -10.0 + 273.15 }, { "J/m^2", "50mJ/m^2", 50e-3 },
+        { "J/m^2", "50mJ/m2", 50e-3 }, { "Pa", "1MPa", 1e6 },       { "Pa", "5kPa", 5e3 },
+        { "s", "10ms", 10e-3 },     { "m/V", "60nm/V", 60e-9 },     { "", "30", 30.0 },
+        { "N", "1.1nN", 1.1e-9 },   { "m/V", "1.7e2nm/V", 1.7e-7 }, { "Hz", "0.3kHz", 0.3e3 },
     };
     for (size_t i = 0; i < sizeof ok / sizeof ok[0]; i++) {
         double v = NAN;
@@ -685,7 +686,7 @@ static void test_units_parse(void)
     /* through the field table: the field's own unit decides */
     vafm_params p;
     vafm_params_default(&p);
-    ENSURE(vafm_params_set(&p, "setpoint_N", "2nN", NULL) == 0 && p.setpoint_N == 2.0 * 1e-9);
+    ENSURE(vafm_params_set(&p, "setpoint_N", "2nN", NULL) == 0 && p.setpoint_N == 2e-9);
     ENSURE(vafm_params_set(&p, "T_K", "25C", NULL) == 0 && p.T_K == 298.15);
     vafm_error err;
     memset(&err, 0, sizeof err);

@@ -112,7 +112,7 @@ void vafm_cli_error(const char *fmt, ...) VAFM_CLI_PRINTF(1, 2);
 int vafm_cli_exit_of(int code);
 double vafm_cli_now(void);
 int vafm_cli_parse_u64(const char *opt, const char *text, uint64_t lo, uint64_t hi, uint64_t *out);
-int vafm_cli_parse_list(const char *opt, const char *text, double **out, size_t *n);
+int vafm_cli_parse_list(const char *opt, const char *field, const char *text, double **out, size_t *n);
 int vafm_cli_report(const vafm_error *err, int code);
 int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int validate);
 void vafm_cli_print_provenance(FILE *o, const vafm_cli_scene *sc);

@@ -49,28 +49,38 @@ int vafm_cli_parse_u64(const char *opt, const char *text, uint64_t lo, uint64_t 
     return 0;
 }
 
-/* A comma-separated list of reals. Ranges are the library's business (campaign validation). */
-int vafm_cli_parse_list(const char *opt, const char *text, double **out, size_t *n)
+/* A comma-separated list of values of one field, each with its unit if typed ("25C,35C", "1um/s,2um/s"). Ranges
+ * are the library's business (campaign validation). */
+int vafm_cli_parse_list(const char *opt, const char *field, const char *text, double **out, size_t *n)
 {
     size_t cap = 1;
     for (const char *c = text; *c; c++)
         cap += *c == ',';
     double *v = calloc(cap, sizeof *v);
-    if (!v) {
+    char *tok = strdup(text);
+    if (!v || !tok) {
+        free(v);
+        free(tok);
         vafm_cli_error("out of memory");
         return VAFM_CLI_EXIT_RUNTIME;
     }
-    const char *c = text;
+    const vafm_param_info *f = vafm_params_field_find(field);
+    char *c = tok;
     for (size_t i = 0; i < cap; i++) {
-        char *end = NULL;
-        v[i] = strtod(c, &end);
-        if (end == c || (*end != ',' && *end != '\0')) {
-            vafm_cli_error("%s: '%s' is not a comma-separated list of numbers (element %zu)", opt, text, i + 1);
+        char *comma = strchr(c, ',');
+        if (comma)
+            *comma = '\0';
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        if (vafm_units_parse(field, c, f ? f->unit : "", &v[i], &err)) {
+            vafm_cli_error("%s: element %zu of '%s': %s", opt, i + 1, text, err.message);
             free(v);
+            free(tok);
             return VAFM_CLI_EXIT_USAGE;
         }
-        c = end + (*end == ',');
+        c = comma ? comma + 1 : c + strlen(c);
     }
+    free(tok);
     *out = v;
     *n = cap;
     return 0;
@@ -113,6 +123,8 @@ int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int valid
         if (r)
             return vafm_cli_report(&err, r);
     }
+    if ((r = vafm_params_resolve(&sc->p, &err)) != 0) /* the instrument's settings → speeds, rate, setpoint */
+        return vafm_cli_report(&err, r);
     if (validate && (r = vafm_params_validate(&sc->p, &err)) != 0)
         return vafm_cli_report(&err, r);
     return 0;

@@ -92,9 +92,9 @@ static int s_grid_parse(const vafm_cli_args *a, s_grid *g)
     if ((rc = vafm_cli_parse_u64("-n", a->val[O_N], 1, 1000000000ULL, &N)) ||
         (a->val[O_THREADS] && (rc = vafm_cli_parse_u64("--threads", a->val[O_THREADS], 0, 256, &threads))) ||
         (a->val[O_FIRST] && (rc = vafm_cli_parse_u64("--first", a->val[O_FIRST], 0, UINT64_MAX, &first))) ||
-        (a->val[O_T] && (rc = vafm_cli_parse_list("--T", a->val[O_T], &g->T, &g->spec.n_T))) ||
-        (a->val[O_V] && (rc = vafm_cli_parse_list("--v", a->val[O_V], &g->v, &g->spec.n_v))) ||
-        (a->val[O_K] && (rc = vafm_cli_parse_list("--k", a->val[O_K], &g->k, &g->spec.n_k))))
+        (a->val[O_T] && (rc = vafm_cli_parse_list("--T", "T_K", a->val[O_T], &g->T, &g->spec.n_T))) ||
+        (a->val[O_V] && (rc = vafm_cli_parse_list("--v", "v_approach_m_per_s", a->val[O_V], &g->v, &g->spec.n_v))) ||
+        (a->val[O_K] && (rc = vafm_cli_parse_list("--k", "k_N_per_m", a->val[O_K], &g->k, &g->spec.n_k))))
         return rc;
     g->spec.T_K = g->T;
     g->spec.v_m_per_s = g->v;

@@ -60,28 +60,57 @@ static int s_find_option(const char *name, size_t len)
     return -1;
 }
 
-/* `--NAME=VALUE` or `--NAME VALUE` for a parameter of the table. */
+/* The words of an instrument's force-curve dialog, as options: each names the field(s) of the table it sets
+ * (values take units: --setpoint 1nN, --speed 2um/s, --f0 70kHz, --T 25C). */
+static const struct {
+    const char *alias, *field, *field2;
+} s_aliases[] = {
+    { "setpoint", "setpoint_N", NULL },     { "ramp-size", "ramp_size_m", NULL },
+    { "ramp-rate", "ramp_rate_Hz", NULL },  { "speed", "v_approach_m_per_s", "v_retract_m_per_s" },
+    { "f0", "f0_Hz", NULL },                { "invols", "sensitivity_m_per_V", NULL },
+    { "rate", "sample_rate_Hz", NULL },     { "dwell", "dwell_s", NULL },
+    { "radius", "R_m", NULL },
+};
+
+static int s_add_override(vafm_cli_args *a, const char *field, const char *value)
+{
+    vafm_cli_override *o = &a->ov[a->n_ov++];
+    snprintf(o->name, sizeof o->name, "%s", field);
+    o->value = value;
+    return 0;
+}
+
+/* `--NAME=VALUE` or `--NAME VALUE` for a parameter of the table or one of its instrument words. */
 static int s_parse_override(vafm_cli_args *a, const char *arg, size_t len, const char *value)
 {
     const char *name = arg + 2;
     size_t nlen = len - 2;
-    vafm_cli_override *o = &a->ov[a->n_ov];
-    if (nlen >= sizeof o->name) {
+    char buf[64];
+    if (nlen >= sizeof buf) {
         vafm_cli_error("unknown option '%.*s' (see vafm --help)", (int)len, arg);
         return VAFM_CLI_EXIT_USAGE;
     }
-    memcpy(o->name, name, nlen);
-    o->name[nlen] = '\0';
-    if (!vafm_params_field_find(o->name)) {
+    memcpy(buf, name, nlen);
+    buf[nlen] = '\0';
+    const char *f1 = NULL, *f2 = NULL;
+    for (size_t i = 0; i < sizeof s_aliases / sizeof s_aliases[0]; i++)
+        if (!strcmp(buf, s_aliases[i].alias)) {
+            f1 = s_aliases[i].field;
+            f2 = s_aliases[i].field2;
+        }
+    if (!f1 && vafm_params_field_find(buf))
+        f1 = buf;
+    if (!f1) {
         vafm_cli_error("unknown option or parameter '%.*s' (see vafm --help for the PARAMETERS list)", (int)len, arg);
         return VAFM_CLI_EXIT_USAGE;
     }
     if (!value) {
-        vafm_cli_error("parameter --%s needs a value (--%s=VALUE or --%s VALUE)", o->name, o->name, o->name);
+        vafm_cli_error("parameter --%s needs a value (--%s=VALUE or --%s VALUE)", buf, buf, buf);
         return VAFM_CLI_EXIT_USAGE;
     }
-    o->value = value;
-    a->n_ov++;
+    s_add_override(a, f1, value);
+    if (f2)
+        s_add_override(a, f2, value);
     return 0;
 }
 
@@ -145,9 +174,25 @@ static int s_parse_positional(vafm_cli_args *a, const char *arg)
 }
 
 /* Every option given must belong to the command; parameter overrides only to scene commands. */
-static int s_check_options(const vafm_cli_args *a)
+static int s_check_options(vafm_cli_args *a)
 {
     const vafm_cli_command *c = a->cmd;
+    /* --T, --v and --k are a campaign's grid axes; for a single scene they set the temperature, both speeds
+     * and the spring constant */
+    if (c->scene) {
+        static const struct {
+            int id;
+            const char *f1, *f2;
+        } one[] = { { O_T, "T_K", NULL }, { O_V, "v_approach_m_per_s", "v_retract_m_per_s" }, { O_K, "k_N_per_m", NULL } };
+        for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
+            if (a->on[one[i].id] && !(c->opts & M(one[i].id))) {
+                s_add_override(a, one[i].f1, a->val[one[i].id]);
+                if (one[i].f2)
+                    s_add_override(a, one[i].f2, a->val[one[i].id]);
+                a->on[one[i].id] = 0;
+                a->val[one[i].id] = NULL;
+            }
+    }
     for (int id = 0; id < VAFM_CLI_NOPT; id++)
         if (a->on[id] && !(c->opts & M(id)) && !(c->scene && (S_SCENE_OPTS & M(id)))) {
             vafm_cli_error("option %s does not apply to `vafm %s` (see vafm %s --help)", s_options[id].name, c->name,
@@ -164,7 +209,7 @@ static int s_check_options(const vafm_cli_args *a)
 static int s_parse_args(vafm_cli_args *a, int argc, char **argv)
 {
     memset(a, 0, sizeof *a);
-    a->ov = calloc((size_t)argc + 1, sizeof *a->ov);
+    a->ov = calloc(2 * (size_t)argc + 8, sizeof *a->ov); /* an alias may set two fields; --T/--v/--k one more */
     if (!a->ov) {
         vafm_cli_error("out of memory");
         return VAFM_CLI_EXIT_RUNTIME;
@@ -215,7 +260,17 @@ static const char s_scene_help[] =
     "  --preset NAME        start from a preset (default " VAFM_CLI_DEFAULT_PRESET "; see `vafm presets`)\n"
     "  --scene FILE.json    apply a JSON object {\"preset\": NAME, \"<parameter>\": value, ...};\n"
     "                       its preset comes first; `vafm params --json` writes one\n"
-    "  --NAME=VALUE         set a parameter (see PARAMETERS); also --NAME VALUE; in command-line order\n";
+    "  --NAME=VALUE         set a parameter (see PARAMETERS); also --NAME VALUE; in command-line order;\n"
+    "                       values may carry the field's unit with an SI prefix: 1nN, 2um/s, 70kHz, 25C\n"
+    "  the instrument's words set the same parameters:\n"
+    "    --setpoint F       setpoint_N (1nN)             --ramp-size Z    ramp_size_m (1um: a fixed ramp)\n"
+    "    --speed V          both speeds (2um/s)          --ramp-rate R    ramp_rate_Hz (1Hz)\n"
+    "    --f0 F             f0_Hz (70kHz)                --Q Q            quality factor\n"
+    "    --invols S         sensitivity_m_per_V (60nm/V) --rate R         sample_rate_Hz (10kHz)\n"
+    "    --dwell T          dwell_s (0.5s)               --radius R       R_m (10nm)\n"
+    "    --T T, --v V, --k K  temperature, both speeds, spring constant (a campaign's lists: --T 15C,25C,35C)\n"
+    "  then extend_time_s/retract_time_s/ramp_rate_Hz set the speeds, segment_samples the sample rate and\n"
+    "  setpoint_V the setpoint (vafm_params_resolve)\n";
 
 static const char s_exit_help[] = "\nEXIT STATUS\n"
                                   "  0 success, 1 runtime error (a curve failed, output failed,\n"

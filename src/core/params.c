@@ -519,6 +519,10 @@ static const char *s_choice_value(const vafm_params *p, const s_field *f)
  * exact): people read it, and files and JSON still round-trip bit for bit. */
 static void s_fmt_shortest(char *buf, size_t len, double v)
 {
+    if (v == floor(v) && fabs(v) < 1e7) { /* whole numbers as people write them: 13000, not 1.3e+04 */
+        snprintf(buf, len, "%.0f", v);
+        return;
+    }
     for (int prec = 1; prec <= 17; prec++) {
         snprintf(buf, len, "%.*g", prec, v);
         if (strtod(buf, NULL) == v)

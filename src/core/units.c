@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* The only place where SI meets reduced units (physics notes, "Units"). */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -51,15 +52,30 @@ void vafm_units_from_reduced(vafm_params *p, const vafm_reduced *r)
 
 typedef struct s_prefix {
     const char *text;
-    double factor;
+    int exp10;
 } s_prefix;
 
 /* The prefixes people use on an instrument's controls; no c, d, da, h (a "cN" or "dm/s" is a typo more often
  * than a wish) and no E, P (no AFM quantity needs them). */
 static const s_prefix s_prefixes[] = {
-    { "f", 1e-15 }, { "p", 1e-12 }, { "n", 1e-9 }, { "u", 1e-6 }, { "\xc2\xb5", 1e-6 } /* µ */, { "m", 1e-3 },
-    { "k", 1e3 },   { "M", 1e6 },   { "G", 1e9 },  { "T", 1e12 },
+    { "f", -15 }, { "p", -12 }, { "n", -9 }, { "u", -6 }, { "\xc2\xb5", -6 } /* µ */, { "m", -3 },
+    { "k", 3 },   { "M", 6 },   { "G", 9 },  { "T", 12 },
 };
+
+/* The decimal number num (n characters) times 10^exp10, read as one decimal: "60" with -9 reads "60e-9", so
+ * 60nm/V is exactly the double of 60e-9 (a multiplication by 1e-9 would round twice). */
+static double s_scaled(const char *num, size_t n, int exp10)
+{
+    char buf[96];
+    size_t e = 0;
+    while (e < n && num[e] != 'e' && num[e] != 'E')
+        e++;
+    long ex = e < n ? strtol(num + e + 1, NULL, 10) : 0;
+    if (ex > 100000 || ex < -100000)
+        ex = ex > 0 ? 100000 : -100000;
+    snprintf(buf, sizeof buf, "%.*se%ld", (int)e, num, ex + exp10);
+    return strtod(buf, NULL);
+}
 
 /* suffix == unit, with the squared-metre spellings m^2, m2 and m² taken as one */
 static int s_unit_eq(const char *suffix, const char *unit)
@@ -134,14 +150,17 @@ int vafm_units_parse(const char *field, const char *text, const char *unit, doub
             *out = v;
             return 0;
         }
-        if (!strcmp(unit, "K") && (!strcmp(sfx, "C") || !strcmp(sfx, "degC") || !strcmp(sfx, "\xc2\xb0" "C"))) {
+        if (!strcmp(unit, "K") && *sfx && (!strcmp(sfx, "C") || !strcmp(sfx, "degC") || !strcmp(sfx, "\xc2\xb0" "C"))) {
             *out = v + 273.15;
             return 0;
         }
         for (size_t i = 0; unit[0] && *sfx && i < sizeof s_prefixes / sizeof s_prefixes[0]; i++) {
-            size_t n = strlen(s_prefixes[i].text);
-            if (!strncmp(sfx, s_prefixes[i].text, n) && s_unit_eq(sfx + n, unit)) {
-                *out = v * s_prefixes[i].factor;
+            size_t pn = strlen(s_prefixes[i].text);
+            if (!strncmp(sfx, s_prefixes[i].text, pn) && s_unit_eq(sfx + pn, unit)) {
+                double w = s_scaled(text, n, s_prefixes[i].exp10);
+                if (!isfinite(w))
+                    break;
+                *out = w;
                 return 0;
             }
         }

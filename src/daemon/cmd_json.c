@@ -583,7 +583,9 @@ int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd
         }
     }
     vafm_error verr = { 0 };
-    int rc = vafm_params_validate(&np, &verr);
+    int rc = vafm_params_resolve(&np, &verr); /* ramp rate, extend/retract times, segment samples, setpoint_V */
+    if (!rc)
+        rc = vafm_params_validate(&np, &verr);
     if (rc) {
         vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "the resulting scene is invalid: %s", verr.message);
         return -1;
@@ -596,10 +598,10 @@ int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd
 static json_t *s_info_param(const vafm_param_info *f)
 {
     json_t *o = json_object();
-    static const char *const kinds[] = { "real", "choice", "seed", "bool" };
-    json_object_set_new(o, "kind", json_string(f->kind >= 0 && f->kind < 4 ? kinds[f->kind] : "?"));
+    static const char *const kinds[] = { "real", "choice", "seed", "bool", "integer" };
+    json_object_set_new(o, "kind", json_string(f->kind >= 0 && f->kind < 5 ? kinds[f->kind] : "?"));
     json_object_set_new(o, "unit", json_string(f->unit));
-    if (f->kind == VAFM_PARAM_REAL) {
+    if (f->kind == VAFM_PARAM_REAL || f->kind == VAFM_PARAM_INT) {
         json_object_set_new(o, "min", json_real(f->min));
         json_object_set_new(o, "max", json_real(f->max));
     }
