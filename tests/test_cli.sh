@@ -134,7 +134,7 @@ if [ "$rc" -eq 0 ] && grep -qF '"v_approach_m_per_s": 2e-06' "$TMP/out" && grep 
     ok "ramp rate and samples per segment derive speed and sample rate"
 else bad "ramp rate" "exit $rc: $(head -c 300 "$TMP/out")"; fi
 expect_fail "a value in the wrong unit names field and unit" 2 setpoint_N "'2nm'" "in N" -- params --setpoint 2nm
-expect_fail "a ramp rate needs a ramp size" 2 ramp_rate_Hz ramp_size_m -- params --ramp-rate 1Hz
+expect_fail "a ramp rate needs a ramp size" 2 ramp_rate_Hz ramp_size_m -- params --ramp-size 0 --ramp-rate 1Hz
 expect_fail "a list element in the wrong unit" 2 "--T" "element 2" -- curves -n 1 --preset paper-fig4 --T 300K,5nN
 printf '{"setpoint_N": "1nN"}\n' >"$TMP/unitjson.json"
 expect_fail "JSON scene files keep plain SI numbers" 2 "$TMP/unitjson.json" setpoint_N -- params --scene "$TMP/unitjson.json"

@@ -337,7 +337,7 @@ static const struct {
     M(z_range_m), M(dwell_s), M(retract_margin_m), M(retract_max_m), M(sample_rate_Hz), M(tune_duration_s),
     M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT), M(sensitivity_m_per_V), M(noise_V_rms),
     M(adc_range_V), M(baseline_offset_V), M(ramp_size_m), M(ramp_rate_Hz), M(extend_time_s), M(retract_time_s),
-    M(setpoint_V), M(dwell_feedback_s),
+    M(setpoint_V), M(dwell_feedback_s), M(tune_rate_Hz),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])
@@ -701,6 +701,7 @@ static void test_resolve(void)
     vafm_preset_apply(&p, "contact-silica", NULL);
     vafm_error err;
     memset(&err, 0, sizeof err);
+    p.ramp_size_m = 0; /* an adaptive ramp */
     p.ramp_rate_Hz = 1.0;
     ENSURE(vafm_params_resolve(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "ramp_rate_Hz")); /* no ramp size */
     p.ramp_size_m = 500e-9;
@@ -738,8 +739,35 @@ static void test_resolve(void)
     ENSURE(vafm_params_validate(&p, &err) == VAFM_EINVAL && !strcmp(err.field, "dwell_feedback_s"));
 }
 
+/* A tune samples fast enough to show the resonance: the first 1-2-5 rate at or above 4 f0 when the curve's
+ * rate is lower, the curve's rate when it is not, tune_rate_Hz when given. */
+static void test_tune_rate(void)
+{
+    static const char *const presets[] = { "paper-fig1", "paper-fig4", "contact-silica", "cell-liquid",
+                                           "colloid-pdms", "stiff-polymer" };
+    for (size_t i = 0; i < sizeof presets / sizeof presets[0]; i++) {
+        vafm_params p, q;
+        vafm_preset_apply(&p, presets[i], NULL);
+        double f0 = sqrt(p.k_N_per_m / vafm_params_mass_kg(&p)) / (2.0 * M_PI), r = vafm_params_tune_rate_Hz(&p);
+        double mant = r / pow(10.0, floor(log10(r)));
+        int is125 = fabs(mant - 1) < 1e-9 || fabs(mant - 2) < 1e-9 || fabs(mant - 5) < 1e-9;
+        ENSURE_MSG(r >= 4.0 * f0 * (1 - 1e-12) && (r == p.sample_rate_Hz || (is125 && r < 10.0 * f0)),
+                   "%s: f0 %.6g Hz, tune at %.6g Hz (curve %.6g Hz)", presets[i], f0, r, p.sample_rate_Hz);
+        vafm_params_tune_scene(&p, &q);
+        ENSURE(q.sample_rate_Hz == r && q.segment_samples == 0 && vafm_params_validate(&q, NULL) == 0);
+        p.tune_rate_Hz = 1234.5;
+        ENSURE(vafm_params_tune_rate_Hz(&p) == 1234.5);
+    }
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL); /* f0 = 13 kHz: 52 kHz → 100 kHz */
+    ENSURE(vafm_params_tune_rate_Hz(&p) == 100e3);
+    p.sample_rate_Hz = 250e3; /* already above: kept */
+    ENSURE(vafm_params_tune_rate_Hz(&p) == 250e3);
+}
+
 int main(void)
 {
+    RUN_TEST(test_tune_rate);
     RUN_TEST(test_units_parse);
     RUN_TEST(test_resolve);
     RUN_TEST(test_shortest_text);

@@ -25,8 +25,9 @@ HAVE_MPL=0
 MPLBACKEND=Agg /usr/bin/python3 -c 'import matplotlib.pyplot' 2>/dev/null && HAVE_MPL=1
 
 # ---- vafm theory -------------------------------------------------------------------------------------
-"$VAFM" theory >"$TMP/th" 2>&1
+"$VAFM" theory >"$TMP/th0" 2>&1
 check "theory: exit 0 for the default scene" "[ $? -eq 0 ]"
+"$VAFM" theory --preset paper-fig1 >"$TMP/th" 2>&1
 check "theory: F_det/F_JKR of the notes' table (1.2e-4, 2e-5)" "grep -q '= 0.99992813 F_JKR' '$TMP/th'" "$(head -c 400 "$TMP/th")"
 check "theory: F* and the jump position" "grep -q 'F\* (contact force at the jump' '$TMP/th' && grep -q 'u_spr\*' '$TMP/th'"
 check "theory: MFPT and DHS columns" "grep -q 'MFPT <y>' '$TMP/th' && grep -q 'DHS <y>' '$TMP/th'"

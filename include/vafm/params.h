@@ -128,10 +128,14 @@ typedef struct vafm_params {
     int dwell_mode;        /**< enum vafm_dwell_mode */
     double dwell_feedback_s; /**< constant-force dwell: time constant of the feedback loop, s (0: 10 sample
                                   intervals; else at least 2) */
+    double tune_rate_Hz;   /**< thermal tune sample rate, Hz (0: automatic, vafm_params_tune_rate_Hz) */
     uint8_t reserved[32];
 } vafm_params;
 
-/** Fill p with the built-in default scene (preset "paper-fig1"). */
+/** The scene the tools (vafm, vafmd, make demo) start from: an instrument at room temperature. */
+#define VAFM_TOOLS_DEFAULT_PRESET "contact-silica"
+
+/** Fill p with the library's reference scene (preset "paper-fig1", the paper's reduced Fig. 1/2 scene). */
 VAFM_API void vafm_params_default(vafm_params *p);
 
 /** Number of presets; names and one-line descriptions by index. */
@@ -156,6 +160,12 @@ VAFM_API int vafm_params_validate(const vafm_params *p, vafm_error *err);
 VAFM_API double vafm_params_mass_kg(const vafm_params *p);
 /** The effective friction rate, 1/s: 2π f0 / Q when Q > 0 (f0 = f0_Hz, or √(k/m)/2π), else eta_per_s. */
 VAFM_API double vafm_params_eta_per_s(const vafm_params *p);
+
+/** The sample rate of a thermal tune, Hz: tune_rate_Hz when > 0, else sample_rate_Hz raised, when lower, to
+ *  the first 1-2-5 value at or above 4 f0 (a tune must show the resonance: f0 below Nyquist, with room). */
+VAFM_API double vafm_params_tune_rate_Hz(const vafm_params *p);
+/** The scene a thermal tune runs: p at the tune's sample rate (segment_samples cleared, it is the curve's). */
+VAFM_API void vafm_params_tune_scene(const vafm_params *p, vafm_params *out);
 
 /** Kind of a parameter in the field table. */
 enum vafm_param_kind {

@@ -44,7 +44,7 @@
 
 enum { VAFM_CLI_EXIT_OK = 0, VAFM_CLI_EXIT_RUNTIME = 1, VAFM_CLI_EXIT_USAGE = 2 };
 
-#define VAFM_CLI_DEFAULT_PRESET "paper-fig1"
+#define VAFM_CLI_DEFAULT_PRESET VAFM_TOOLS_DEFAULT_PRESET
 #define VAFM_CLI_PROGRESS_PERIOD_S 0.5
 #define VAFM_CLI_CHUNK_SAMPLES 64 /* samples per vafm_sim_advance call: progress granularity of one curve */
 #define VAFM_CLI_MAX_TOTAL_CURVES 1000000000000000ULL

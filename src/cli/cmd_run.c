@@ -17,6 +17,8 @@ static int s_open_sim(const vafm_cli_args *a, vafm_cli_scene *sc, uint64_t *inde
     int rc = vafm_cli_resolve_scene(a, sc, 1);
     if (rc || (rc = s_index_arg(a, index)) != 0)
         return rc;
+    if (a->on[O_TUNE]) /* a tune samples fast enough to show the resonance (tune_rate_Hz) */
+        vafm_params_tune_scene(&sc->p, &sc->p);
     return vafm_cli_new_sim(&sc->p, sim);
 }
 

@@ -83,7 +83,7 @@ static void s_help(FILE *o)
 int vafm_cmd_theory(int argc, char **argv)
 {
     vafm_params p;
-    vafm_params_default(&p);
+    vafm_preset_apply(&p, VAFM_TOOLS_DEFAULT_PRESET, NULL);
     char desc[1024] = "";
     double vlist[64];
     size_t n_v = 0;
@@ -149,7 +149,7 @@ int vafm_cmd_theory(int argc, char **argv)
         return 1;
     }
     const double fN = sc.force_N * 1e9, ln = sc.length_m * 1e9;
-    printf("scene        %s\n", desc[0] ? desc : "preset paper-fig1 (default)");
+    printf("scene        %s\n", desc[0] ? desc : "preset " VAFM_TOOLS_DEFAULT_PRESET " (default)");
     printf("reduced      gamma %.6g, k %.6g, m %.6g (zeta = m*eta = %.6g), kT %.6g, v_retract %.6g, integrator %s\n",
            r.gamma, r.k, r.m, zeta, r.kT, r.v_retract, p.integrator->name);
     printf("units        force E*R^2 = %.6g nN, length R = %.6g nm, time 1/eta = %.6g s, speed R*eta = %.6g m/s\n", fN,

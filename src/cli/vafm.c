@@ -232,7 +232,7 @@ static int s_parse_args(vafm_cli_args *a, int argc, char **argv)
 static void s_print_param_help(FILE *o)
 {
     vafm_params def;
-    vafm_params_default(&def);
+    vafm_preset_apply(&def, VAFM_CLI_DEFAULT_PRESET, NULL);
     fprintf(o, "\nPARAMETERS (--NAME=VALUE or --NAME VALUE; also the keys of a --scene file)\n"
                "  name                 unit   allowed                          default (%s)\n",
             VAFM_CLI_DEFAULT_PRESET);

@@ -89,6 +89,9 @@ static const s_field s_fields[] = {
         "output samples: mean over the sample interval (box-car anti-alias) or point samples" },
       offsetof(vafm_params, antialias), S_ANTIALIAS },
     REAL(tune_duration_s, "s", 0, 1e5, "thermal tune: recorded duration"),
+    REAL(tune_rate_Hz, "Hz", 0, 1e10,
+         "thermal tune: sample rate (0: automatic: sample_rate_Hz, raised to the first 1-2-5 value >= 4 f0 so the "
+         "resonance shows)"),
     { { "integrator", VAFM_PARAM_CHOICE, "", 0, 0, "gjf|baoab|paper-vv|brownian",
         "time integrator: gjf (default), baoab, paper-vv (the paper's Eq. 7 method), brownian (overdamped)" },
       0, S_INTEGRATOR },
@@ -232,8 +235,8 @@ static void s_instrument(vafm_params *p)
 /* A soft contact-mode cantilever on silica in air: k = 0.1 N/m, f0 = 13 kHz, Q = 30 (silicon contact
  * levers in air: NanoWorld CONT 0.2 N/m, 13 kHz; Bruker MLCT 0.01-0.6 N/m, 7-125 kHz; Q ~ 10-100 in air),
  * a silicon tip of 10 nm on fused silica (E = 169 and 73 GPa, ν = 0.27 and 0.17: E* = 53 GPa), work of
- * adhesion 0.05 J/m² (silica in ambient air, tens of mJ/m²: F_JKR = 2.4 nN), InvOLS 60 nm/V; a 1 µm/s ramp
- * from 100 nm above the surface to a 5 nN setpoint, 10 kHz sampling. */
+ * adhesion 0.05 J/m² (silica in ambient air, tens of mJ/m²: F_JKR = 2.4 nN), InvOLS 60 nm/V; a fixed 200 nm
+ * ramp at 1 µm/s from 100 nm above the surface, a 5 nN setpoint, 10 kHz sampling. The tools' default. */
 static void s_fill_contact_silica(vafm_params *p)
 {
     s_instrument(p);
@@ -245,6 +248,7 @@ static void s_fill_contact_silica(vafm_params *p)
     p->Q = 30;
     p->v_approach_m_per_s = p->v_retract_m_per_s = 1e-6;
     p->start_height_m = 100e-9;
+    p->ramp_size_m = 200e-9; /* the setpoint lies ~150 nm down; the retract returns to +100 nm */
     p->setpoint_N = 5e-9;
     p->trigger_height_m = -20e-9;
     p->sample_rate_Hz = 10e3;
@@ -254,7 +258,7 @@ static void s_fill_contact_silica(vafm_params *p)
 /* A sharp tip on a living cell in buffer: k = 0.03 N/m, f0 = 3 kHz and Q = 2 in liquid (Bruker MLCT-C:
  * 0.01 N/m, 7 kHz in air, about a third of it and Q ~ 1-3 in water), R = 20 nm, a cell of E = 5 kPa
  * (1-10 kPa for fibroblasts and epithelial cells; ν = 0.5: E* = 6.7 kPa), no adhesion (Hertz: model only
- * what it needs), 310 K; a 2 µm/s ramp from 300 nm above to a 0.5 nN setpoint, 5 kHz sampling. */
+ * what it needs), 310 K; a fixed 1.5 µm ramp at 2 µm/s from 300 nm above, a 0.5 nN setpoint, 5 kHz sampling. */
 static void s_fill_cell_liquid(vafm_params *p)
 {
     s_instrument(p);
@@ -268,16 +272,63 @@ static void s_fill_cell_liquid(vafm_params *p)
     p->Q = 2;
     p->v_approach_m_per_s = p->v_retract_m_per_s = 2e-6;
     p->start_height_m = 300e-9;
+    p->ramp_size_m = 1.5e-6; /* the indentation at the setpoint is ~0.55 µm, ~0.87 µm of travel */
     p->setpoint_N = 0.5e-9;
     p->trigger_height_m = -500e-9;
-    p->z_range_m = 1.5e-6; /* the automatic limit leaves out the indentation: ~0.55 µm here at the setpoint */
     p->retract_margin_m = 300e-9;
     p->sample_rate_Hz = 5e3;
     p->sensitivity_m_per_V = 40e-9;
 }
 
+/* A colloidal probe on PDMS in air: a 5 µm silica bead (R = 2.5 µm) on a tipless lever of k = 2 N/m, f0 = 50 kHz,
+ * Q = 50 (tipless levers for colloidal probes: 0.1-5 N/m; NanoWorld TL-FM 2.8 N/m, 75 kHz), Sylgard-184-like
+ * PDMS of E = 1 MPa (ν = 0.5: E* = 1.33 MPa; 0.5-3 MPa by cure), work of adhesion 0.04 J/m² (JKR tests of
+ * PDMS against silica: 40-50 mJ/m²; F_JKR = 0.47 µN), InvOLS 30 nm/V; a fixed 2 µm ramp at 2 µm/s from 500 nm
+ * above the surface, a 200 nN setpoint, 20 kHz sampling. */
+static void s_fill_colloid_pdms(vafm_params *p)
+{
+    s_instrument(p);
+    p->E_star_Pa = 1.33e6;
+    p->R_m = 2.5e-6;
+    p->gamma_J_per_m2 = 0.04;
+    p->k_N_per_m = 2.0;
+    p->f0_Hz = 50e3;
+    p->Q = 50;
+    p->v_approach_m_per_s = p->v_retract_m_per_s = 2e-6;
+    p->start_height_m = 500e-9;
+    p->ramp_size_m = 2e-6;
+    p->setpoint_N = 200e-9;
+    p->trigger_height_m = -200e-9;
+    p->sample_rate_Hz = 20e3;
+    p->sensitivity_m_per_V = 30e-9;
+}
+
+/* A stiff cantilever on a glassy polymer in air: k = 40 N/m, f0 = 300 kHz, Q = 400 (tapping-mode levers:
+ * Bruker RTESPA-300 40 N/m, 300 kHz; NanoWorld NCH 42 N/m, 320 kHz; Q ~ 300-600 in air), an 8 nm silicon
+ * tip on polystyrene (E = 3.0 GPa, ν = 0.35, with the tip's own compliance E* = 3.4 GPa), work of adhesion
+ * 0.06 J/m² (F_JKR = 2.3 nN, 0.06 nm of deflection: the stiff lever barely shows adhesion), InvOLS 80 nm/V;
+ * a fixed 100 nm ramp at 1 µm/s from 40 nm above the surface, a 200 nN setpoint (~6 nm indentation),
+ * 50 kHz sampling. */
+static void s_fill_stiff_polymer(vafm_params *p)
+{
+    s_instrument(p);
+    p->E_star_Pa = 3.4e9;
+    p->R_m = 8e-9;
+    p->gamma_J_per_m2 = 0.06;
+    p->k_N_per_m = 40.0;
+    p->f0_Hz = 300e3;
+    p->Q = 400;
+    p->v_approach_m_per_s = p->v_retract_m_per_s = 1e-6;
+    p->start_height_m = 40e-9;
+    p->ramp_size_m = 100e-9;
+    p->setpoint_N = 200e-9;
+    p->trigger_height_m = -10e-9;
+    p->sample_rate_Hz = 50e3;
+    p->sensitivity_m_per_V = 80e-9;
+}
+
 static const s_preset s_presets[] = {
-    { "paper-fig1", "the paper's reduced Fig. 1/2 scene in SI (default): 20 GPa, 15.7 nm tip, 6.3 mN/m, ~280 K, "
+    { "paper-fig1", "the paper's reduced Fig. 1/2 scene in SI (the library's reference): 20 GPa, 15.7 nm tip, 6.3 mN/m, ~280 K, "
                     "196 nm/s", s_fill_fig1 },
     { "paper-fig4", "the paper's reduced Fig. 4/5 scene, Langevin: gamma 0.229, k 0.1, m 0.01, kT 0.01, v 1e-3 "
                     "(in SI ~3e6 K: a theory scene, not an instrument)", s_fill_fig4 },
@@ -287,6 +338,10 @@ static const s_preset s_presets[] = {
                         "25 C, 1 um/s, 5 nN", s_fill_contact_silica },
     { "cell-liquid", "instrument: soft lever in buffer (0.03 N/m, 3 kHz, Q 2), 20 nm tip on a 5 kPa cell (Hertz), "
                      "37 C, 2 um/s, 0.5 nN", s_fill_cell_liquid },
+    { "colloid-pdms", "instrument: 5 um silica bead on a 2 N/m lever (50 kHz, Q 50) on PDMS (E 1 MPa, 40 mJ/m^2) in "
+                      "air, 25 C, 2 um/s, 200 nN", s_fill_colloid_pdms },
+    { "stiff-polymer", "instrument: stiff lever (40 N/m, 300 kHz, Q 400), 8 nm tip on polystyrene (E 3 GPa) in air, "
+                       "25 C, 1 um/s, 200 nN", s_fill_stiff_polymer },
 };
 #define S_NPRESETS ((int)(sizeof s_presets / sizeof s_presets[0]))
 
@@ -317,8 +372,8 @@ int vafm_preset_apply(vafm_params *p, const char *name, vafm_error *err)
             s_presets[i].fill(p);
             return 0;
         }
-    vafm_err_set(err, VAFM_ENOTFOUND, "preset", "unknown preset '%s' (known: paper-fig1, paper-fig4, paper-fig4-bd, contact-silica, cell-liquid)",
-                 name ? name : "(null)");
+    vafm_err_set(err, VAFM_ENOTFOUND, "preset", "unknown preset '%s' (known: paper-fig1, paper-fig4, paper-fig4-bd, contact-silica, cell-liquid, "
+                 "colloid-pdms, stiff-polymer)", name ? name : "(null)");
     return VAFM_ENOTFOUND;
 }
 
@@ -578,6 +633,29 @@ double vafm_params_mass_kg(const vafm_params *p)
         return p->k_N_per_m / (w * w);
     }
     return p->m_kg;
+}
+
+double vafm_params_tune_rate_Hz(const vafm_params *p)
+{
+    if (p->tune_rate_Hz > 0)
+        return p->tune_rate_Hz;
+    double f0 = sqrt(p->k_N_per_m / vafm_params_mass_kg(p)) / (2.0 * M_PI), want = 4.0 * f0;
+    if (!(p->sample_rate_Hz < want) || !isfinite(want))
+        return p->sample_rate_Hz;
+    double dec = pow(10.0, floor(log10(want)));
+    static const double steps[] = { 1, 2, 5, 10 };
+    for (int i = 0; i < 4; i++)
+        if (steps[i] * dec >= want * (1.0 - 1e-12))
+            return steps[i] * dec;
+    return 10.0 * dec;
+}
+
+void vafm_params_tune_scene(const vafm_params *p, vafm_params *out)
+{
+    vafm_params q = *p;
+    q.sample_rate_Hz = vafm_params_tune_rate_Hz(p);
+    q.segment_samples = 0;
+    *out = q;
 }
 
 double vafm_params_eta_per_s(const vafm_params *p)

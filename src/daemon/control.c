@@ -347,6 +347,8 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     if (kind == VAFMD_RUN_REPLAY)
         return s_start_replay(d, c, e);
     vafm_params p = d->scene;
+    if (kind == VAFMD_RUN_TUNE) /* a tune samples fast enough to show the resonance (tune_rate_Hz) */
+        vafm_params_tune_scene(&d->scene, &p);
     if (c->has_duration) {
         char buf[64];
         snprintf(buf, sizeof buf, "%.17g", c->duration_s);

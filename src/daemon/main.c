@@ -39,7 +39,7 @@ static const char s_usage[] =
     "                     With curve_secret_key, both sockets require CURVE (40-character Z85 keys as from\n"
     "                     zmq_curve_keypair) and only clients whose public key is listed are served.\n"
     "  --curve-required   refuse to start unless CURVE is configured (also on loopback)\n"
-    "  --preset NAME      scene preset (replaces the config file's; default paper-fig1)\n"
+    "  --preset NAME      scene preset (replaces the config file's; default " VAFM_TOOLS_DEFAULT_PRESET ")\n"
     "  --speed F          pacing speed factor in [0.01, 1000] (1: real time)\n"
     "  --free-run         no pacing: release blocks as fast as they are computed\n"
     "  --sensitivity S    detector sensitivity (InvOLS), m/V (default 50e-9)\n"
@@ -189,7 +189,7 @@ int main(int argc, char **argv)
             *dst = argv[++i];
         }
     }
-    vafm_params_default(&d.scene);
+    vafm_preset_apply(&d.scene, VAFM_TOOLS_DEFAULT_PRESET, NULL); /* an instrument, not the paper's scene */
     vafmd_settings_default(&d.set);
     if (config) {
         json_error_t jerr;

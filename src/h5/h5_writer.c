@@ -890,6 +890,7 @@ void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_
     m->software = "vafm";
     m->software_version = vafm_version();
     m->spring_constant_N_per_m = p->k_N_per_m;
+    m->sensitivity_m_per_V = p->sensitivity_m_per_V; /* with "spring constant": vDeflection from force */
     if (p->trigger == VAFM_TRIGGER_FORCE)
         m->setpoint_N = p->setpoint_N;
     m->rate_approach_Hz = m->rate_retract_Hz = p->sample_rate_Hz;
