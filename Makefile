@@ -20,7 +20,7 @@ $(ASAN)/build.ninja: | deps
 	$(MESON) setup $(ASAN) -Dbuildtype=debugoptimized -Dwerror=true -Dlong_tests=false \
 	    -Db_sanitize=address,undefined -Db_lundef=false
 
-# The main job: vafmd on the default scene (paper-fig1, paced at 1x real time) on private ipc:// endpoints,
+# The main job: vafmd on the default scene (contact-silica, paced at 1x real time) on private ipc:// endpoints,
 # one live force curve logged to HDF5 by the daemon, its pull-off observables, a PNG; the daemon is stopped.
 DEMO ?= $(BUILD)/demo
 demo: all

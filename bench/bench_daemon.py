@@ -133,7 +133,7 @@ LOOKAHEADS = (1.0, 0.0)  # the default, then the baseline without compute-ahead
 def bench_pacing(exe, rows):
     for name, preset, values, req in (
         ("paper-fig4 tune 3 s", "paper-fig4", {}, {"cmd": "tune", "duration_s": 3.0}),
-        ("paper-fig1 curve (default scene)", "paper-fig1", {}, {"cmd": "curve", "index": 0}),
+        ("paper-fig1 curve (the paper's scene)", "paper-fig1", {}, {"cmd": "curve", "index": 0}),
         ("paper-fig1 omega_dt=0.6 curve", "paper-fig1", {"omega_dt": 0.6}, {"cmd": "curve", "index": 0}),
     ):
         for la in LOOKAHEADS:
@@ -153,7 +153,7 @@ def bench_pacing(exe, rows):
 
 def bench_max_rate(exe, rows, values=None, label="paper-fig1", lookahead_s=1.0):
     """Highest output sample rate of a scene (paper-fig1 force curve) at 1x with no late block."""
-    d = Daemon(exe)
+    d = Daemon(exe, "--preset", "paper-fig1")  # the measured scene, not the tools' default
     d.cmd({"cmd": "set", "values": {**(values or {}), "lookahead_s": lookahead_s}})
     label = f"{label}, lookahead_s {lookahead_s:g}"
     s = d.sub()
@@ -181,7 +181,7 @@ def bench_max_rate(exe, rows, values=None, label="paper-fig1", lookahead_s=1.0):
 
 def bench_sustained(exe, rows, fs=1e6, n=5):
     """The target rate sustained: a daemon campaign of n default-scene curves back to back at fs, 1x."""
-    d = Daemon(exe)
+    d = Daemon(exe, "--preset", "paper-fig1")  # the measured scene, not the tools' default
     d.cmd({"cmd": "set", "values": {"sample_rate_Hz": fs}})
     s = d.sub()
     r = d.cmd({"cmd": "campaign", "n": n})
@@ -211,7 +211,7 @@ def bench_sustained(exe, rows, fs=1e6, n=5):
     rp99 = [e["release_lateness_ns"]["p99"] / 1e6 for e in ends]
     rmax = max(e["release_lateness_ns"]["max"] for e in ends) / 1e6
     ok = late == 0 and all(e["status"] == "ok" for e in ends) and got == samples
-    rows.append(("sustained 1x", f"paper-fig1 (default scene, default step): campaign of {n} curves at "
+    rows.append(("sustained 1x", f"paper-fig1 (the paper's scene, default step): campaign of {n} curves at "
                  f"{fs / 1e6:g} MS/s", f"{samples} samples in {wall:.1f} s, late blocks {late}",
                  f"{'ok' if ok else 'LATE or LOST'}: worst {worst:.3f} ms; release lateness p99 per curve "
                  f"{min(rp99):.3f}-{max(rp99):.3f} ms, max {rmax:.3f} ms; subscriber got {got}, delivery "

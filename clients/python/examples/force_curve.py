@@ -117,21 +117,31 @@ def main(argv=None):
     failed |= not same
 
     plt = plt_agg()
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    h_nm, f_nN = run["height_m"] * 1e9, run["force_N"] * 1e9
-    for seg, name, color, lw, z in ((1, "retract", "tab:red", 2.2, 1), (2, "dwell", "tab:gray", 1.0, 2),
-                                    (0, "approach", "tab:blue", 0.9, 3)):  # approach on top: they overlap in contact
+    # left: force vs piezo height as analysis software shows it (approach drawn above the retract, offset
+    # markers off); right: the same samples in time order, so that the approach's baseline noise, the snap-in
+    # and the retract's adhesion well are each visible on their own
+    fig, (ax, axt) = plt.subplots(1, 2, figsize=(11, 4.5), gridspec_kw={"width_ratios": [3, 2]})
+    h_nm, f_nN, t_ms = run["height_m"] * 1e9, run["force_N"] * 1e9, (run.time_s - run.time_s[0]) * 1e3
+    segs = ((1, "retract", "tab:red", 1.6, 1), (2, "dwell", "tab:gray", 1.0, 2), (0, "approach", "tab:blue", 1.0, 3))
+    for seg, name, color, lw, z in segs:
         m = run.segment == seg
         if m.any():
-            ax.plot(h_nm[m], f_nN[m], lw=lw, color=color, label=name, zorder=z)
+            ax.plot(h_nm[m], f_nN[m], lw=lw, color=color, label=name, zorder=z, alpha=0.9)
+            axt.plot(t_ms[m], f_nN[m], lw=0.8, color=color)
     if retract.any():
         i = np.flatnonzero(retract)[np.argmin(run["force_N"][retract])]
-        ax.plot(h_nm[i], f_nN[i], "ko", ms=5, label=f"pull-off {f_stream * 1e9:.4g} nN ({f_stream / f_jkr:.3f} F_JKR)")
-    ax.axhline(-f_jkr * 1e9, color="k", lw=0.6, ls="--", label="−F_JKR")
-    ax.set_xlabel("piezo height (nm)")
+        ax.plot(h_nm[i], f_nN[i], "ko", ms=5, zorder=4,
+                label=f"pull-off {f_stream * 1e9:.4g} nN" + (f" ({f_stream / f_jkr:.3f} F_JKR)" if f_jkr > 0 else ""))
+        axt.plot(t_ms[i], f_nN[i], "ko", ms=4)
+    if f_jkr > 0:
+        ax.axhline(-f_jkr * 1e9, color="k", lw=0.6, ls="--", label="−F_JKR")
+    ax.set_xlabel("piezo height above the contact point (nm)")
     ax.set_ylabel("force (nN, repulsive > 0)")
-    ax.set_title(f"vafmd force curve {a.index}: k = {scene['k_N_per_m']:.3g} N/m, T = {scene['T_K']:.4g} K")
+    ax.set_title(f"vafmd force curve {a.index}: k = {scene['k_N_per_m']:.3g} N/m, T = {scene['T_K']:.4g} K, "
+                 f"v = {scene['v_approach_m_per_s'] * 1e6:.3g} µm/s", fontsize=9)
     ax.legend(fontsize=8)
+    axt.set_xlabel("time (ms)")
+    axt.set_title("the same samples in time: approach, then retract", fontsize=9)
     fig.tight_layout()
     fig.savefig(png, dpi=110)
     print(f"PNG: {png}")
