@@ -68,6 +68,11 @@ cat "$TMP"/*.list | grep -v '/$' | sort | uniq -d >"$TMP/dup"
 # the packages extracted (no installation) and used from there
 ROOT=$TMP/root
 for p in vafm libvafm0 libvafm-dev python3-vafm-client; do dpkg-deb -x "${DEBS[$p]}" "$ROOT"; done
+DOC=$ROOT/usr/share/doc/vafm
+zcat -f "$DOC"/README.md* 2>/dev/null | head -1 | grep -q '^# vafm — a virtual AFM' &&
+    ok "vafm's documentation: the README" || bad "vafm's documentation: the README" "$(ls "$DOC")"
+zcat -f "$DOC"/protocol/wire.md* 2>/dev/null | grep -q . && ok "vafm's documentation: the protocol (protocol/wire.md)" ||
+    bad "vafm's documentation: protocol/wire.md" "$(ls "$DOC")"
 export LD_LIBRARY_PATH=$ROOT/usr/lib/$MA
 VERSION=$(dpkg-deb -f "${DEBS[vafm]}" Version | sed 's/-[^-]*$//')
 mkdir -p "$TMP/away" && cd "$TMP/away" || exit 1
