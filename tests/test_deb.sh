@@ -4,8 +4,9 @@
 # The Debian packages `make deb` built (not part of meson test): each package holds its files and no file is
 # in two packages; then, with no installation, the packages are extracted into a temporary directory and
 # used from there: the extracted vafm and vafmd run (LD_LIBRARY_PATH at the extracted libvafm0) and report
-# the packaged version, vafm runs a curve, a C program builds against the extracted libvafm-dev through
-# pkg-config, and python3 imports the extracted client. Usage: test_deb.sh DEB_DIR (the directory of the .debs).
+# the packaged version, vafm runs a curve and a quick study with its figure, a C program builds against the
+# extracted libvafm-dev through pkg-config, and python3 imports the extracted client.
+# Usage: test_deb.sh DEB_DIR (the directory of the .debs).
 set -u
 
 DEBDIR=$(cd "${1:?usage: test_deb.sh DEB_DIR}" && pwd)
@@ -92,6 +93,17 @@ if "$ROOT/usr/bin/vafm" run --preset paper-fig4 -q >"$TMP/run" 2>&1 && grep -q p
     ok "the extracted vafm runs a curve"
 else
     bad "the extracted vafm runs a curve" "$(tail -3 "$TMP/run")"
+fi
+# the study's plotter is found beside the binary: /usr/bin/../share/vafm/study_plot.py
+if "$ROOT/usr/bin/vafm" study hysteresis --quick --out study >"$TMP/study" 2>&1; then
+    if /usr/bin/python3 -c 'import matplotlib' 2>/dev/null; then
+        [ -s study/hysteresis.png ] && ok "the extracted vafm study draws its figure with the packaged plotter" ||
+            bad "the packaged plotter drew the figure" "$(grep -i figure study/report.md | head -3)"
+    else
+        ok "the extracted vafm study hysteresis --quick (no matplotlib: figures skipped)"
+    fi
+else
+    bad "the extracted vafm study hysteresis --quick" "$(tail -3 "$TMP/study")"
 fi
 printf '#include "vafm/sim.h"\n#include "vafm/client.h"\n#include <stdio.h>\nint main(void){vafm_params p; vafm_params_default(&p); printf("%%s\\n", vafm_version()); return vafm_params_validate(&p, NULL);}\n' >core.c
 flags=$(PKG_CONFIG_PATH=$ROOT/usr/lib/$MA/pkgconfig pkg-config --define-variable=prefix="$ROOT/usr" --cflags --libs vafm vafm-client 2>&1)
