@@ -5,7 +5,7 @@ ASAN   ?= build-asan
 MESON  ?= meson
 PY     ?= /usr/bin/python3
 
-.PHONY: all deps demo test test-release test-asan bench install clean
+.PHONY: all deps demo test test-release test-asan bench install deb clean
 
 all: $(BUILD)/build.ninja
 	ninja -C $(BUILD)
@@ -49,6 +49,13 @@ PREFIX ?=
 install: all
 	$(if $(PREFIX),$(MESON) configure $(BUILD) -Dprefix=$(PREFIX) && ninja -C $(BUILD),)
 	$(MESON) install -C $(BUILD) $(if $(DESTDIR),--destdir $(DESTDIR),)
+
+# Debian packages (debian/): built from a copy of the tree in $(DEB)/vafm-VERSION, the .debs left in $(DEB),
+# then lintian (its errors fail) and tests/test_deb.sh (each package's files; the extracted vafm runs).
+DEB ?= $(BUILD)/deb
+deb:
+	@bash .ci/deps.sh --deb
+	bash .ci/deb.sh $(DEB)
 
 clean:
 	rm -rf $(BUILD) $(ASAN)
