@@ -335,7 +335,7 @@ static const struct {
     M(v_approach_m_per_s), M(v_retract_m_per_s), M(start_height_m), M(setpoint_N), M(trigger_height_m),
     M(z_range_m), M(dwell_s), M(retract_margin_m), M(retract_max_m), M(sample_rate_Hz), M(tune_duration_s),
     M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT), M(sensitivity_m_per_V), M(noise_V_rms),
-    M(adc_range_V), M(baseline_offset_V),
+    M(adc_range_V), M(baseline_offset_V), M(surface_height_m),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])

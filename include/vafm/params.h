@@ -87,7 +87,12 @@ typedef struct vafm_params {
     int adc_bits;          /**< ADC resolution, bits (0: no ADC; 4–24) */
     double adc_range_V;    /**< ADC full range, V (peak to peak; codes saturate beyond ±range/2) */
     double baseline_offset_V; /**< offset of the deflection signal, V */
-    uint8_t reserved[32];
+    /* topography (a force map's pixel, vafm/map.h) */
+    double surface_height_m; /**< height of the sample surface (the contact point) above the reference plane
+                                  (a map's substrate), m: every piezo height a curve reports (samples, touch and
+                                  detach heights) is measured from that plane; start_height_m and
+                                  trigger_height_m stay relative to the contact point. Default 0 */
+    uint8_t reserved[24];
 } vafm_params;
 
 /** Fill p with the built-in default scene (preset "paper-fig1"). */
