@@ -38,6 +38,8 @@ typedef struct vafm_campaign_spec {
     size_t n_points;            /**< points of the grid when point_fn is set, ≥ 1 */
     vafm_campaign_point_fn point_fn; /**< the scene of each point (NULL: the T × v × k grid) */
     void *point_user;           /**< for point_fn */
+    const char *map_json;       /**< a force map's spec as a JSON object (vafm_map_to_json), which HDF5 files keep
+                                     in their grid ("map") and resume compares; NULL: not a map */
     uint8_t reserved[8];
 } vafm_campaign_spec;
 
