@@ -28,12 +28,14 @@
 #include <time.h>
 #include <unistd.h>
 #include "vafm/campaign.h"
+#include "vafm/detector.h"
 #include "vafm/common.h"
 #include "vafm/contact.h"
 #include "vafm/h5.h"
 #include "vafm/record.h"
 #include "vafm/stats.h"
 #include "vafm/integrator.h"
+#include "vafm/map.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "vafm/theory.h"
@@ -106,6 +108,44 @@ typedef struct vafm_cli_progress {
 #else
 #define VAFM_CLI_PRINTF(a, b)
 #endif
+
+/* recording a campaign into one HDF5 file (cli_common.c; vafm campaign, vafm map) */
+typedef struct vafm_cli_rec {
+    vafm_recorder *rec;
+    double *mdefl, *mforce; /* measured deflection and force of the curve being recorded (detector on) */
+    size_t mcap;
+    int werr_code; /* the first recorder error */
+    vafm_error werr;
+    vafm_cli_progress pg; /* the fields below belong to the delivering worker */
+    uint64_t done, total;
+    int fail_status;
+    uint64_t fail_index;
+    const vafm_map_spec *map; /* a force map: its curves get the pixel's map attributes (NULL: none) */
+    const vafm_params *base;  /* the map's base scene */
+} vafm_cli_rec;
+
+typedef struct vafm_cli_rec_opts {
+    const char *out;
+    int resume, overwrite, gzip;
+    double interval;
+    double mb_before; /* size of the file continued by --resume */
+} vafm_cli_rec_opts;
+
+/* "done/total curves, rate, ETA" on the progress line, when one is due */
+void vafm_cli_progress_curves(vafm_cli_progress *pg, uint64_t done, uint64_t total);
+/* --out, --resume, --overwrite, --flush-interval, --gzip */
+int vafm_cli_rec_parse(const vafm_cli_args *a, vafm_cli_rec_opts *o);
+/* the file's size estimated before anything is written; refused when it cannot fit */
+int vafm_cli_rec_size_check(const vafm_cli_args *a, const vafm_cli_rec_opts *co, const vafm_params *base,
+                            const vafm_campaign_spec *spec);
+/* open (create, resume, overwrite) and record or compare the provenance */
+int vafm_cli_rec_open(vafm_cli_rec *cp, const vafm_cli_rec_opts *o, const vafm_cli_scene *sc,
+                      const vafm_campaign_spec *spec);
+/* the campaign callback (vafm_campaign_fn): one curve into the file, through the scene's detector */
+int vafm_cli_rec_curve(void *user, const vafm_campaign_curve *c);
+/* close the recorder after a run (r: the campaign's return), report what failed; @return the exit status */
+int vafm_cli_rec_close(vafm_cli_rec *cp, const vafm_cli_rec_opts *co, uint64_t first, int r, const vafm_error *err,
+                       vafm_recorder_report *rep);
 
 /* cli_common.c */
 void vafm_cli_error(const char *fmt, ...) VAFM_CLI_PRINTF(1, 2);
