@@ -54,7 +54,8 @@ enum { VAFM_CLI_EXIT_OK = 0, VAFM_CLI_EXIT_RUNTIME = 1, VAFM_CLI_EXIT_USAGE = 2 
 
 enum vafm_cli_opt {
     O_HELP, O_VERSION, O_QUIET, O_PROGRESS, O_PRESET, O_SCENE, O_INDEX, O_N, O_THREADS, O_FIRST, O_CSV,
-    O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, O_MPI, VAFM_CLI_NOPT
+    O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, O_MPI,
+    O_NX, O_NY, O_SIZE, O_PATTERN, O_PPARAM, VAFM_CLI_NOPT
 };
 
 typedef struct vafm_cli_override {
@@ -178,12 +179,16 @@ int vafm_cli_parse_real(const char *opt, const char *text, double lo, double hi,
 double vafm_cli_file_mb(const char *path);
 uint64_t vafm_cli_truth_stats(const vafm_h5_reader *r, size_t np, vafm_point_stats *stats);
 void vafm_cli_print_statistics(FILE *o, const vafm_params *base, const vafm_campaign_spec *spec, const vafm_point_stats *stats);
+/* A force map's grid, per-region statistics and text renderings (by material, adhesion, height), from the
+ * file's map attributes and ground truth. @return 1 printed, 0 not a map, -1 out of memory. */
+int vafm_cli_print_map(FILE *o, vafm_h5_reader *r);
 
 /* the subcommands (one table in vafm.c) */
 int vafm_cli_cmd_run(const vafm_cli_args *a);
 int vafm_cli_cmd_samples(const vafm_cli_args *a);
 int vafm_cli_cmd_curves(const vafm_cli_args *a);
 int vafm_cli_cmd_campaign(const vafm_cli_args *a);
+int vafm_cli_cmd_map(const vafm_cli_args *a);
 int vafm_cli_cmd_info(const vafm_cli_args *a);
 int vafm_cli_cmd_export(const vafm_cli_args *a);
 int vafm_cli_cmd_params(const vafm_cli_args *a);

@@ -657,3 +657,149 @@ int vafm_cli_rec_close(vafm_cli_rec *cp, const vafm_cli_rec_opts *co, uint64_t f
     }
     return rc;
 }
+
+/* ---- force maps (vafm map, vafm info) ---------------------------------------------------------------- */
+
+#define S_MAP_MAX_REGIONS 8
+#define S_MAP_MAX_COLS 64
+#define S_MAP_MAX_ROWS 32
+
+typedef struct s_region {
+    double E, gamma;
+    uint64_t n;
+    double hmin, hmax;
+    vafm_point_stats st;
+} s_region;
+
+/* One text rendering of a per-pixel value: one character per shown pixel, y up (row ny-1 first). */
+static void s_map_render(FILE *o, const char *title, const double *v, int nx, int ny, const char *levels, double lo,
+                         double hi, const char *(*label)(double, char *))
+{
+    int sx = (nx + S_MAP_MAX_COLS - 1) / S_MAP_MAX_COLS, sy = (ny + S_MAP_MAX_ROWS - 1) / S_MAP_MAX_ROWS;
+    fprintf(o, "%s", title);
+    if (sx > 1 || sy > 1)
+        fprintf(o, " (every %d. pixel along x, every %d. along y)", sx, sy);
+    fputc('\n', o);
+    int nl = (int)strlen(levels);
+    for (int iy = ny - 1 - ((ny - 1) % sy); iy >= 0; iy -= sy) {
+        fputs("  ", o);
+        for (int ix = 0; ix < nx; ix += sx) {
+            double x = v[(size_t)iy * (size_t)nx + (size_t)ix];
+            char ch[8];
+            if (label)
+                fputs(label(x, ch), o);
+            else if (isnan(x))
+                fputc('?', o);
+            else {
+                int k = hi > lo ? (int)((x - lo) / (hi - lo) * (double)nl) : 0;
+                fputc(levels[k < 0 ? 0 : k >= nl ? nl - 1 : k], o);
+            }
+        }
+        fputc('\n', o);
+    }
+}
+
+static const char *s_region_char(double x, char *buf)
+{
+    buf[0] = isnan(x) ? '?' : (char)('a' + (int)x);
+    buf[1] = 0;
+    return buf;
+}
+
+int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
+{
+    size_t n = vafm_h5_reader_count(r);
+    vafm_h5_curve c;
+    if (!n || vafm_h5_reader_curve_info(r, 0, &c, NULL) || c.meta.grid_shape_x < 1 || c.meta.grid_shape_y < 1)
+        return 0; /* not a map */
+    int nx = (int)c.meta.grid_shape_x, ny = (int)c.meta.grid_shape_y;
+    size_t np = (size_t)nx * (size_t)ny;
+    if (nx > VAFM_MAP_MAX_SIDE || ny > VAFM_MAP_MAX_SIDE)
+        return 0;
+    fprintf(o, "map          %d x %d pixels over %.6g x %.6g um centred at (%.6g, %.6g) um; curve = iy*%d + ix; "
+               "%zu of %zu pixels recorded\n",
+            nx, ny, c.meta.grid_size_x_m * 1e6, c.meta.grid_size_y_m * 1e6, c.meta.grid_center_x_m * 1e6,
+            c.meta.grid_center_y_m * 1e6, nx, n < np ? n : np, np);
+    double *reg = malloc(np * sizeof *reg), *pull = malloc(np * sizeof *pull), *hgt = malloc(np * sizeof *hgt);
+    s_region rg[S_MAP_MAX_REGIONS];
+    int nr = 0, more = 0;
+    if (!reg || !pull || !hgt) {
+        free(reg);
+        free(pull);
+        free(hgt);
+        return -1;
+    }
+    for (size_t i = 0; i < np; i++)
+        reg[i] = pull[i] = hgt[i] = NAN;
+    double plo = INFINITY, phi = -INFINITY, hlo = INFINITY, hhi = -INFINITY;
+    for (size_t i = 0; i < n; i++) {
+        vafm_h5_truth t;
+        if (vafm_h5_reader_curve_info(r, i, &c, NULL) || c.meta.grid_index_x < 0 || c.meta.grid_index_y < 0 ||
+            c.meta.grid_index_x >= nx || c.meta.grid_index_y >= ny ||
+            vafm_h5_reader_truth(r, vafm_h5_reader_group(r, i), &t))
+            continue;
+        size_t px = (size_t)c.meta.grid_index_y * (size_t)nx + (size_t)c.meta.grid_index_x;
+        int k = 0;
+        while (k < nr && !(rg[k].E == t.E_star_Pa && rg[k].gamma == t.gamma_J_per_m2))
+            k++;
+        if (k == nr) {
+            if (nr == S_MAP_MAX_REGIONS) {
+                more++;
+                continue;
+            }
+            memset(&rg[nr], 0, sizeof rg[nr]);
+            rg[nr].E = t.E_star_Pa;
+            rg[nr].gamma = t.gamma_J_per_m2;
+            rg[nr].hmin = INFINITY;
+            rg[nr].hmax = -INFINITY;
+            nr++;
+        }
+        rg[k].n++;
+        rg[k].hmin = fmin(rg[k].hmin, t.surface_height_m);
+        rg[k].hmax = fmax(rg[k].hmax, t.surface_height_m);
+        vafm_point_stats_add(&rg[k].st, t.status, &t.result);
+        reg[px] = k;
+        hgt[px] = t.surface_height_m;
+        if (isfinite(t.surface_height_m)) {
+            hlo = fmin(hlo, t.surface_height_m);
+            hhi = fmax(hhi, t.surface_height_m);
+        }
+        if (vafm_stats_is_pulloff(t.status, &t.result)) {
+            pull[px] = t.result.pulloff_sampled_N;
+            plo = fmin(plo, pull[px]);
+            phi = fmax(phi, pull[px]);
+        }
+    }
+    fprintf(o, "regions      the ground truth's materials (E*, gamma); pull-off = pulloff_sampled, mean +- sem\n");
+    for (int k = 0; k < nr; k++) {
+        const vafm_moments *m = &rg[k].st.obs[VAFM_OBS_PULLOFF_SAMPLED];
+        fprintf(o, "  %c  E* = %-10.6g Pa  gamma = %-8.4g J/m^2  %6" PRIu64 " curves, surface height %.4g..%.4g um, "
+                   "pull-off ",
+                'a' + k, rg[k].E, rg[k].gamma, rg[k].n, rg[k].hmin * 1e6, rg[k].hmax * 1e6);
+        if (m->n)
+            fprintf(o, "%.6g +- %.3g nN (n %" PRIu64 ")\n", m->mean * 1e9, vafm_moments_sem(m) * 1e9, m->n);
+        else
+            fprintf(o, "none (n 0)\n");
+    }
+    if (more)
+        fprintf(o, "  (%d curve(s) of further materials left out)\n", more);
+    if (nr > 0) {
+        s_map_render(o, "material map (one letter per pixel: its region; y up)", reg, nx, ny, "", 0, 0, s_region_char);
+        if (phi > plo || isfinite(plo)) {
+            char title[160];
+            snprintf(title, sizeof title, "adhesion map (pull-off force, ' .:-=+*#%%@' from %.4g to %.4g nN; '?' none)",
+                     plo * 1e9, phi * 1e9);
+            s_map_render(o, title, pull, nx, ny, " .:-=+*#%@", plo, phi, NULL);
+        }
+        if (hhi > hlo) {
+            char title[160];
+            snprintf(title, sizeof title, "height map (surface height, ' .:-=+*#%%@' from %.4g to %.4g um)", hlo * 1e6,
+                     hhi * 1e6);
+            s_map_render(o, title, hgt, nx, ny, " .:-=+*#%@", hlo, hhi, NULL);
+        }
+    }
+    free(reg);
+    free(pull);
+    free(hgt);
+    return 1;
+}
