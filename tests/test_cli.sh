@@ -59,7 +59,7 @@ cp "$TMP/out" "$TMP/help"
 missing=""
 for f in $fields; do
     u=$(unit_of "$f")
-    got=$(awk -v f="$f" '$1 == f { print $2; exit }' "$TMP/help")
+    got=$(awk -v f="$f" 'index($0, "  " f " ") == 1 { print $2; exit }' "$TMP/help")
     if [ -z "$got" ]; then missing="$missing $f(absent)"; elif [ -n "$u" ] && [ "$got" != "$u" ]; then missing="$missing $f($got!=$u)"; fi
 done
 if [ "$rc" -eq 0 ] && [ "$nfields" -ge 20 ] && [ -z "$missing" ]; then ok "--help lists every field with its unit"; else bad "--help parameter list" "exit $rc:$missing"; fi
@@ -271,7 +271,7 @@ run info "$TMP/t1.h5"
 cp "$TMP/out" "$TMP/t1.info"
 lines=$(grep -cE '^ +[0-9]+ +[0-9]+ +[0-9]+ +[0-9]+ +[0-9]+ .* \| +[01] +0 ' "$TMP/t1.info")
 if [ "$rc" -eq 0 ] && [ "$(ncurves)" = 8 ] && [ "$lines" -eq 8 ] && grep -q "^conformance  ok" "$TMP/t1.info" &&
-    grep -q "^vafm format  1.0, created .*, seed 1, ground truth for 8 curve(s)" "$TMP/t1.info" &&
+    grep -q "^vafm format  1.1, created .*, seed 1, ground truth for 8 curve(s)" "$TMP/t1.info" &&
     grep -q "^grid         2 point(s) x 4 curves = 8 curves; .* v 6.4e-05,0.00064 m/s;" "$TMP/t1.info" &&
     grep -q "^software     vafm " "$TMP/t1.info"; then
     ok "info: 8 curve lines with ground truth, provenance, grid, conformance ok"

@@ -225,7 +225,7 @@ static void syn_make(syn *s, size_t n, double k, uint64_t index)
     m->grid_size_x_m = m->grid_size_y_m = 4e-6;
     m->grid_shape_x = m->grid_shape_y = 4;
     m->grid_index_x = (int64_t)(index % 4);
-    m->grid_index_y = (int64_t)(index / 4);
+    m->grid_index_y = (int64_t)((index / 4) % 4); /* inside the shape (L17) */
     m->point_count = (int64_t)n;
     m->segment_count = 2;
     vafm_h5_truth *t = &s->truth;

@@ -338,6 +338,7 @@ static const struct {
     M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT), M(sensitivity_m_per_V), M(noise_V_rms),
     M(adc_range_V), M(baseline_offset_V), M(ramp_size_m), M(ramp_rate_Hz), M(extend_time_s), M(retract_time_s),
     M(setpoint_V), M(dwell_feedback_s), M(tune_rate_Hz),
+    M(surface_height_m),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])

@@ -17,6 +17,11 @@
 extern "C" {
 #endif
 
+/** The scene of grid point `point` over `base` into *out, for a grid given point by point (a force map,
+ *  vafm/map.h). Called from the worker threads concurrently: it must be thread-safe and give the same
+ *  scene for the same point every time. @return 0 or a negative VAFM_E* code. */
+typedef int (*vafm_campaign_point_fn)(void *user, const vafm_params *base, size_t point, vafm_params *out);
+
 /** The grid. A list left NULL (count 0) means "the base scene's value". */
 typedef struct vafm_campaign_spec {
     const double *T_K;          /**< temperatures, K */
@@ -29,14 +34,20 @@ typedef struct vafm_campaign_spec {
     uint64_t first_curve;       /**< skip global indices below this (resume); usually 0 */
     int threads;                /**< worker threads, 0: all online cores */
     int keep_samples;           /**< 1: hand each curve's samples to the callback */
-    uint8_t reserved[32];
+    /* a grid given point by point (a force map): with point_fn set the T, v, k lists must be empty */
+    size_t n_points;            /**< points of the grid when point_fn is set, ≥ 1 */
+    vafm_campaign_point_fn point_fn; /**< the scene of each point (NULL: the T × v × k grid) */
+    void *point_user;           /**< for point_fn */
+    const char *map_json;       /**< a force map's spec as a JSON object (vafm_map_to_json), which HDF5 files keep
+                                     in their grid ("map") and resume compares; NULL: not a map */
+    uint8_t reserved[8];
 } vafm_campaign_spec;
 
 /** One finished curve. */
 typedef struct vafm_campaign_curve {
     uint64_t index;            /**< global curve index */
-    size_t point;              /**< grid point (T index slowest, then v, then k) */
-    const vafm_params *params; /**< the scene of that point */
+    size_t point;              /**< grid point (T index slowest, then v, then k; or point_fn's point) */
+    const vafm_params *params; /**< the scene of that point (valid during the callback) */
     int status;                /**< 0, or the VAFM_E* code the curve ended with (e.g. VAFM_EUNSTABLE) */
     vafm_curve_result result;  /**< observables */
     vafm_samples samples;      /**< all samples of the curve when keep_samples, else n = 0 */
@@ -49,14 +60,15 @@ typedef int (*vafm_campaign_fn)(void *user, const vafm_campaign_curve *c);
 /** @return the number of grid points of a spec. */
 VAFM_API size_t vafm_campaign_points(const vafm_campaign_spec *spec);
 
-/** Fill `out` with the scene of grid point `point`. */
+/** Fill `out` with the scene of grid point `point` (point_fn's, when the spec has one).
+ *  @return 0, VAFM_EINVAL (no such point) or point_fn's error. */
 VAFM_API int vafm_campaign_point_params(const vafm_params *base, const vafm_campaign_spec *spec,
                                         size_t point, vafm_params *out);
 
 /** Validate the scene of every grid point (vafm_params_validate), in point order, before anything is
  *  run or written. @param bad_point receives the first invalid point (may be NULL)
  *  @return 0, or the first point's error with err->message "grid point P (T = …, v = …, k = …): why"
- *  and err->field the parameter. */
+ *  and err->field the parameter. A spec with point_fn and T, v or k lists, or n_points 0, is VAFM_EINVAL. */
 VAFM_API int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *spec, size_t *bad_point,
                                     vafm_error *err);
 

@@ -33,7 +33,7 @@ extern "C" {
 /** vafm's own format version, stored in the root attribute "vafm format version" as "MAJOR.MINOR".
  *  A reader refuses another major version; a newer minor version only adds root attributes. */
 #define VAFM_H5_FORMAT_MAJOR 1
-#define VAFM_H5_FORMAT_MINOR 0
+#define VAFM_H5_FORMAT_MINOR 1
 
 /** The most samples a curve (each of its channels) may have, written or read: 2^25 = 33,554,432 (a
  *  3.4 s curve at 8 MS/s has 27 M; five float64 channels of this length take 1.3 GB). A reader checks
@@ -104,6 +104,10 @@ typedef struct vafm_h5_truth {
     double v_m_per_s;           /**< piezo speed of the point, m/s */
     double k_N_per_m;           /**< spring constant of the point, N/m */
     vafm_curve_result result;   /**< observables; result.index is the curve's number (its group) */
+    /* the sample under the tip (format 1.1; NaN when read from a 1.0 file) */
+    double E_star_Pa;           /**< the curve's contact modulus E*, Pa (a map's pixel: its material's) */
+    double gamma_J_per_m2;      /**< the curve's JKR surface energy γ, J/m² (0 for hertz, none) */
+    double surface_height_m;    /**< height of the surface above the reference plane, m (a map's topography) */
 } vafm_h5_truth;
 
 /** Provenance read back from a file. Strings are owned by the reader (valid until destroy). */
@@ -113,7 +117,8 @@ typedef struct vafm_h5_provenance {
     int is_vafm;                  /**< 1 if the file carries vafm's root attributes */
     int format_major, format_minor; /**< "vafm format version" (is_vafm only) */
     const char *scene_json;       /**< "vafm scene": the base scene, vafm_params_to_json() */
-    const char *grid_json;        /**< "vafm grid": temperatures, speeds, spring constants, N per point */
+    const char *grid_json;        /**< "vafm grid": temperatures, speeds, spring constants, N per point; a force
+                                       map's grid has the map's spec under "map" (vafm/map.h) */
     const char *created;          /**< "vafm created": UTC time the file was created, ISO 8601 */
     uint64_t seed;                /**< "vafm seed" */
     size_t truth_rows;            /**< ground-truth rows present */
@@ -209,8 +214,8 @@ VAFM_API void vafm_h5_writer_destroy(vafm_h5_writer **w);
 VAFM_API void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_params *p,
                                      const vafm_curve_result *r);
 
-/** Fill a ground-truth row for a simulated curve: grid point `point`, the scene's T, retract speed and
- *  spring constant, the curve result (status 0). result.index stays the curve's stream index: a writer
+/** Fill a ground-truth row for a simulated curve: grid point `point`, the scene's T, retract speed,
+ *  spring constant, E*, γ and surface height, the curve result (status 0). result.index stays the curve's stream index: a writer
  *  that numbers rows by group sets it afterwards. */
 VAFM_API void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params *p,
                                      const vafm_curve_result *r);

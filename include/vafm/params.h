@@ -129,7 +129,12 @@ typedef struct vafm_params {
     double dwell_feedback_s; /**< constant-force dwell: time constant of the feedback loop, s (0: 10 sample
                                   intervals; else at least 2) */
     double tune_rate_Hz;   /**< thermal tune sample rate, Hz (0: automatic, vafm_params_tune_rate_Hz) */
-    uint8_t reserved[32];
+    /* topography (a force map's pixel, vafm/map.h) */
+    double surface_height_m; /**< height of the sample surface (the contact point) above the reference plane
+                                  (a map's substrate), m: every piezo height a curve reports (samples, touch and
+                                  detach heights) is measured from that plane; start_height_m and
+                                  trigger_height_m stay relative to the contact point. Default 0 */
+    uint8_t reserved[24];
 } vafm_params;
 
 /** The scene the tools (vafm, vafmd, make demo) start from: an instrument at room temperature. */

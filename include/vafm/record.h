@@ -21,6 +21,7 @@
 #include "vafm/campaign.h"
 #include "vafm/common.h"
 #include "vafm/h5.h"
+#include "vafm/map.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
 
@@ -77,6 +78,10 @@ typedef struct vafm_record_curve {
     double sensitivity_m_per_V;     /**< deflection sensitivity (InvOLS), m/V; NaN: not recorded */
     int measured_force;             /**< 1: force is a measured (noisy, quantised) signal, so the file gets
                                          no "tip position" = height + force/k column (hdf5.md L14) */
+    const vafm_map_spec *map;       /**< a force map (vafm/map.h), with pixel; NULL: not a map curve */
+    const vafm_map_truth *pixel;    /**< the curve's pixel: its indices and position, with the map's shape, centre
+                                         and size, become afmformats' map attributes ("grid index x", "position x",
+                                         ...); its E*, γ and surface height are the scene's (params) */
 } vafm_record_curve;
 
 /** Append one curve as the next group, with its ground truth; durable after the call when the flush

@@ -28,12 +28,14 @@
 #include <time.h>
 #include <unistd.h>
 #include "vafm/campaign.h"
+#include "vafm/detector.h"
 #include "vafm/common.h"
 #include "vafm/contact.h"
 #include "vafm/h5.h"
 #include "vafm/record.h"
 #include "vafm/stats.h"
 #include "vafm/integrator.h"
+#include "vafm/map.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "vafm/theory.h"
@@ -52,7 +54,8 @@ enum { VAFM_CLI_EXIT_OK = 0, VAFM_CLI_EXIT_RUNTIME = 1, VAFM_CLI_EXIT_USAGE = 2 
 
 enum vafm_cli_opt {
     O_HELP, O_VERSION, O_QUIET, O_PROGRESS, O_PRESET, O_SCENE, O_INDEX, O_N, O_THREADS, O_FIRST, O_CSV,
-    O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, O_MPI, VAFM_CLI_NOPT
+    O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, O_MPI,
+    O_NX, O_NY, O_SIZE, O_PATTERN, O_PPARAM, VAFM_CLI_NOPT
 };
 
 typedef struct vafm_cli_override {
@@ -107,6 +110,44 @@ typedef struct vafm_cli_progress {
 #define VAFM_CLI_PRINTF(a, b)
 #endif
 
+/* recording a campaign into one HDF5 file (cli_common.c; vafm campaign, vafm map) */
+typedef struct vafm_cli_rec {
+    vafm_recorder *rec;
+    double *mdefl, *mforce; /* measured deflection and force of the curve being recorded (detector on) */
+    size_t mcap;
+    int werr_code; /* the first recorder error */
+    vafm_error werr;
+    vafm_cli_progress pg; /* the fields below belong to the delivering worker */
+    uint64_t done, total;
+    int fail_status;
+    uint64_t fail_index;
+    const vafm_map_spec *map; /* a force map: its curves get the pixel's map attributes (NULL: none) */
+    const vafm_params *base;  /* the map's base scene */
+} vafm_cli_rec;
+
+typedef struct vafm_cli_rec_opts {
+    const char *out;
+    int resume, overwrite, gzip;
+    double interval;
+    double mb_before; /* size of the file continued by --resume */
+} vafm_cli_rec_opts;
+
+/* "done/total curves, rate, ETA" on the progress line, when one is due */
+void vafm_cli_progress_curves(vafm_cli_progress *pg, uint64_t done, uint64_t total);
+/* --out, --resume, --overwrite, --flush-interval, --gzip */
+int vafm_cli_rec_parse(const vafm_cli_args *a, vafm_cli_rec_opts *o);
+/* the file's size estimated before anything is written; refused when it cannot fit */
+int vafm_cli_rec_size_check(const vafm_cli_args *a, const vafm_cli_rec_opts *co, const vafm_params *base,
+                            const vafm_campaign_spec *spec);
+/* open (create, resume, overwrite) and record or compare the provenance */
+int vafm_cli_rec_open(vafm_cli_rec *cp, const vafm_cli_rec_opts *o, const vafm_cli_scene *sc,
+                      const vafm_campaign_spec *spec);
+/* the campaign callback (vafm_campaign_fn): one curve into the file, through the scene's detector */
+int vafm_cli_rec_curve(void *user, const vafm_campaign_curve *c);
+/* close the recorder after a run (r: the campaign's return), report what failed; @return the exit status */
+int vafm_cli_rec_close(vafm_cli_rec *cp, const vafm_cli_rec_opts *co, uint64_t first, int r, const vafm_error *err,
+                       vafm_recorder_report *rep);
+
 /* cli_common.c */
 void vafm_cli_error(const char *fmt, ...) VAFM_CLI_PRINTF(1, 2);
 int vafm_cli_exit_of(int code);
@@ -138,12 +179,16 @@ int vafm_cli_parse_real(const char *opt, const char *text, double lo, double hi,
 double vafm_cli_file_mb(const char *path);
 uint64_t vafm_cli_truth_stats(const vafm_h5_reader *r, size_t np, vafm_point_stats *stats);
 void vafm_cli_print_statistics(FILE *o, const vafm_params *base, const vafm_campaign_spec *spec, const vafm_point_stats *stats);
+/* A force map's grid, per-region statistics and text renderings (by material, adhesion, height), from the
+ * file's map attributes and ground truth. @return 1 printed, 0 not a map, -1 out of memory. */
+int vafm_cli_print_map(FILE *o, vafm_h5_reader *r);
 
 /* the subcommands (one table in vafm.c) */
 int vafm_cli_cmd_run(const vafm_cli_args *a);
 int vafm_cli_cmd_samples(const vafm_cli_args *a);
 int vafm_cli_cmd_curves(const vafm_cli_args *a);
 int vafm_cli_cmd_campaign(const vafm_cli_args *a);
+int vafm_cli_cmd_map(const vafm_cli_args *a);
 int vafm_cli_cmd_info(const vafm_cli_args *a);
 int vafm_cli_cmd_export(const vafm_cli_args *a);
 int vafm_cli_cmd_params(const vafm_cli_args *a);

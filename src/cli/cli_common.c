@@ -454,3 +454,364 @@ void vafm_cli_print_statistics(FILE *o, const vafm_params *base, const vafm_camp
         vafm_cli_print_point(o, i, &p, &stats[i]);
     }
 }
+
+/* ---- recording a campaign into one HDF5 file (vafm campaign, vafm map) ----------------------------- */
+
+/* "done/total curves, rate, ETA" on the progress line, when one is due (vafm curves and campaign). */
+void vafm_cli_progress_curves(vafm_cli_progress *pg, uint64_t done, uint64_t total)
+{
+    if (!vafm_cli_progress_due(pg))
+        return;
+    double wall = vafm_cli_now() - pg->t0, rate = (double)done / wall;
+    char line[160];
+    snprintf(line, sizeof line, "%" PRIu64 "/%" PRIu64 " curves, %.3g curves/s, ETA %.0f s", done, total, rate,
+             rate > 0 ? (double)(total - done) / rate : 0.0);
+    vafm_cli_progress_line(pg, line);
+}
+
+
+/*
+ * The curves reach vafm_cli_rec_curve in index order, one at a time, from whichever worker finished the
+ * next one, and go into the file at once through the recorder (vafm/record.h), which flushes on a timer
+ * (--flush-interval) from its own thread: a kill -9 at any moment loses at most the curves of the last
+ * interval; --resume recomputes exactly those.
+ */
+
+/* The curve's samples through the scene's measured chain (vafm/detector.h) into cp's buffers. */
+static int s_measure(vafm_cli_rec *cp, const vafm_campaign_curve *c, vafm_samples *out)
+{
+    const vafm_samples *s = &c->samples;
+    if (s->n > cp->mcap) {
+        double *d = realloc(cp->mdefl, s->n * sizeof *d), *f = d ? realloc(cp->mforce, s->n * sizeof *f) : NULL;
+        if (d)
+            cp->mdefl = d;
+        if (!f)
+            return -1;
+        cp->mforce = f;
+        cp->mcap = s->n;
+    }
+    vafm_detector det;
+    vafm_detector_begin(&det, c->params, c->index);
+    for (size_t i = 0; i < s->n; i++)
+        vafm_detector_apply(&det, s->deflection_m[i], NULL, &cp->mdefl[i], &cp->mforce[i]);
+    *out = *s;
+    out->deflection_m = cp->mdefl;
+    out->force_N = cp->mforce;
+    return 0;
+}
+
+/* Called in index order, one at a time. A failed curve stops the campaign, as in vafm curves. */
+int vafm_cli_rec_curve(void *user, const vafm_campaign_curve *c)
+{
+    vafm_cli_rec *cp = user;
+    if (c->status) {
+        cp->fail_status = c->status;
+        cp->fail_index = c->index;
+        return 1;
+    }
+    vafm_record_curve rc = { .samples = &c->samples, .params = c->params, .result = &c->result,
+                             .point = c->point, .sensitivity_m_per_V = c->params->sensitivity_m_per_V };
+    vafm_map_truth px;
+    if (cp->map) { /* a force map: the pixel's indices and position (curve index = iy*nx + ix) */
+        int ix = (int)(c->index % (uint64_t)cp->map->nx), iy = (int)(c->index / (uint64_t)cp->map->nx);
+        vafm_map_pixel(cp->map, cp->base, ix, iy, NULL, &px, NULL);
+        rc.map = cp->map;
+        rc.pixel = &px;
+    }
+    vafm_samples measured;
+    if (vafm_detector_on(c->params)) {
+        /* the measured chain, as vafmd streams it: force and deflection are the instrument's, the file then
+         * has no tip position = height + force/k column (hdf5.md L14); the ground truth stays physical */
+        if (s_measure(cp, c, &measured)) {
+            cp->werr_code = VAFM_ENOMEM;
+            snprintf(cp->werr.message, sizeof cp->werr.message, "out of memory for curve %" PRIu64 "'s samples",
+                     c->index);
+            return 1;
+        }
+        rc.samples = &measured;
+        rc.measured_force = 1;
+    }
+    int r = vafm_recorder_append(cp->rec, &rc, &cp->werr);
+    if (r) {
+        cp->werr_code = r;
+        return 1;
+    }
+    cp->done++;
+    vafm_cli_progress_curves(&cp->pg, cp->done, cp->total);
+    return 0;
+}
+
+int vafm_cli_rec_parse(const vafm_cli_args *a, vafm_cli_rec_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->out = a->val[O_OUT];
+    o->resume = a->on[O_RESUME];
+    o->overwrite = a->on[O_OVERWRITE];
+    o->interval = 1.0;
+    uint64_t gz = 0;
+    int rc = 0;
+    if ((a->val[O_FLUSH] && (rc = vafm_cli_parse_real("--flush-interval", a->val[O_FLUSH], 0.0,
+                                               VAFM_RECORD_MAX_FLUSH_INTERVAL_S, "s", &o->interval))) ||
+        (a->val[O_GZIP] && (rc = vafm_cli_parse_u64("--gzip", a->val[O_GZIP], 0, 9, &gz))))
+        return rc;
+    o->gzip = (int)gz;
+    if (!o->out) {
+        vafm_cli_error("vafm %s: --out FILE.h5 (the HDF5 file to write) is required", a->cmd->name);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    if (o->resume && o->overwrite) {
+        vafm_cli_error("vafm %s: --resume continues %s and --overwrite replaces it; give one of them", a->cmd->name, o->out);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    struct stat st;
+    int exists = stat(o->out, &st) == 0;
+    if (exists && !o->resume && !o->overwrite) {
+        vafm_cli_error("vafm %s: %s exists already; --resume continues it, --overwrite replaces it", a->cmd->name, o->out);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    if (!exists && o->resume) {
+        vafm_cli_error("vafm %s: --resume: %s cannot be resumed: %s", a->cmd->name, o->out, strerror(errno));
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    o->mb_before = o->resume ? (double)st.st_size / 1e6 : 0.0;
+    return 0;
+}
+
+/* Open (create or resume) the file and record or compare the provenance. */
+int vafm_cli_rec_open(vafm_cli_rec *cp, const vafm_cli_rec_opts *o, const vafm_cli_scene *sc, const vafm_campaign_spec *spec)
+{
+    vafm_recorder_opts ro;
+    vafm_recorder_opts_default(&ro);
+    ro.mode = o->resume ? VAFM_RECORD_RESUME : o->overwrite ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE;
+    ro.gzip_level = o->gzip;
+    /* a flush rewrites the file's metadata: a 0 s interval still flushes from the flusher thread, as
+     * soon as a curve waits, so the workers never wait on it */
+    ro.flush_interval_s = o->interval > 0 ? o->interval : 1e-9;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_recorder_open(&cp->rec, o->out, &ro, &sc->p, spec, &err);
+    return r ? vafm_cli_report(&err, r) : 0;
+}
+
+/* The file a campaign (or a map) will write, estimated before anything is written (vafm_sim_estimate_cost of every
+ * grid point; 41 bytes a sample: five float64 channels and the segment byte). Said on stderr; refused
+ * when it cannot fit the free space of the file system (with --gzip only said: the ratio is not known). */
+int vafm_cli_rec_size_check(const vafm_cli_args *a, const vafm_cli_rec_opts *co, const vafm_params *base,
+                            const vafm_campaign_spec *spec)
+{
+    uint64_t have = 0;
+    if (co->resume) {
+        vafm_h5_reader *r = NULL;
+        vafm_error e;
+        if (!vafm_h5_reader_open(&r, co->out, &e))
+            have = vafm_h5_reader_count(r);
+        vafm_h5_reader_destroy(&r);
+    }
+    size_t np = vafm_campaign_points(spec);
+    double bytes = 0.0, curves = 0.0;
+    for (size_t i = 0; i < np; i++) {
+        vafm_params p;
+        vafm_sim_estimate est;
+        vafm_campaign_point_params(base, spec, i, &p);
+        if (vafm_sim_estimate_cost(&p, &est, NULL))
+            continue;
+        /* the curves of this point still to run */
+        double lo = (double)i * (double)spec->curves_per_point, hi = lo + (double)spec->curves_per_point;
+        double todo = hi <= (double)have ? 0.0 : hi - fmax(lo, (double)have);
+        bytes += todo * est.samples * 41.0;
+        curves += todo;
+    }
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s", co->out);
+    char *slash = strrchr(dir, '/');
+    if (slash)
+        *(slash == dir ? slash + 1 : slash) = '\0';
+    else
+        snprintf(dir, sizeof dir, ".");
+    struct statvfs vs;
+    double avail = statvfs(dir, &vs) == 0 ? (double)vs.f_bavail * (double)vs.f_frsize : INFINITY;
+    if (!a->on[O_QUIET])
+        fprintf(stderr, "vafm: %s: %.0f curve(s) to run, ~%.3g GB of samples uncompressed (%.3g GB free there)\n",
+                co->out, curves, bytes / 1e9, avail / 1e9);
+    if (bytes > avail && !co->gzip) {
+        vafm_cli_error("-n: the campaign would write ~%.3g GB to %s, more than the %.3g GB free on its file system; "
+                "run fewer curves (-n, the grid), lower sample_rate_Hz, or compress (--gzip)", bytes / 1e9, co->out,
+                avail / 1e9);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    return 0;
+}
+
+
+int vafm_cli_rec_close(vafm_cli_rec *cp, const vafm_cli_rec_opts *co, uint64_t first, int r, const vafm_error *err,
+                       vafm_recorder_report *rep)
+{
+    /* A clean close merges the ground truth into one table; the file holds every curve delivered. */
+    vafm_error cerr;
+    memset(&cerr, 0, sizeof cerr);
+    int cr = vafm_recorder_close(&cp->rec, rep, &cerr);
+    free(cp->mdefl);
+    free(cp->mforce);
+    cp->mdefl = cp->mforce = NULL;
+    int rc = 0;
+    if (cp->fail_status) {
+        vafm_cli_error("curve %" PRIu64 " failed: %s; %s holds the %" PRIu64 " curve(s) before it", cp->fail_index,
+                       vafm_strerror(cp->fail_status), co->out, first + cp->done);
+        rc = VAFM_CLI_EXIT_RUNTIME;
+    } else if (cp->werr_code) {
+        vafm_cli_error("%s", cp->werr.message[0] ? cp->werr.message : vafm_strerror(cp->werr_code));
+        rc = VAFM_CLI_EXIT_RUNTIME;
+    } else if (r && r != VAFM_EABORT) {
+        rc = vafm_cli_report(err, r);
+    } else if (cr) {
+        vafm_cli_error("%s", cerr.message[0] ? cerr.message : vafm_strerror(cr));
+        rc = VAFM_CLI_EXIT_RUNTIME;
+    }
+    return rc;
+}
+
+/* ---- force maps (vafm map, vafm info) ---------------------------------------------------------------- */
+
+#define S_MAP_MAX_REGIONS 8
+#define S_MAP_MAX_COLS 64
+#define S_MAP_MAX_ROWS 32
+
+typedef struct s_region {
+    double E, gamma;
+    uint64_t n;
+    double hmin, hmax;
+    vafm_point_stats st;
+} s_region;
+
+/* One text rendering of a per-pixel value: one character per shown pixel, y up (row ny-1 first). */
+static void s_map_render(FILE *o, const char *title, const double *v, int nx, int ny, const char *levels, double lo,
+                         double hi, const char *(*label)(double, char *))
+{
+    int sx = (nx + S_MAP_MAX_COLS - 1) / S_MAP_MAX_COLS, sy = (ny + S_MAP_MAX_ROWS - 1) / S_MAP_MAX_ROWS;
+    fprintf(o, "%s", title);
+    if (sx > 1 || sy > 1)
+        fprintf(o, " (every %d. pixel along x, every %d. along y)", sx, sy);
+    fputc('\n', o);
+    int nl = (int)strlen(levels);
+    for (int iy = ny - 1 - ((ny - 1) % sy); iy >= 0; iy -= sy) {
+        fputs("  ", o);
+        for (int ix = 0; ix < nx; ix += sx) {
+            double x = v[(size_t)iy * (size_t)nx + (size_t)ix];
+            char ch[8];
+            if (label)
+                fputs(label(x, ch), o);
+            else if (isnan(x))
+                fputc('?', o);
+            else {
+                int k = hi > lo ? (int)((x - lo) / (hi - lo) * (double)nl) : 0;
+                fputc(levels[k < 0 ? 0 : k >= nl ? nl - 1 : k], o);
+            }
+        }
+        fputc('\n', o);
+    }
+}
+
+static const char *s_region_char(double x, char *buf)
+{
+    buf[0] = isnan(x) ? '?' : (char)('a' + (int)x);
+    buf[1] = 0;
+    return buf;
+}
+
+int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
+{
+    size_t n = vafm_h5_reader_count(r);
+    vafm_h5_curve c;
+    if (!n || vafm_h5_reader_curve_info(r, 0, &c, NULL) || c.meta.grid_shape_x < 1 || c.meta.grid_shape_y < 1)
+        return 0; /* not a map */
+    int nx = (int)c.meta.grid_shape_x, ny = (int)c.meta.grid_shape_y;
+    size_t np = (size_t)nx * (size_t)ny;
+    if (nx > VAFM_MAP_MAX_SIDE || ny > VAFM_MAP_MAX_SIDE)
+        return 0;
+    fprintf(o, "map          %d x %d pixels over %.6g x %.6g um centred at (%.6g, %.6g) um; curve = iy*%d + ix; "
+               "%zu of %zu pixels recorded\n",
+            nx, ny, c.meta.grid_size_x_m * 1e6, c.meta.grid_size_y_m * 1e6, c.meta.grid_center_x_m * 1e6,
+            c.meta.grid_center_y_m * 1e6, nx, n < np ? n : np, np);
+    double *reg = malloc(np * sizeof *reg), *pull = malloc(np * sizeof *pull), *hgt = malloc(np * sizeof *hgt);
+    s_region rg[S_MAP_MAX_REGIONS];
+    int nr = 0, more = 0;
+    if (!reg || !pull || !hgt) {
+        free(reg);
+        free(pull);
+        free(hgt);
+        return -1;
+    }
+    for (size_t i = 0; i < np; i++)
+        reg[i] = pull[i] = hgt[i] = NAN;
+    double plo = INFINITY, phi = -INFINITY, hlo = INFINITY, hhi = -INFINITY;
+    for (size_t i = 0; i < n; i++) {
+        vafm_h5_truth t;
+        if (vafm_h5_reader_curve_info(r, i, &c, NULL) || c.meta.grid_index_x < 0 || c.meta.grid_index_y < 0 ||
+            c.meta.grid_index_x >= nx || c.meta.grid_index_y >= ny ||
+            vafm_h5_reader_truth(r, vafm_h5_reader_group(r, i), &t))
+            continue;
+        size_t px = (size_t)c.meta.grid_index_y * (size_t)nx + (size_t)c.meta.grid_index_x;
+        int k = 0;
+        while (k < nr && !(rg[k].E == t.E_star_Pa && rg[k].gamma == t.gamma_J_per_m2))
+            k++;
+        if (k == nr) {
+            if (nr == S_MAP_MAX_REGIONS) {
+                more++;
+                continue;
+            }
+            memset(&rg[nr], 0, sizeof rg[nr]);
+            rg[nr].E = t.E_star_Pa;
+            rg[nr].gamma = t.gamma_J_per_m2;
+            rg[nr].hmin = INFINITY;
+            rg[nr].hmax = -INFINITY;
+            nr++;
+        }
+        rg[k].n++;
+        rg[k].hmin = fmin(rg[k].hmin, t.surface_height_m);
+        rg[k].hmax = fmax(rg[k].hmax, t.surface_height_m);
+        vafm_point_stats_add(&rg[k].st, t.status, &t.result);
+        reg[px] = k;
+        hgt[px] = t.surface_height_m;
+        if (isfinite(t.surface_height_m)) {
+            hlo = fmin(hlo, t.surface_height_m);
+            hhi = fmax(hhi, t.surface_height_m);
+        }
+        if (vafm_stats_is_pulloff(t.status, &t.result)) {
+            pull[px] = t.result.pulloff_sampled_N;
+            plo = fmin(plo, pull[px]);
+            phi = fmax(phi, pull[px]);
+        }
+    }
+    fprintf(o, "regions      the ground truth's materials (E*, gamma); pull-off = pulloff_sampled, mean +- sem\n");
+    for (int k = 0; k < nr; k++) {
+        const vafm_moments *m = &rg[k].st.obs[VAFM_OBS_PULLOFF_SAMPLED];
+        fprintf(o, "  %c  E* = %-10.6g Pa  gamma = %-8.4g J/m^2  %6" PRIu64 " curves, surface height %.4g..%.4g um, "
+                   "pull-off ",
+                'a' + k, rg[k].E, rg[k].gamma, rg[k].n, rg[k].hmin * 1e6, rg[k].hmax * 1e6);
+        if (m->n)
+            fprintf(o, "%.6g +- %.3g nN (n %" PRIu64 ")\n", m->mean * 1e9, vafm_moments_sem(m) * 1e9, m->n);
+        else
+            fprintf(o, "none (n 0)\n");
+    }
+    if (more)
+        fprintf(o, "  (%d curve(s) of further materials left out)\n", more);
+    if (nr > 0) {
+        s_map_render(o, "material map (one letter per pixel: its region; y up)", reg, nx, ny, "", 0, 0, s_region_char);
+        if (phi > plo || isfinite(plo)) {
+            char title[160];
+            snprintf(title, sizeof title, "adhesion map (pull-off force, ' .:-=+*#%%@' from %.4g to %.4g nN; '?' none)",
+                     plo * 1e9, phi * 1e9);
+            s_map_render(o, title, pull, nx, ny, " .:-=+*#%@", plo, phi, NULL);
+        }
+        if (hhi > hlo) {
+            char title[160];
+            snprintf(title, sizeof title, "height map (surface height, ' .:-=+*#%%@' from %.4g to %.4g um)", hlo * 1e6,
+                     hhi * 1e6);
+            s_map_render(o, title, hgt, nx, ny, " .:-=+*#%@", hlo, hhi, NULL);
+        }
+    }
+    free(reg);
+    free(pull);
+    free(hgt);
+    return 1;
+}

@@ -32,21 +32,9 @@ static const char s_csv_header[] =
     "detach_height_m,detach_eq_force_N,detach_time_s,touch_time_s,touch_height_m,retract_start_s,samples,"
     "steps,steps_contact,steps_free,duration_s\n";
 
-/* "done/total curves, rate, ETA" on the progress line, when one is due (vafm curves and campaign). */
-static void s_progress_curves(vafm_cli_progress *pg, uint64_t done, uint64_t total)
-{
-    if (!vafm_cli_progress_due(pg))
-        return;
-    double wall = vafm_cli_now() - pg->t0, rate = (double)done / wall;
-    char line[160];
-    snprintf(line, sizeof line, "%" PRIu64 "/%" PRIu64 " curves, %.3g curves/s, ETA %.0f s", done, total, rate,
-             rate > 0 ? (double)(total - done) / rate : 0.0);
-    vafm_cli_progress_line(pg, line);
-}
-
 static void s_curves_progress(s_curves *cv)
 {
-    s_progress_curves(&cv->pg, cv->done, cv->total);
+    vafm_cli_progress_curves(&cv->pg, cv->done, cv->total);
 }
 
 /* Called in index order, one at a time. A failed curve stops the campaign: it is a runtime error. */
@@ -195,81 +183,7 @@ int vafm_cli_cmd_curves(const vafm_cli_args *a)
 
 /* ---- vafm campaign: one HDF5 file ------------------------------------------------------------------ */
 
-/*
- * The curves reach s_camp_curve in index order, one at a time, from whichever worker finished the next
- * one, and go into the file at once through the recorder (vafm/record.h), which flushes on a timer
- * (--flush-interval) from its own thread: a kill -9 at any moment loses at most the curves of the last
- * interval; --resume recomputes exactly those.
- */
-
-typedef struct s_camp {
-    vafm_recorder *rec;
-    double *mdefl, *mforce; /* measured deflection and force of the curve being recorded (detector on) */
-    size_t mcap;
-    int werr_code; /* the first recorder error */
-    vafm_error werr;
-    vafm_cli_progress pg; /* the fields below belong to the delivering worker */
-    uint64_t done, total;
-    int fail_status;
-    uint64_t fail_index;
-} s_camp;
-
-/* The curve's samples through the scene's measured chain (vafm/detector.h) into cp's buffers. */
-static int s_measure(s_camp *cp, const vafm_campaign_curve *c, vafm_samples *out)
-{
-    const vafm_samples *s = &c->samples;
-    if (s->n > cp->mcap) {
-        double *d = realloc(cp->mdefl, s->n * sizeof *d), *f = d ? realloc(cp->mforce, s->n * sizeof *f) : NULL;
-        if (d)
-            cp->mdefl = d;
-        if (!f)
-            return -1;
-        cp->mforce = f;
-        cp->mcap = s->n;
-    }
-    vafm_detector det;
-    vafm_detector_begin(&det, c->params, c->index);
-    for (size_t i = 0; i < s->n; i++)
-        vafm_detector_apply(&det, s->deflection_m[i], NULL, &cp->mdefl[i], &cp->mforce[i]);
-    *out = *s;
-    out->deflection_m = cp->mdefl;
-    out->force_N = cp->mforce;
-    return 0;
-}
-
-/* Called in index order, one at a time. A failed curve stops the campaign, as in vafm curves. */
-static int s_camp_curve(void *user, const vafm_campaign_curve *c)
-{
-    s_camp *cp = user;
-    if (c->status) {
-        cp->fail_status = c->status;
-        cp->fail_index = c->index;
-        return 1;
-    }
-    vafm_record_curve rc = { .samples = &c->samples, .params = c->params, .result = &c->result,
-                             .point = c->point, .sensitivity_m_per_V = c->params->sensitivity_m_per_V };
-    vafm_samples measured;
-    if (vafm_detector_on(c->params)) {
-        /* the measured chain, as vafmd streams it: force and deflection are the instrument's, the file then
-         * has no tip position = height + force/k column (hdf5.md L14); the ground truth stays physical */
-        if (s_measure(cp, c, &measured)) {
-            cp->werr_code = VAFM_ENOMEM;
-            snprintf(cp->werr.message, sizeof cp->werr.message, "out of memory for curve %" PRIu64 "'s samples",
-                     c->index);
-            return 1;
-        }
-        rc.samples = &measured;
-        rc.measured_force = 1;
-    }
-    int r = vafm_recorder_append(cp->rec, &rc, &cp->werr);
-    if (r) {
-        cp->werr_code = r;
-        return 1;
-    }
-    cp->done++;
-    s_progress_curves(&cp->pg, cp->done, cp->total);
-    return 0;
-}
+/* The recording itself (vafm_cli_rec_*, cli_common.c) is shared with vafm map. */
 
 /* Every grid point's scene, checked before the file is created (so a bad grid leaves no file behind). */
 static int s_check_points(const vafm_params *base, const vafm_campaign_spec *spec)
@@ -284,67 +198,8 @@ static int s_check_points(const vafm_params *base, const vafm_campaign_spec *spe
     return 0;
 }
 
-typedef struct s_camp_opts {
-    const char *out;
-    int resume, overwrite, gzip;
-    double interval;
-    double mb_before; /* size of the file continued by --resume */
-} s_camp_opts;
-
-static int s_camp_parse(const vafm_cli_args *a, s_camp_opts *o)
-{
-    memset(o, 0, sizeof *o);
-    o->out = a->val[O_OUT];
-    o->resume = a->on[O_RESUME];
-    o->overwrite = a->on[O_OVERWRITE];
-    o->interval = 1.0;
-    uint64_t gz = 0;
-    int rc = 0;
-    if ((a->val[O_FLUSH] && (rc = vafm_cli_parse_real("--flush-interval", a->val[O_FLUSH], 0.0,
-                                               VAFM_RECORD_MAX_FLUSH_INTERVAL_S, "s", &o->interval))) ||
-        (a->val[O_GZIP] && (rc = vafm_cli_parse_u64("--gzip", a->val[O_GZIP], 0, 9, &gz))))
-        return rc;
-    o->gzip = (int)gz;
-    if (!o->out) {
-        vafm_cli_error("vafm campaign: --out FILE.h5 (the HDF5 file to write) is required");
-        return VAFM_CLI_EXIT_USAGE;
-    }
-    if (o->resume && o->overwrite) {
-        vafm_cli_error("vafm campaign: --resume continues %s and --overwrite replaces it; give one of them", o->out);
-        return VAFM_CLI_EXIT_USAGE;
-    }
-    struct stat st;
-    int exists = stat(o->out, &st) == 0;
-    if (exists && !o->resume && !o->overwrite) {
-        vafm_cli_error("vafm campaign: %s exists already; --resume continues it, --overwrite replaces it", o->out);
-        return VAFM_CLI_EXIT_USAGE;
-    }
-    if (!exists && o->resume) {
-        vafm_cli_error("vafm campaign: --resume: %s cannot be resumed: %s", o->out, strerror(errno));
-        return VAFM_CLI_EXIT_USAGE;
-    }
-    o->mb_before = o->resume ? (double)st.st_size / 1e6 : 0.0;
-    return 0;
-}
-
-/* Open (create or resume) the file and record or compare the provenance. */
-static int s_camp_open(s_camp *cp, const s_camp_opts *o, const vafm_cli_scene *sc, const vafm_campaign_spec *spec)
-{
-    vafm_recorder_opts ro;
-    vafm_recorder_opts_default(&ro);
-    ro.mode = o->resume ? VAFM_RECORD_RESUME : o->overwrite ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE;
-    ro.gzip_level = o->gzip;
-    /* a flush rewrites the file's metadata: a 0 s interval still flushes from the flusher thread, as
-     * soon as a curve waits, so the workers never wait on it */
-    ro.flush_interval_s = o->interval > 0 ? o->interval : 1e-9;
-    vafm_error err;
-    memset(&err, 0, sizeof err);
-    int r = vafm_recorder_open(&cp->rec, o->out, &ro, &sc->p, spec, &err);
-    return r ? vafm_cli_report(&err, r) : 0;
-}
-
-static void s_camp_summary(FILE *o, const vafm_cli_scene *sc, const vafm_campaign_spec *spec, const s_camp_opts *co,
-                           const s_camp *cp, const vafm_recorder_report *rep, uint64_t first, double wall)
+static void s_camp_summary(FILE *o, const vafm_cli_scene *sc, const vafm_campaign_spec *spec,
+                           const vafm_cli_rec_opts *co, const vafm_cli_rec *cp, const vafm_recorder_report *rep, uint64_t first, double wall)
 {
     uint64_t in_file = first + cp->done;
     double mb = vafm_cli_file_mb(co->out);
@@ -373,55 +228,6 @@ static void s_camp_summary(FILE *o, const vafm_cli_scene *sc, const vafm_campaig
     free(stats);
 }
 
-/* The file a campaign will write, estimated before anything is written (vafm_sim_estimate_cost of every
- * grid point; 41 bytes a sample: five float64 channels and the segment byte). Said on stderr; refused
- * when it cannot fit the free space of the file system (with --gzip only said: the ratio is not known). */
-static int s_camp_size_check(const vafm_cli_args *a, const s_camp_opts *co, const vafm_params *base,
-                             const vafm_campaign_spec *spec)
-{
-    uint64_t have = 0;
-    if (co->resume) {
-        vafm_h5_reader *r = NULL;
-        vafm_error e;
-        if (!vafm_h5_reader_open(&r, co->out, &e))
-            have = vafm_h5_reader_count(r);
-        vafm_h5_reader_destroy(&r);
-    }
-    size_t np = vafm_campaign_points(spec);
-    double bytes = 0.0, curves = 0.0;
-    for (size_t i = 0; i < np; i++) {
-        vafm_params p;
-        vafm_sim_estimate est;
-        vafm_campaign_point_params(base, spec, i, &p);
-        if (vafm_sim_estimate_cost(&p, &est, NULL))
-            continue;
-        /* the curves of this point still to run */
-        double lo = (double)i * (double)spec->curves_per_point, hi = lo + (double)spec->curves_per_point;
-        double todo = hi <= (double)have ? 0.0 : hi - fmax(lo, (double)have);
-        bytes += todo * est.samples * 41.0;
-        curves += todo;
-    }
-    char dir[4096];
-    snprintf(dir, sizeof dir, "%s", co->out);
-    char *slash = strrchr(dir, '/');
-    if (slash)
-        *(slash == dir ? slash + 1 : slash) = '\0';
-    else
-        snprintf(dir, sizeof dir, ".");
-    struct statvfs vs;
-    double avail = statvfs(dir, &vs) == 0 ? (double)vs.f_bavail * (double)vs.f_frsize : INFINITY;
-    if (!a->on[O_QUIET])
-        fprintf(stderr, "vafm: %s: %.0f curve(s) to run, ~%.3g GB of samples uncompressed (%.3g GB free there)\n",
-                co->out, curves, bytes / 1e9, avail / 1e9);
-    if (bytes > avail && !co->gzip) {
-        vafm_cli_error("-n: the campaign would write ~%.3g GB to %s, more than the %.3g GB free on its file system; "
-                "run fewer curves (-n, the grid), lower sample_rate_Hz, or compress (--gzip)", bytes / 1e9, co->out,
-                avail / 1e9);
-        return VAFM_CLI_EXIT_USAGE;
-    }
-    return 0;
-}
-
 /* One campaign, single-process (mpi NULL) or as one MPI rank (campaign_mpi.h): the same checks, the
  * same per-curve computation and the same writer callback; MPI only changes who computes which curve.
  * Rank 0 alone touches the file; the other ranks check their scene against rank 0's, then compute. */
@@ -429,13 +235,13 @@ static int s_campaign(const vafm_cli_args *a, vafm_cli_mpi *mpi)
 {
     s_grid g;
     vafm_cli_scene sc;
-    s_camp_opts co;
+    vafm_cli_rec_opts co;
     int root = vafm_cli_mpi_rank(mpi) == 0;
     int rc = s_grid_parse(a, &g);
-    if (!rc && !(rc = s_curves_check(a, &sc, &g)) && !(rc = root ? s_camp_parse(a, &co) : 0))
+    if (!rc && !(rc = s_curves_check(a, &sc, &g)) && !(rc = root ? vafm_cli_rec_parse(a, &co) : 0))
         rc = s_check_points(&sc.p, &g.spec);
     if (!rc && root)
-        rc = s_camp_size_check(a, &co, &sc.p, &g.spec);
+        rc = vafm_cli_rec_size_check(a, &co, &sc.p, &g.spec);
     if ((rc = vafm_cli_mpi_agree(mpi, rc, &sc.p, &g.spec)) != 0) {
         s_grid_free(&g);
         return rc;
@@ -449,11 +255,11 @@ static int s_campaign(const vafm_cli_args *a, vafm_cli_mpi *mpi)
         s_grid_free(&g);
         return rc;
     }
-    s_camp cp;
+    vafm_cli_rec cp;
     memset(&cp, 0, sizeof cp);
     vafm_cli_progress_init(&cp.pg, a);
     double t_start = cp.pg.t0;
-    rc = s_camp_open(&cp, &co, &sc, &g.spec);
+    rc = vafm_cli_rec_open(&cp, &co, &sc, &g.spec);
     if (mpi && (rc = vafm_cli_mpi_agree(mpi, rc, NULL, NULL)) != 0 && cp.rec)
         vafm_recorder_close(&cp.rec, NULL, NULL);
     if (rc) {
@@ -471,32 +277,12 @@ static int s_campaign(const vafm_cli_args *a, vafm_cli_mpi *mpi)
 
     vafm_error err;
     memset(&err, 0, sizeof err);
-    int r = mpi ? vafm_cli_mpi_run(mpi, &sc.p, &g.spec, s_camp_curve, &cp, &err)
-                : vafm_campaign_run(&sc.p, &g.spec, s_camp_curve, &cp, &err);
+    int r = mpi ? vafm_cli_mpi_run(mpi, &sc.p, &g.spec, vafm_cli_rec_curve, &cp, &err)
+                : vafm_campaign_run(&sc.p, &g.spec, vafm_cli_rec_curve, &cp, &err);
     vafm_cli_progress_end(&cp.pg);
-
-    /* A clean close merges the ground truth into one table; the file holds every curve delivered. */
-    vafm_error cerr;
-    memset(&cerr, 0, sizeof cerr);
     vafm_recorder_report rep;
-    int cr = vafm_recorder_close(&cp.rec, &rep, &cerr);
-    free(cp.mdefl);
-    free(cp.mforce);
+    rc = vafm_cli_rec_close(&cp, &co, first, r, &err, &rep);
     double wall = vafm_cli_now() - t_start;
-
-    if (cp.fail_status) {
-        vafm_cli_error("curve %" PRIu64 " failed: %s; %s holds the %" PRIu64 " curve(s) before it", cp.fail_index,
-                vafm_strerror(cp.fail_status), co.out, first + cp.done);
-        rc = VAFM_CLI_EXIT_RUNTIME;
-    } else if (cp.werr_code) {
-        vafm_cli_error("%s", cp.werr.message[0] ? cp.werr.message : vafm_strerror(cp.werr_code));
-        rc = VAFM_CLI_EXIT_RUNTIME;
-    } else if (r && r != VAFM_EABORT) {
-        rc = vafm_cli_report(&err, r);
-    } else if (cr) {
-        vafm_cli_error("%s", cerr.message[0] ? cerr.message : vafm_strerror(cr));
-        rc = VAFM_CLI_EXIT_RUNTIME;
-    }
     if (!rc) {
         s_camp_summary(stdout, &sc, &g.spec, &co, &cp, &rep, first, wall);
         vafm_cli_mpi_describe(mpi, stdout);

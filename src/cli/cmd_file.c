@@ -48,7 +48,7 @@ static void s_print_list(FILE *o, const char *name, const double *v, size_t n, c
 }
 
 typedef struct s_info_prov {
-    int scene_ok, grid_ok;
+    int scene_ok, grid_ok, is_map;
     vafm_params p;
     vafm_scene_grid grid;
     vafm_campaign_spec spec;
@@ -70,7 +70,13 @@ static void s_info_provenance(FILE *o, const char *path, const vafm_h5_provenanc
     if (pv->grid_json) {
         snprintf(origin, sizeof origin, "%s: root attribute 'vafm grid'", path);
         ip->grid_ok = !vafm_scene_grid_parse(pv->grid_json, origin, &ip->grid, &err);
-        if (ip->grid_ok) {
+        ip->is_map = strstr(pv->grid_json, "\"map\": {") != NULL;
+        if (ip->grid_ok && ip->is_map) {
+            const char *pat = strstr(pv->grid_json, "\"pattern\": \""), *st = strstr(pv->grid_json, "\"start\": \"");
+            fprintf(o, "grid         a force map (vafm map), pattern %.*s, start %.*s: one curve per pixel (map below)\n",
+                    pat ? (int)strcspn(pat + 12, "\"") : 1, pat ? pat + 12 : "?", st ? (int)strcspn(st + 10, "\"") : 1,
+                    st ? st + 10 : "?");
+        } else if (ip->grid_ok) {
             vafm_campaign_spec *sp = &ip->spec;
             sp->T_K = ip->grid.T_K;
             sp->n_T = ip->grid.n_T;
@@ -177,7 +183,10 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
     if (damaged > VAFM_CLI_MAX_CURVE_ERRORS)
         vafm_cli_error("%s: ... and %" PRIu64 " more curve(s) that cannot be read (only the first %d are named)", a->file,
                 damaged - VAFM_CLI_MAX_CURVE_ERRORS, VAFM_CLI_MAX_CURVE_ERRORS);
-    if (pv.is_vafm && ip.scene_ok && ip.grid_ok && n) {
+    int map = vafm_cli_print_map(stdout, r);
+    if (map < 0)
+        printf("map          n/a: out of memory\n");
+    if (pv.is_vafm && ip.scene_ok && ip.grid_ok && !ip.is_map && n) {
         size_t np = vafm_campaign_points(&ip.spec);
         vafm_point_stats *stats = calloc(np, sizeof *stats);
         if (stats) {
@@ -194,7 +203,7 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
     memset(&cerr, 0, sizeof cerr);
     int ck = vafm_h5_check(a->file, &cerr);
     if (!ck)
-        printf("conformance  ok: every rule of protocol/hdf5.md (L1-L16%s)\n", pv.is_vafm ? ", V1-V4" : "");
+        printf("conformance  ok: every rule of protocol/hdf5.md (L1-L17%s)\n", pv.is_vafm ? ", V1-V5" : "");
     else
         printf("conformance  FAILED: %s\n", cerr.message[0] ? cerr.message : vafm_strerror(ck));
     if (damaged) {

@@ -37,6 +37,9 @@ static const s_option s_options[VAFM_CLI_NOPT] = {
     [O_OVERWRITE] = { "--overwrite", NULL, 0 }, [O_FLUSH] = { "--flush-interval", NULL, 1 },
     [O_GZIP] = { "--gzip", NULL, 1 },       [O_CURVE] = { "--curve", NULL, 1 },
     [O_MPI] = { "--mpi", NULL, 0 },
+    [O_NX] = { "--nx", NULL, 1 },           [O_NY] = { "--ny", NULL, 1 },
+    [O_SIZE] = { "--size", NULL, 1 },       [O_PATTERN] = { "--pattern", NULL, 1 },
+    [O_PPARAM] = { "--pattern-param", NULL, 1 },
 };
 
 #define M(o) (1u << (o))
@@ -388,6 +391,29 @@ static const vafm_cli_command s_commands[] = {
       "                       srun it is implied): `mpirun -np R vafm campaign ...` splits the curves over R\n"
       "                       ranks (x --threads each, default: the rank's share of its node's cores); rank 0\n"
       "                       writes FILE, identical to the single-process file (README: Campaigns on MPI)\n", 0, NULL },
+    { "map", vafm_cli_cmd_map,
+      S_GENERAL | M(O_NX) | M(O_NY) | M(O_SIZE) | M(O_PATTERN) | M(O_PPARAM) | M(O_OUT) | M(O_THREADS) |
+          M(O_RESUME) | M(O_OVERWRITE) | M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET),
+      1, "a force map: one curve per pixel over a heterogeneous sample into one HDF5 file, resumable",
+      "vafm map --out FILE.h5 [--nx NX] [--ny NY] [--size S|SX,SY] [--pattern NAME] [--pattern-param LIST]\n"
+      "         [SCENE] [--threads T] [--resume | --overwrite] [--flush-interval S] [--gzip L] [--progress | --quiet]\n"
+      "  --nx, --ny N         pixels along x and y (default 32 each; 1-1024 each, nx*ny <= 262144)\n"
+      "  --size S|SX,SY       scan size, m (default 10e-6 both); pixel (ix, iy) sits at the centre of its cell\n"
+      "  --pattern NAME       the sample: uniform (default; the scene's material), stripes (along y, period_m:\n"
+      "                       material a then b), disc | dome (a body of material b, radius_m, height_m, on a\n"
+      "                       substrate of material a; dome: a spherical cap), domains (a random blend of a and\n"
+      "                       b from domain_seed, domain size domain_m, fraction of b)\n"
+      "  --pattern-param LIST NAME=VALUE,...: period_m (5e-6), radius_m (3e-6), height_m (0.5e-6), domain_m (1e-6),\n"
+      "                       domain_seed (1), fraction (0.5), center_x_m, center_y_m (0), start (surface: start\n"
+      "                       start_height_m above the local surface, the default; fixed: above the substrate,\n"
+      "                       so a higher surface is reached sooner), the materials a_contact, a_E_star_Pa,\n"
+      "                       a_gamma_J_per_m2 (default: the scene's) and b_... (default: the scene's contact,\n"
+      "                       E* 1e9 Pa, gamma 0.02 J/m^2; hertz and none have gamma 0); also nx, ny, size_x_m, size_y_m\n"
+      "  -o, --out FILE.h5    the file: one curve per pixel, curve index = iy*nx + ix (its random stream), with\n"
+      "                       afmformats' map attributes (grid shape/size/center/index, position) and the\n"
+      "                       ground truth (E*, gamma, surface height of each pixel); protocol/hdf5.md\n"
+      "  --threads T          worker threads (default 0: all cores); the file does not depend on it\n"
+      "  --resume, --overwrite, --flush-interval S, --gzip L, --progress, -q: as for vafm campaign\n", 0, NULL },
     { "info", vafm_cli_cmd_info, S_GENERAL | M(O_JSON), 0,
       "summarise an HDF5 force-curve file (vafm's or another program's) and check its conformance",
       "vafm info FILE [--json]\n"

@@ -22,6 +22,8 @@
 
 size_t vafm_campaign_points(const vafm_campaign_spec *spec)
 {
+    if (spec->point_fn)
+        return spec->n_points;
     size_t nT = spec->n_T ? spec->n_T : 1, nv = spec->n_v ? spec->n_v : 1, nk = spec->n_k ? spec->n_k : 1;
     return nT * nv * nk;
 }
@@ -32,6 +34,8 @@ int vafm_campaign_point_params(const vafm_params *base, const vafm_campaign_spec
     size_t nv = spec->n_v ? spec->n_v : 1, nk = spec->n_k ? spec->n_k : 1;
     if (point >= vafm_campaign_points(spec))
         return VAFM_EINVAL;
+    if (spec->point_fn)
+        return spec->point_fn(spec->point_user, base, point, out);
     *out = *base;
     size_t ik = point % nk, iv = (point / nk) % nv, iT = point / (nk * nv);
     if (spec->n_T)
@@ -53,6 +57,7 @@ typedef struct s_slot {
     int done, status;
     uint64_t index;
     size_t point;
+    vafm_params params; /* the scene of its point */
     vafm_curve_result res;
     s_buf buf;
 } s_slot;
@@ -60,7 +65,6 @@ typedef struct s_slot {
 typedef struct s_shared {
     const vafm_params *base;
     const vafm_campaign_spec *spec;
-    vafm_params *point_params; /* validated scene per point */
     vafm_campaign_fn fn;
     void *user;
     vafm_campaign_source_fn source;
@@ -126,7 +130,7 @@ static void s_deliver(s_shared *sh)
         memset(&c, 0, sizeof c);
         c.index = sl->index;
         c.point = sl->point;
-        c.params = &sh->point_params[sl->point];
+        c.params = &sl->params;
         c.status = sl->status;
         c.result = sl->res;
         if (sh->spec->keep_samples) {
@@ -159,6 +163,9 @@ static void *s_worker(void *arg)
     s_shared *sh = arg;
     vafm_sim *sim = NULL;
     size_t sim_point = (size_t)-1;
+    vafm_params sim_params, p;
+    memset(&sim_params, 0, sizeof sim_params);
+    memset(&p, 0, sizeof p);
     s_buf local;
     memset(&local, 0, sizeof local);
     pthread_mutex_lock(&sh->mu);
@@ -195,9 +202,17 @@ static void *s_worker(void *arg)
         vafm_curve_result res;
         memset(&res, 0, sizeof res);
         if (point != sim_point) {
-            vafm_sim_destroy(&sim);
-            status = vafm_sim_new(&sim, &sh->point_params[point], NULL);
+            /* a point's scene (validated before the run); a grid given point by point (a map) repeats
+             * scenes: the simulation of an equal one is kept */
+            status = vafm_campaign_point_params(sh->base, sh->spec, point, &p);
+            if (!status && !(sim && !memcmp(&p, &sim_params, sizeof p))) {
+                vafm_sim_destroy(&sim);
+                status = vafm_sim_new(&sim, &p, NULL);
+                sim_params = p;
+            }
             sim_point = status ? (size_t)-1 : point;
+            if (status)
+                vafm_sim_destroy(&sim);
         }
         local.n = 0;
         if (!status)
@@ -211,6 +226,7 @@ static void *s_worker(void *arg)
         sl->res = res;
         sl->status = status;
         sl->point = point;
+        sl->params = p;
         sl->index = idx;
         sl->done = 1;
         if (status == VAFM_ENOMEM)
@@ -231,11 +247,22 @@ int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *sp
         vafm_err_set(err, VAFM_EINVAL, "", "vafm_campaign_validate: no scene or no spec");
         return VAFM_EINVAL;
     }
+    if (spec->point_fn && (spec->n_T || spec->n_v || spec->n_k || spec->n_points == 0)) {
+        vafm_err_set(err, VAFM_EINVAL, "n_points",
+                     "a grid given point by point takes no T, v or k lists and at least one point");
+        return VAFM_EINVAL;
+    }
     size_t np = vafm_campaign_points(spec);
     for (size_t i = 0; i < np; i++) {
         vafm_params p;
-        vafm_campaign_point_params(base, spec, i, &p);
-        int r = vafm_params_validate(&p, err);
+        int r = vafm_campaign_point_params(base, spec, i, &p);
+        if (r) {
+            if (bad_point)
+                *bad_point = i;
+            vafm_err_set(err, r, "", "grid point %zu: its scene cannot be made (%s)", i, vafm_strerror(r));
+            return r;
+        }
+        r = vafm_params_validate(&p, err);
         if (r) {
             if (bad_point)
                 *bad_point = i;
@@ -287,17 +314,10 @@ int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *
         return VAFM_EINVAL;
     }
     sh.first = source ? 0 : spec->first_curve;
-    sh.point_params = calloc(np, sizeof *sh.point_params);
-    if (!sh.point_params)
-        return VAFM_ENOMEM;
-    for (size_t i = 0; i < np; i++)
-        vafm_campaign_point_params(base, spec, i, &sh.point_params[i]);
     size_t bad;
     int vr = vafm_campaign_validate(base, spec, &bad, err);
-    if (vr) {
-        free(sh.point_params);
+    if (vr)
         return vr;
-    }
     int threads = spec->threads > 0 ? spec->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
     if (threads < 1)
         threads = 1;
@@ -309,7 +329,6 @@ int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *
     if (!sh.slots || !tid) {
         free(sh.slots);
         free(tid);
-        free(sh.point_params);
         return VAFM_ENOMEM;
     }
     pthread_mutex_init(&sh.mu, NULL);
@@ -330,7 +349,6 @@ int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *
         s_buf_free(&sh.slots[i].buf);
     free(sh.slots);
     free(tid);
-    free(sh.point_params);
     if (sh.error) {
         vafm_err_set(err, sh.error, "", "campaign: %s", vafm_strerror(sh.error));
         return sh.error;

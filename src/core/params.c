@@ -129,6 +129,10 @@ static const s_field s_fields[] = {
       offsetof(vafm_params, adc_bits), S_NONE },
     REAL(adc_range_V, "V", 1e-3, 100, "detector: ADC full range, peak to peak (codes saturate beyond it)"),
     REAL(baseline_offset_V, "V", -100, 100, "detector: offset of the deflection signal"),
+    REAL(surface_height_m, "m", -1e-3, 1e-3,
+         "height of the sample surface above the reference plane (a force map's substrate): the piezo heights "
+         "a curve reports are measured from that plane; start_height_m and trigger_height_m stay relative to "
+         "the contact point"),
 };
 #undef REAL
 

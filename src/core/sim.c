@@ -237,6 +237,13 @@ static double s_trigger_point(const vafm_sim *s)
     return hi + s->F_set / K->k;
 }
 
+/* A height above the contact point as the curve reports it: above the reference plane (surface_height_m;
+ * nothing is added on a flat sample, so those curves stay bit for bit what they were, -0.0 included). */
+static inline double s_height(const vafm_sim *s, double above_contact_m)
+{
+    return s->p.surface_height_m != 0.0 ? above_contact_m + s->p.surface_height_m : above_contact_m;
+}
+
 static void s_begin(vafm_sim *s, uint64_t index, int scene)
 {
     vafm_kernel *K = &s->K;
@@ -811,10 +818,10 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         double defl = uspr_m - u_m, force = K->k * defl;
         size_t j = s->nblk++;
         s->bt[j] = t_m * sc->time_s;
-        s->bh[j] = -uspr_m * sc->length_m;
+        s->bh[j] = s_height(s, -uspr_m * sc->length_m);
         s->bd[j] = defl * sc->length_m;
         s->bf[j] = force * sc->force_N;
-        s->btip[j] = -u_m * sc->length_m;
+        s->btip[j] = s_height(s, -u_m * sc->length_m);
         s->bseg[j] = (uint8_t)seg;
         s->sample_index++;
         if (seg == VAFM_SEG_RETRACT) {
@@ -856,7 +863,7 @@ int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)
                                 : NAN;
     if (s->detached_in_retract) {
         out->detach_force_N = -s->fs_detach * sc->force_N;
-        out->detach_height_m = -s->uspr_detach * sc->length_m;
+        out->detach_height_m = s_height(s, -s->uspr_detach * sc->length_m);
         out->detach_time_s = s->t_detach * sc->time_s;
         double ueq, Feq;
         if (K->contact.type == vafm_contact_jkr && K->contact.gamma > 0 &&
@@ -868,7 +875,7 @@ int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)
         out->detach_force_N = out->detach_height_m = out->detach_time_s = out->detach_eq_force_N = NAN;
     }
     out->touch_time_s = s->touch_t * sc->time_s;
-    out->touch_height_m = -s->touch_uspr * sc->length_m;
+    out->touch_height_m = s_height(s, -s->touch_uspr * sc->length_m);
     out->retract_start_s = s->t_retract0 * sc->time_s;
     out->duration_s = K->t * sc->time_s;
     out->samples = s->sample_index;

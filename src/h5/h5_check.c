@@ -22,6 +22,9 @@ typedef struct s_ctx {
     uint64_t ncurves;
     int64_t *point_count; /* per curve, for V4 */
     double *spring;       /* per curve, for V4 */
+    int format_minor;     /* of "vafm format version" */
+    int map;              /* the grid is a force map's ("map" in "vafm grid", V5) */
+    vafm_h5_meta grid0;   /* curve 0's grid attributes (V5) */
 } s_ctx;
 
 #define FAIL(rule, obj, ...)                                                                    \
@@ -207,6 +210,50 @@ static int s_group_attrs(s_ctx *x, hid_t g, const char *gname, size_t n, vafm_h5
         FAIL("L15", obj, "'feedback mode' is '%s' (afmformats knows contact and force-modulation)", m->feedback_mode);
     if (!isnan(m->spring_constant_N_per_m) && !(m->spring_constant_N_per_m > 0))
         FAIL("L15", obj, "'spring constant' is not positive");
+    /* afmformats' map attributes: a shape of whole pixels, an index inside it, a positive size */
+    if (m->grid_shape_x == 0 || m->grid_shape_y == 0)
+        FAIL("L17", obj, "'grid shape %s' is 0 (a map has at least one pixel)", m->grid_shape_x == 0 ? "x" : "y");
+    if (m->grid_shape_x > 0 && m->grid_index_x >= m->grid_shape_x)
+        FAIL("L17", obj, "'grid index x' %lld lies outside 'grid shape x' %lld", (long long)m->grid_index_x,
+             (long long)m->grid_shape_x);
+    if (m->grid_shape_y > 0 && m->grid_index_y >= m->grid_shape_y)
+        FAIL("L17", obj, "'grid index y' %lld lies outside 'grid shape y' %lld", (long long)m->grid_index_y,
+             (long long)m->grid_shape_y);
+    if (!(isnan(m->grid_size_x_m) || m->grid_size_x_m > 0) || !(isnan(m->grid_size_y_m) || m->grid_size_y_m > 0))
+        FAIL("L17", obj, "'grid size %s' is not positive", !(isnan(m->grid_size_x_m) || m->grid_size_x_m > 0) ? "x" : "y");
+    return 0;
+}
+
+/* V5: a vafm force map. Every curve carries the ten map attributes, with curve 0's shape, centre and size;
+ * curve i is pixel (i mod nx, i div nx) and sits at the centre of its cell. */
+static int s_map_curve(s_ctx *x, const char *obj, uint64_t num, const vafm_h5_meta *m)
+{
+    if (!x->map)
+        return 0;
+    if (num == 0)
+        x->grid0 = *m;
+    const vafm_h5_meta *g = &x->grid0;
+    const char *miss = m->grid_shape_x < 0 ? "grid shape x" : m->grid_shape_y < 0 ? "grid shape y"
+                       : m->grid_index_x < 0 ? "grid index x" : m->grid_index_y < 0 ? "grid index y"
+                       : isnan(m->grid_center_x_m) ? "grid center x" : isnan(m->grid_center_y_m) ? "grid center y"
+                       : isnan(m->grid_size_x_m) ? "grid size x" : isnan(m->grid_size_y_m) ? "grid size y"
+                       : isnan(m->position_x_m) ? "position x" : isnan(m->position_y_m) ? "position y" : NULL;
+    if (miss)
+        FAIL("V5", obj, "a vafm map writes '%s' in every curve", miss);
+    if (m->grid_shape_x != g->grid_shape_x || m->grid_shape_y != g->grid_shape_y ||
+        m->grid_center_x_m != g->grid_center_x_m || m->grid_center_y_m != g->grid_center_y_m ||
+        m->grid_size_x_m != g->grid_size_x_m || m->grid_size_y_m != g->grid_size_y_m)
+        FAIL("V5", obj, "the grid (shape, center, size) differs from curve 0's");
+    if ((uint64_t)m->grid_index_y * (uint64_t)m->grid_shape_x + (uint64_t)m->grid_index_x != num)
+        FAIL("V5", obj, "pixel (%lld, %lld) is not curve %llu (curve = grid index y * grid shape x + grid index x)",
+             (long long)m->grid_index_x, (long long)m->grid_index_y, (unsigned long long)num);
+    double px = m->grid_center_x_m - 0.5 * m->grid_size_x_m +
+                ((double)m->grid_index_x + 0.5) * (m->grid_size_x_m / (double)m->grid_shape_x);
+    double py = m->grid_center_y_m - 0.5 * m->grid_size_y_m +
+                ((double)m->grid_index_y + 0.5) * (m->grid_size_y_m / (double)m->grid_shape_y);
+    if (fabs(px - m->position_x_m) > 1e-9 * m->grid_size_x_m || fabs(py - m->position_y_m) > 1e-9 * m->grid_size_y_m)
+        FAIL("V5", obj, "'position x|y' (%.9g, %.9g) m is not the centre of its pixel (%.9g, %.9g) m", m->position_x_m,
+             m->position_y_m, px, py);
     return 0;
 }
 
@@ -305,6 +352,8 @@ static int s_group(s_ctx *x, uint64_t num)
             goto done;
         }
     }
+    if (x->has_prov && (rc = s_map_curve(x, obj, num, &m)))
+        goto done;
     if (num < x->ncurves) {
         x->point_count[num] = m.point_count;
         x->spring[num] = m.spring_constant_N_per_m;
@@ -333,7 +382,7 @@ static int s_truth(s_ctx *x)
     if (vafm_h5i_truth_attr_names(x->file, &names, &nn))
         FAIL_H5("L2", "/", "root attributes cannot be listed");
     int rc = 0;
-    int nf = vafm_h5i_row_nfields();
+    int nf = vafm_h5i_row_nfields_of(x->format_minor);
     for (size_t i = 0; i < nn && !rc; i++) {
         hid_t a = H5Aopen(x->file, names[i], H5P_DEFAULT);
         hid_t t = a >= 0 ? H5Aget_type(a) : -1, sp = a >= 0 ? H5Aget_space(a) : -1;
@@ -383,6 +432,10 @@ static int s_truth(s_ctx *x)
         else if (r->k_N_per_m != x->spring[i])
             snprintf(why, sizeof why, "curve %zu: k_N_per_m %.17g differs from its 'spring constant' %.17g", i,
                      r->k_N_per_m, x->spring[i]);
+        else if (x->format_minor >= 1 && !(r->E_star_Pa >= 0 && isfinite(r->E_star_Pa) && r->gamma_J_per_m2 >= 0 &&
+                                           isfinite(r->gamma_J_per_m2) && isfinite(r->surface_height_m)))
+            snprintf(why, sizeof why, "curve %zu: E_star_Pa %.6g, gamma_J_per_m2 %.6g, surface_height_m %.6g (E* and "
+                     "gamma >= 0, all finite)", i, r->E_star_Pa, r->gamma_J_per_m2, r->surface_height_m);
         if (why[0]) {
             free(rows);
             FAIL("V4", "/", "ground truth: %s", why);
@@ -441,6 +494,7 @@ static int s_check(s_ctx *x)
         free(s);
         if (!ok)
             FAIL("V1", "/", "'" VAFM_H5I_A_FORMAT "' is '%s', not \"%d.MINOR\"", v, VAFM_H5_FORMAT_MAJOR);
+        x->format_minor = mi;
         x->has_prov = H5Aexists(x->file, VAFM_H5I_A_SCENE) > 0;
         if (x->has_prov) {
             static const char *json[] = { VAFM_H5I_A_SCENE, VAFM_H5I_A_GRID };
@@ -448,6 +502,8 @@ static int s_check(s_ctx *x)
                 if ((rc = s_vlen_str(x, "V3", x->file, "/", json[i], &s)))
                     return rc;
                 ok = vafm_h5i_json_object_ok(s);
+                if (i == 1 && ok && strstr(s, "\"map\": {"))
+                    x->map = 1;
                 free(s);
                 if (!ok)
                     FAIL("V3", "/", "'%s' is not a JSON object", json[i]);

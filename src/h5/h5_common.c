@@ -123,12 +123,27 @@ static const s_rowfield s_rowfields[] = {
     RF(steps, F_U64),
     RF(steps_contact, F_U64),
     RF(steps_free, F_U64),
+    RF(E_star_Pa, F_F64), /* format 1.1 */
+    RF(gamma_J_per_m2, F_F64),
+    RF(surface_height_m, F_F64),
 };
+#define S_NROWFIELDS_1_0 21
 #define S_NROWFIELDS ((int)(sizeof s_rowfields / sizeof s_rowfields[0]))
 
 int vafm_h5i_row_nfields(void)
 {
     return S_NROWFIELDS;
+}
+
+int vafm_h5i_row_nfields_of(int minor)
+{
+    return minor >= 1 ? S_NROWFIELDS : S_NROWFIELDS_1_0;
+}
+
+void vafm_h5i_row_absent(vafm_h5i_row *row, int minor)
+{
+    if (minor < 1)
+        row->E_star_Pa = row->gamma_J_per_m2 = row->surface_height_m = NAN;
 }
 
 const char *vafm_h5i_row_field(int i)
@@ -188,6 +203,9 @@ void vafm_h5i_row_from_truth(vafm_h5i_row *row, uint64_t curve, const vafm_h5_tr
     row->steps = r->steps;
     row->steps_contact = r->steps_contact;
     row->steps_free = r->steps_free;
+    row->E_star_Pa = t->E_star_Pa;
+    row->gamma_J_per_m2 = t->gamma_J_per_m2;
+    row->surface_height_m = t->surface_height_m;
 }
 
 void vafm_h5i_truth_from_row(vafm_h5_truth *t, const vafm_h5i_row *row)
@@ -215,6 +233,9 @@ void vafm_h5i_truth_from_row(vafm_h5_truth *t, const vafm_h5i_row *row)
     r->steps = row->steps;
     r->steps_contact = row->steps_contact;
     r->steps_free = row->steps_free;
+    t->E_star_Pa = row->E_star_Pa;
+    t->gamma_J_per_m2 = row->gamma_J_per_m2;
+    t->surface_height_m = row->surface_height_m;
 }
 
 /* ---- HDF5 errors ---------------------------------------------------------------------------------- */

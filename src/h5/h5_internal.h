@@ -97,6 +97,7 @@ typedef struct vafm_h5i_row {
     double pulloff_sampled_N, pulloff_spring_N, detach_force_N, detach_height_m, detach_eq_force_N;
     double detach_time_s, touch_time_s, touch_height_m, retract_start_s, duration_s;
     uint64_t samples, steps, steps_contact, steps_free;
+    double E_star_Pa, gamma_J_per_m2, surface_height_m; /* format 1.1 */
 } vafm_h5i_row;
 
 /** Compound type of a row: file = 1 (little-endian, packed) or 0 (native, for memory). Caller closes. */
@@ -106,6 +107,10 @@ void vafm_h5i_truth_from_row(vafm_h5_truth *t, const vafm_h5i_row *row);
 
 /** Number of fields of the row type, and field i's name (for the checker). */
 int vafm_h5i_row_nfields(void);
+/** Number of fields a row of format 1.minor has (1.0: the first 21). */
+int vafm_h5i_row_nfields_of(int minor);
+/** Set the fields a row of format 1.minor lacks to NaN. */
+void vafm_h5i_row_absent(vafm_h5i_row *row, int minor);
 const char *vafm_h5i_row_field(int i);
 
 /* ---- HDF5 error handling -------------------------------------------------------------------------- */

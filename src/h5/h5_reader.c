@@ -127,6 +127,10 @@ static int s_rows_one(hid_t file, const char *name, vafm_h5i_row **rows, size_t 
         memset(*rows + *n, 0, (size_t)m * sizeof **rows);
         if (mt < 0 || H5Aread(a, mt, *rows + *n) < 0)
             goto done;
+        /* a table of format 1.0 has no sample fields: NaN, "not recorded" */
+        if (H5Tget_member_index(t, "E_star_Pa") < 0)
+            for (hssize_t i = 0; i < m; i++)
+                vafm_h5i_row_absent(*rows + *n + i, 0);
     }
     *n += (size_t)m;
     rc = 0;

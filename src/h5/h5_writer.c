@@ -290,6 +290,13 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
         free(fmt);
         return VAFM_EFORMAT;
     }
+    if (mi != VAFM_H5_FORMAT_MINOR) { /* its rows and scene lack fields this version writes */
+        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %s, this vafm writes %d.%d; "
+                     "resume it with the vafm version that wrote it", w->path, fmt, VAFM_H5_FORMAT_MAJOR,
+                     VAFM_H5_FORMAT_MINOR);
+        free(fmt);
+        return VAFM_EFORMAT;
+    }
     free(fmt);
     if (s_read_root_str(w->file, VAFM_H5I_A_SCENE, &w->scene) || s_read_root_str(w->file, VAFM_H5I_A_GRID, &w->grid)) {
         vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: the stored scene cannot be read", w->path);
@@ -458,6 +465,12 @@ static int s_grid_json(const vafm_campaign_spec *g, char *buf, size_t len)
         k = snprintf(buf + pos, len - pos, "\"points\": 1}");
         return k < 0 || (size_t)k >= len - pos ? -1 : 0;
     }
+    if (g->point_fn) { /* a grid given point by point: a force map carries its spec */
+        size_t points = vafm_campaign_points(g);
+        k = snprintf(buf + pos, len - pos, "\"curves_per_point\": 1, \"points\": %zu, \"curves\": %zu%s%s}", points,
+                     points, g->map_json ? ", \"map\": " : "", g->map_json ? g->map_json : "");
+        return k < 0 || (size_t)k >= len - pos ? -1 : 0;
+    }
     if (s_json_list(buf, len, &pos, "T_K", g->T_K, g->T_K ? g->n_T : 0) ||
         s_json_list(buf, len, &pos, "v_m_per_s", g->v_m_per_s, g->v_m_per_s ? g->n_v : 0) ||
         s_json_list(buf, len, &pos, "k_N_per_m", g->k_N_per_m, g->k_N_per_m ? g->n_k : 0))
@@ -533,6 +546,10 @@ int vafm_h5_resume_check(const char *path, const vafm_params *scene, const vafm_
     else if (!pv.is_vafm || pv.format_major != VAFM_H5_FORMAT_MAJOR)
         vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x", path,
                      VAFM_H5_FORMAT_MAJOR);
+    else if (pv.format_minor != VAFM_H5_FORMAT_MINOR)
+        vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %d.%d, this vafm writes "
+                     "%d.%d; resume it with the vafm version that wrote it", path, pv.format_major, pv.format_minor,
+                     VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR);
     else if (vafm_params_to_json(scene, sj, S_JSON_MAX) < 0 || s_grid_json(grid, gj, S_JSON_MAX))
         vafm_h5i_err(err, rc = VAFM_EINVAL, "", "%s: the scene or grid does not fit in %d bytes of JSON", path,
                      S_JSON_MAX);
@@ -923,6 +940,9 @@ void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params 
     t->v_m_per_s = p->v_retract_m_per_s;
     t->k_N_per_m = p->k_N_per_m;
     t->result = *r;
+    t->E_star_Pa = p->E_star_Pa;
+    t->gamma_J_per_m2 = p->gamma_J_per_m2;
+    t->surface_height_m = p->surface_height_m;
 }
 
 int vafm_h5_writer_truth(const vafm_h5_writer *w, uint64_t curve, vafm_h5_truth *out)

@@ -230,6 +230,18 @@ int vafm_recorder_append(vafm_recorder *r, const vafm_record_curve *c, vafm_erro
                     sizeof cid);
     hc.meta.session_id = sid;
     hc.meta.curve_id = cid;
+    if (c->map && c->pixel) { /* afmformats' map attributes */
+        hc.meta.grid_shape_x = c->map->nx;
+        hc.meta.grid_shape_y = c->map->ny;
+        hc.meta.grid_index_x = c->pixel->ix;
+        hc.meta.grid_index_y = c->pixel->iy;
+        hc.meta.grid_center_x_m = c->map->center_x_m;
+        hc.meta.grid_center_y_m = c->map->center_y_m;
+        hc.meta.grid_size_x_m = c->map->size_x_m;
+        hc.meta.grid_size_y_m = c->map->size_y_m;
+        hc.meta.position_x_m = c->pixel->x_m;
+        hc.meta.position_y_m = c->pixel->y_m;
+    }
     vafm_h5_truth t;
     vafm_h5_truth_from_sim(&t, c->point, c->params, c->result);
     vafm_error e;

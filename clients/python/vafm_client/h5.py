@@ -7,6 +7,9 @@
         F, z = c["force"], c["height (piezo)"]
         print(c.group, c.meta["spring constant"], c.truth and c.truth["pulloff_spring_N"])
     print(f.is_vafm, f.scene["k_N_per_m"], f.seed, f.grid)
+    if f.is_map:                        # a force map (vafm map, or any file with afmformats' map attributes)
+        E = f.map_array([c.truth["E_star_Pa"] for c in f])   # [iy, ix]; NaN where no curve
+        print(f.map_shape, f.map_extent, f.map_spec)         # (nx, ny), (x0, x1, y0, y1) m, vafm's spec or None
 
 Any file of the layout loads (vafm's, afmformats' exports, instrument conversions: `time` and
 `tip position` may be absent); vafm's provenance (scene, grid, seed, ground truth) is read when present.
@@ -86,7 +89,8 @@ class H5File:
     """A loaded file: `curves` (list of Curve, in group order), `software`, `software_version`, `attrs`
     (every root attribute), and for vafm files (`is_vafm`) `format_version`, `scene` (dict), `grid`
     (dict), `seed`, `created` and `truth` (the ground-truth table as a numpy structured array, one row per
-    curve, or None)."""
+    curve, or None; format 1.1 rows carry each curve's E_star_Pa, gamma_J_per_m2, surface_height_m). A force
+    map (`is_map`) has `map_shape`, `map_extent`, `map_spec` and `map_array(values)`."""
 
     def __init__(self, path, curves, attrs, truth):
         self.path, self.curves, self.attrs, self.truth = path, curves, attrs, truth
@@ -98,6 +102,40 @@ class H5File:
         self.grid = json.loads(attrs["vafm grid"]) if "vafm grid" in attrs else None
         self.seed = int(attrs["vafm seed"]) if "vafm seed" in attrs else None
         self.created = attrs.get("vafm created")
+
+    @property
+    def is_map(self):
+        """True when the curves carry afmformats' map attributes ("grid shape x|y", "grid index x|y")."""
+        return bool(self.curves) and all(k in self.curves[0].meta for k in
+                                         ("grid shape x", "grid shape y", "grid index x", "grid index y"))
+
+    @property
+    def map_shape(self):
+        """(nx, ny) of a map, from curve 0's "grid shape x|y"."""
+        m = self.curves[0].meta
+        return int(m["grid shape x"]), int(m["grid shape y"])
+
+    @property
+    def map_extent(self):
+        """(x0, x1, y0, y1) of a map in m: "grid center" -+ "grid size"/2 (afmformats' convention: the size
+        spans the whole image, the pixels' boundaries included); for matplotlib's imshow(extent=...)."""
+        m = self.curves[0].meta
+        cx, cy, sx, sy = (float(m[k]) for k in ("grid center x", "grid center y", "grid size x", "grid size y"))
+        return cx - sx / 2, cx + sx / 2, cy - sy / 2, cy + sy / 2
+
+    @property
+    def map_spec(self):
+        """vafm's map spec (the grid's "map": pattern, materials, ...; protocol/hdf5.md), or None."""
+        return (self.grid or {}).get("map")
+
+    def map_array(self, values):
+        """Per-curve values (one per curve, in curve order) as a 2-D array [iy, ix] placed by each curve's
+        "grid index x|y"; NaN where no curve sits."""
+        nx, ny = self.map_shape
+        out = np.full((ny, nx), np.nan)
+        for c, v in zip(self.curves, values):
+            out[int(c.meta["grid index y"]), int(c.meta["grid index x"])] = np.nan if v is None else v
+        return out
 
     def __len__(self):
         return len(self.curves)
