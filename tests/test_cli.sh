@@ -41,6 +41,7 @@ expect_fail() {
 # The unit a field's name promises (the table's naming rule: SI unit as the suffix).
 unit_of() {
     case $1 in
+    *_V_per_sqrt_s) echo "V/s^0.5" ;; *_V_per_s) echo "V/s" ;; *_V_per_m) echo "V/m" ;;
     *_m_per_s) echo "m/s" ;; *_N_per_m) echo "N/m" ;; *_J_per_m2) echo "J/m^2" ;; *_per_s) echo "1/s" ;;
     *_Pa) echo "Pa" ;; *_kg) echo "kg" ;; *_Hz) echo "Hz" ;; *_K) echo "K" ;; *_N) echo "N" ;;
     *_s) echo "s" ;; *_m) echo "m" ;; *) echo "" ;;

@@ -338,7 +338,9 @@ static const struct {
     M(dt_s), M(omega_dt), M(omega_dt_far), M(near_barrier_kT), M(sensitivity_m_per_V), M(noise_V_rms),
     M(adc_range_V), M(baseline_offset_V), M(ramp_size_m), M(ramp_rate_Hz), M(extend_time_s), M(retract_time_s),
     M(setpoint_V), M(dwell_feedback_s), M(tune_rate_Hz),
-    M(surface_height_m),
+    M(surface_height_m), M(drift_V_per_s), M(drift_walk_V_per_sqrt_s), M(virtual_deflection_V_per_m),
+    M(interference_V), M(interference_period_m), M(flicker_corner_Hz), M(mains_V), M(mains_Hz),
+    M(contact_point_sd_m), M(sample_drift_m_per_s),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])

@@ -134,6 +134,19 @@ typedef struct vafm_params {
                                   (a map's substrate), m: every piezo height a curve reports (samples, touch and
                                   detach heights) is measured from that plane; start_height_m and
                                   trigger_height_m stay relative to the contact point. Default 0 */
+    /* instrument artefacts (off at 0): the measured signal (vafm/detector.h; the physics is untouched) */
+    double drift_V_per_s;  /**< linear drift of the deflection signal's baseline, V/s */
+    double drift_walk_V_per_sqrt_s; /**< random walk of the baseline, V/√s (its own stream) */
+    double virtual_deflection_V_per_m; /**< baseline slope with the piezo height (virtual deflection), V/m */
+    double interference_V; /**< laser interference on the baseline: amplitude, V (a sinusoid in height) */
+    double interference_period_m; /**< its period in piezo height, m (near half the laser wavelength) */
+    double flicker_corner_Hz; /**< 1/f noise of the signal: the frequency where it equals the white floor
+                                   noise_V_rms, Hz (the 1/f band reaches down to 1 mHz) */
+    double mains_V;        /**< mains pickup: amplitude of the fundamental, V (harmonics 2 and 3 at 1/2, 1/3) */
+    double mains_Hz;       /**< mains frequency, Hz (50 or 60) */
+    /* ... and of the sample (they move the surface the tip meets) */
+    double contact_point_sd_m; /**< each curve's surface at a random height: normal with this sd, m */
+    double sample_drift_m_per_s; /**< the sample surface rises at this speed during a curve, m/s */
     uint8_t reserved[24];
 } vafm_params;
 

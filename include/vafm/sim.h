@@ -69,6 +69,8 @@ typedef struct vafm_curve_result {
     uint64_t steps;           /**< integrator steps taken (all kinds) */
     uint64_t steps_contact;   /**< of which in contact */
     uint64_t steps_free;      /**< of which exact free-cantilever steps */
+    double surface_height_m;  /**< the curve's contact point above the reference plane at t = 0, m
+                                   (surface_height_m plus the random contact point, contact_point_sd_m) */
 } vafm_curve_result;
 
 /** Create a simulation for a validated scene. @return 0, VAFM_EINVAL/VAFM_EUNSTABLE (err filled) or

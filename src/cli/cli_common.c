@@ -493,7 +493,7 @@ static int s_measure(vafm_cli_rec *cp, const vafm_campaign_curve *c, vafm_sample
     vafm_detector det;
     vafm_detector_begin(&det, c->params, c->index);
     for (size_t i = 0; i < s->n; i++)
-        vafm_detector_apply(&det, s->deflection_m[i], NULL, &cp->mdefl[i], &cp->mforce[i]);
+        vafm_detector_apply(&det, s->time_s[i], s->height_m[i], s->deflection_m[i], NULL, &cp->mdefl[i], &cp->mforce[i]);
     *out = *s;
     out->deflection_m = cp->mdefl;
     out->force_N = cp->mforce;

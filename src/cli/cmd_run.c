@@ -67,7 +67,7 @@ static int s_write_samples(void *user, const vafm_samples *b)
     for (size_t i = 0; i < b->n; i++) {
         double defl = b->deflection_m[i], force = b->force_N[i];
         if (o->det.on)
-            vafm_detector_apply(&o->det, b->deflection_m[i], NULL, &defl, &force);
+            vafm_detector_apply(&o->det, b->time_s[i], b->height_m[i], b->deflection_m[i], NULL, &defl, &force);
         if (fprintf(o->f, "%.17g,%.17g,%.17g,%.17g,%.17g,%u\n", b->time_s[i], b->height_m[i], defl, force,
                     b->tip_m[i], (unsigned)b->segment[i]) < 0)
             return 1; /* stop: the output is broken */

@@ -129,6 +129,20 @@ static const s_field s_fields[] = {
       offsetof(vafm_params, adc_bits), S_NONE },
     REAL(adc_range_V, "V", 1e-3, 100, "detector: ADC full range, peak to peak (codes saturate beyond it)"),
     REAL(baseline_offset_V, "V", -100, 100, "detector: offset of the deflection signal"),
+    REAL(drift_V_per_s, "V/s", -100, 100, "artefact: linear drift of the deflection signal's baseline"),
+    REAL(drift_walk_V_per_sqrt_s, "V/s^0.5", 0, 100, "artefact: random walk of the baseline (own random stream)"),
+    REAL(virtual_deflection_V_per_m, "V/m", -1e9, 1e9,
+         "artefact: virtual deflection, a baseline slope with the piezo height (typical 1e3-1e5 V/m)"),
+    REAL(interference_V, "V", 0, 100, "artefact: laser interference on the baseline, amplitude of a sinusoid in height"),
+    REAL(interference_period_m, "m", 0, 1e-3,
+         "artefact: period of the interference in piezo height (about half the laser wavelength)"),
+    REAL(flicker_corner_Hz, "Hz", 0, 1e9,
+         "artefact: 1/f noise, the frequency where it equals the white floor noise_V_rms (1/f down to 1 mHz)"),
+    REAL(mains_V, "V", 0, 100, "artefact: mains pickup, amplitude of the fundamental (harmonics 2, 3 at 1/2, 1/3)"),
+    REAL(mains_Hz, "Hz", 0, 1000, "artefact: mains frequency (50 or 60 Hz)"),
+    REAL(contact_point_sd_m, "m", 0, 1e-4,
+         "artefact: each curve's surface at a random height (normal, this sd; own random stream)"),
+    REAL(sample_drift_m_per_s, "m/s", -1e-3, 1e-3, "artefact: the sample surface rises at this speed during a curve"),
     REAL(surface_height_m, "m", -1e-3, 1e-3,
          "height of the sample surface above the reference plane (a force map's substrate): the piezo heights "
          "a curve reports are measured from that plane; start_height_m and trigger_height_m stay relative to "
@@ -165,6 +179,8 @@ static void s_common(vafm_params *p)
     p->seed = 1;
     p->sensitivity_m_per_V = 50e-9; /* a typical optical lever: 50 nm/V */
     p->adc_range_V = 20.0;          /* ±10 V, a typical controller input */
+    p->interference_period_m = 335e-9; /* half the 670 nm of a common AFM laser diode */
+    p->mains_Hz = 50.0;
 }
 
 /* The paper's Fig. 1/2 scene: m̃ = 5e-5, ṽ = 1e-4, k̃ = 2e-5, k_BT̃ = 5e-8, γ̃ = 1.2e-4 with
@@ -829,6 +845,23 @@ int vafm_params_validate(const vafm_params *p, vafm_error *err)
         vafm_err_set(err, VAFM_EINVAL, "ramp_start",
                      "ramp_start = trigger needs a surface to find (contact jkr or hertz) and a free start "
                      "(start_in_contact = false)");
+        return VAFM_EINVAL;
+    }
+    if (p->flicker_corner_Hz > 0 && !(p->noise_V_rms > 0)) {
+        vafm_err_set(err, VAFM_EINVAL, "flicker_corner_Hz",
+                     "flicker_corner_Hz = %.6g Hz is where 1/f noise meets the white floor: set noise_V_rms > 0 V",
+                     p->flicker_corner_Hz);
+        return VAFM_EINVAL;
+    }
+    if (p->interference_V > 0 && !(p->interference_period_m >= 1e-9)) {
+        vafm_err_set(err, VAFM_EINVAL, "interference_period_m",
+                     "interference_period_m = %.6g m: the interference needs a period of at least 1e-09 m",
+                     p->interference_period_m);
+        return VAFM_EINVAL;
+    }
+    if (p->mains_V > 0 && !(p->mains_Hz >= 1)) {
+        vafm_err_set(err, VAFM_EINVAL, "mains_Hz", "mains_Hz = %.6g Hz: mains pickup needs a frequency in [1, 1000] Hz",
+                     p->mains_Hz);
         return VAFM_EINVAL;
     }
     if (p->setpoint_mode == VAFM_SETPOINT_RELATIVE && p->start_in_contact) {

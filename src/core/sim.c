@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "vafm/detector.h"
 #include "vafm/integrator.h"
 #include "vafm/sim.h"
 #include "vafm/theory.h"
@@ -74,6 +75,8 @@ struct vafm_sim {
     int touched, detached_in_retract, flags, retract_samples;
     double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
     double touch_t, touch_uspr;
+    double surf0_m;     /* artefacts: the curve's contact point above the reference plane, m (vafm/detector.h) */
+    double drift_m_per_s, v_drift; /* the sample's drift, m/s and reduced (added to the support's speed) */
     vafm_error err;     /* detail of the error that ended the scene (err.code 0: none) */
     /* output block */
     size_t nblk;
@@ -237,11 +240,21 @@ static double s_trigger_point(const vafm_sim *s)
     return hi + s->F_set / K->k;
 }
 
-/* A height above the contact point as the curve reports it: above the reference plane (surface_height_m;
- * nothing is added on a flat sample, so those curves stay bit for bit what they were, -0.0 included). */
-static inline double s_height(const vafm_sim *s, double above_contact_m)
+/* A height above the contact point at time t_s as the curve reports it: above the reference plane (the curve's
+ * contact point, surface_height_m plus its random part, and the sample's drift since t = 0; nothing is added on
+ * a flat, still sample, so those curves stay bit for bit what they were, -0.0 included). */
+static inline double s_height(const vafm_sim *s, double above_contact_m, double t_s)
 {
-    return s->p.surface_height_m != 0.0 ? above_contact_m + s->p.surface_height_m : above_contact_m;
+    if (s->drift_m_per_s != 0.0)
+        return above_contact_m + s->surf0_m + s->drift_m_per_s * t_s;
+    return s->surf0_m != 0.0 ? above_contact_m + s->surf0_m : above_contact_m;
+}
+
+/* The support's position in the piezo's own frame (the command): its position relative to the surface less
+ * what the drifting surface added. Travel limits, height triggers and the fixed ramp's end are the piezo's. */
+static inline double s_ucmd(const vafm_sim *s)
+{
+    return s->v_drift != 0.0 ? s->K.u_spr - s->v_drift * s->K.t : s->K.u_spr;
 }
 
 static void s_begin(vafm_sim *s, uint64_t index, int scene)
@@ -271,6 +284,10 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->need_prepare = 1;
 
     const double L = s->nm.sc.length_m;
+    /* the sample's artefacts: where its surface is for this curve, and how fast it rises (a tune has neither) */
+    s->surf0_m = scene == S_SCENE_CURVE ? vafm_artefact_contact_point(&s->p, index) : s->p.surface_height_m;
+    s->drift_m_per_s = scene == S_SCENE_CURVE ? s->p.sample_drift_m_per_s : 0.0;
+    s->v_drift = s->drift_m_per_s / s->nm.sc.speed_m_per_s;
     s->uspr_start = -s->p.start_height_m / L;
     s->F_set = s->p.setpoint_N / s->nm.sc.force_N;
     s->uspr_trigger = -s->p.trigger_height_m / L;
@@ -296,7 +313,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     K->t = 0.0;
     K->u_spr = s->uspr_start;
     double v0 = scene == S_SCENE_CURVE ? rd->v_approach : 0.0;
-    s_kernel_phase(K, v0);
+    s_kernel_phase(K, v0 + s->v_drift);
     vafm_kernel_set_dt(K, s->nm.dt);
     s->dt_cur = s->nm.dt;
     K->event = 0;
@@ -674,10 +691,10 @@ static void s_flush(vafm_sim *s, vafm_sample_fn fn, void *user, int *stop)
 static void s_start_retract(vafm_sim *s)
 {
     vafm_kernel *K = &s->K;
-    s_kernel_phase(K, -s->nm.r.v_retract);
+    s_kernel_phase(K, -s->nm.r.v_retract + s->v_drift);
     s->need_prepare = 1; /* the drift term changed with v_spr */
     s->t_retract0 = K->t;
-    s->uspr_turn = K->u_spr;
+    s->uspr_turn = s_ucmd(s);
     K->fs_min = INFINITY;
     s->phase = S_PH_RETRACT;
     double end = isfinite(s->nm.u_spr_star) ? s->nm.u_spr_star : fmin(0.0, K->contact.u_detach);
@@ -702,16 +719,17 @@ static void s_phase_logic(vafm_sim *s, double force)
                 s->base_n++;
             }
         }
-        int trig = s->p.trigger == VAFM_TRIGGER_FORCE ? armed && force - base >= s->F_set : K->u_spr >= s->uspr_trigger;
+        int trig = s->p.trigger == VAFM_TRIGGER_FORCE ? armed && force - base >= s->F_set : s_ucmd(s) >= s->uspr_trigger;
         s->F_hold = s->p.trigger == VAFM_TRIGGER_FORCE ? s->F_set + base : force;
-        if (!trig && K->u_spr >= s->uspr_zlimit) {
+        if (!trig && s_ucmd(s) >= s->uspr_zlimit) {
             s->flags |= VAFM_CURVE_NO_TRIGGER;
             trig = 1;
         }
         if (trig) {
             s->dwell_left = lround(s->p.dwell_s * s->p.sample_rate_Hz);
             if (s->dwell_left > 0) {
-                s_kernel_phase(K, s->p.dwell_mode == VAFM_DWELL_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0);
+                s_kernel_phase(K, (s->p.dwell_mode == VAFM_DWELL_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0) +
+                                      s->v_drift);
                 s->need_prepare = 1;
                 s->phase = S_PH_DWELL;
             } else {
@@ -725,15 +743,15 @@ static void s_phase_logic(vafm_sim *s, double force)
             s_start_retract(s);
         else if (s->p.dwell_mode == VAFM_DWELL_FORCE) {
             /* an integral loop on the filtered deflection, acting once per sample: dz/dt = (F_hold − F)/(k τ) */
-            s_kernel_phase(K, s->fb_gain * (s->F_hold - force));
+            s_kernel_phase(K, s->fb_gain * (s->F_hold - force) + s->v_drift);
             s->need_prepare = 1;
         }
         break;
     case S_PH_RETRACT: {
-        double travel = s->uspr_turn - K->u_spr;
+        double travel = s->uspr_turn - s_ucmd(s);
         if (s->p.ramp_size_m > 0) {
             /* a fixed ramp returns to its start height, whatever the tip did on the way */
-            if (K->u_spr <= s->uspr_start) {
+            if (s_ucmd(s) <= s->uspr_start) {
                 if (K->in_contact)
                     s->flags |= VAFM_CURVE_NO_DETACH;
                 s->phase = S_PH_DONE;
@@ -741,7 +759,7 @@ static void s_phase_logic(vafm_sim *s, double force)
         } else if (!K->in_contact && s->detached_in_retract && s->uspr_detach - K->u_spr >= s->margin)
             s->phase = S_PH_DONE;
         else if (!K->in_contact && !s->detached_in_retract &&
-                 K->u_spr <= fmin(s->uspr_start, s->uspr_turn) - s->margin)
+                 s_ucmd(s) <= fmin(s->uspr_start, s->uspr_turn) - s->margin)
             s->phase = S_PH_DONE;
         else if (travel >= s->retract_travel_max) {
             if (K->in_contact)
@@ -818,10 +836,10 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         double defl = uspr_m - u_m, force = K->k * defl;
         size_t j = s->nblk++;
         s->bt[j] = t_m * sc->time_s;
-        s->bh[j] = s_height(s, -uspr_m * sc->length_m);
+        s->bh[j] = s_height(s, -uspr_m * sc->length_m, s->bt[j]);
         s->bd[j] = defl * sc->length_m;
         s->bf[j] = force * sc->force_N;
-        s->btip[j] = s_height(s, -u_m * sc->length_m);
+        s->btip[j] = s_height(s, -u_m * sc->length_m, s->bt[j]);
         s->bseg[j] = (uint8_t)seg;
         s->sample_index++;
         if (seg == VAFM_SEG_RETRACT) {
@@ -863,7 +881,7 @@ int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)
                                 : NAN;
     if (s->detached_in_retract) {
         out->detach_force_N = -s->fs_detach * sc->force_N;
-        out->detach_height_m = s_height(s, -s->uspr_detach * sc->length_m);
+        out->detach_height_m = s_height(s, -s->uspr_detach * sc->length_m, (s->t_detach + s->t_retract0) * sc->time_s);
         out->detach_time_s = s->t_detach * sc->time_s;
         double ueq, Feq;
         if (K->contact.type == vafm_contact_jkr && K->contact.gamma > 0 &&
@@ -875,7 +893,8 @@ int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)
         out->detach_force_N = out->detach_height_m = out->detach_time_s = out->detach_eq_force_N = NAN;
     }
     out->touch_time_s = s->touch_t * sc->time_s;
-    out->touch_height_m = s_height(s, -s->touch_uspr * sc->length_m);
+    out->touch_height_m = s_height(s, -s->touch_uspr * sc->length_m, s->touch_t * sc->time_s);
+    out->surface_height_m = s->surf0_m;
     out->retract_start_s = s->t_retract0 * sc->time_s;
     out->duration_s = K->t * sc->time_s;
     out->samples = s->sample_index;

@@ -246,7 +246,8 @@ static int s_sink(void *user, const vafm_samples *b)
             r->ch[1][k] = b->deflection_m[i];
         r->ch[2][k] = b->force_N[i];
         if (r->det.on) /* the measured chain: detector volts, then deflection and force derived from them */
-            vafm_detector_apply(&r->det, b->deflection_m[i], &r->ch[3][k], &r->ch[1][k], &r->ch[2][k]);
+            vafm_detector_apply(&r->det, b->time_s[i], b->height_m[i], b->deflection_m[i], &r->ch[3][k], &r->ch[1][k],
+                                &r->ch[2][k]);
         else if (r->ch[3]) /* a division, not a multiplication by the inverse: bit-exact with deflection / sensitivity */
             r->ch[3][k] = b->deflection_m[i] / r->sens;
         if (r->ch[4])
@@ -553,6 +554,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
             json_object_set_new(o, "steps", json_integer((json_int_t)res.steps));
             json_object_set_new(o, "steps_contact", json_integer((json_int_t)res.steps_contact));
             json_object_set_new(o, "steps_free", json_integer((json_int_t)res.steps_free));
+            json_object_set_new(o, "surface_height_m", s_num_or_null(res.surface_height_m));
             json_object_set_new(j, "result", o);
             if (!strcmp(status, "ok") && !(res.flags & VAFM_CURVE_NO_CONTACT) && isfinite(res.detach_time_s))
                 /* time_s from the run's start, as every other stream time; retract_time_s from the retract's

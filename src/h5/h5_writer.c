@@ -942,7 +942,7 @@ void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params 
     t->result = *r;
     t->E_star_Pa = p->E_star_Pa;
     t->gamma_J_per_m2 = p->gamma_J_per_m2;
-    t->surface_height_m = p->surface_height_m;
+    t->surface_height_m = r && !isnan(r->surface_height_m) ? r->surface_height_m : p->surface_height_m;
 }
 
 int vafm_h5_writer_truth(const vafm_h5_writer *w, uint64_t curve, vafm_h5_truth *out)

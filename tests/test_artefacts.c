@@ -1,0 +1,317 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The instrument's artefacts (issue #14, vafm/detector.h and the sample's in sim.c), each against its own
+ * model: exact where the model is deterministic (drift, virtual deflection, interference, mains, the
+ * contact point's shift of every reported height), statistical with the N and the sigma stated where it is
+ * random (the random walk, the contact point's spread, the 1/f spectrum against S_w·(1 + f_c/f) through
+ * the Hann window). And the contract: each artefact has its own random stream, so turning one on changes
+ * no other sample or draw.
+ */
+#include "harness.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "vafm/detector.h"
+#include "vafm/params.h"
+#include "vafm/sim.h"
+
+/* ---- the signal ---------------------------------------------------------------------------------- */
+
+static vafm_params t_base(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.sample_rate_Hz = 1000.0;
+    return p;
+}
+
+/* The signal of deflection 0 at times i/fs and heights h0 - i*dh, n samples. */
+static void t_signal(const vafm_params *p, uint64_t index, size_t n, double h0, double dh, double *v)
+{
+    vafm_detector d;
+    vafm_detector_begin(&d, p, index);
+    for (size_t i = 0; i < n; i++)
+        vafm_detector_apply(&d, (double)i / p->sample_rate_Hz, h0 - (double)i * dh, 0.0, &v[i], NULL, NULL);
+}
+
+/* Deterministic terms are what their formulas say, and none of them moves the white noise's draws. */
+static void test_deterministic_terms(void)
+{
+    enum { N = 2000 };
+    static double a[N], b[N];
+    vafm_params p = t_base();
+    p.noise_V_rms = 1e-3;
+    p.baseline_offset_V = 0.2;
+    t_signal(&p, 7, N, 1e-6, 1e-10, a);
+    vafm_params q = p;
+    q.drift_V_per_s = 0.05;
+    q.virtual_deflection_V_per_m = 2e4;
+    t_signal(&q, 7, N, 1e-6, 1e-10, b);
+    double worst = 0.0;
+    for (size_t i = 0; i < N; i++) {
+        double t = (double)i / p.sample_rate_Hz, h = 1e-6 - (double)i * 1e-10;
+        worst = fmax(worst, fabs(b[i] - a[i] - (0.05 * t + 2e4 * h)));
+    }
+    ENSURE_MSG(worst < 1e-13, "drift + virtual deflection: worst deviation %g V", worst);
+
+    /* interference: A sin(2π h / P + φ) over ten periods of height, one sample per nm */
+    q = t_base();
+    q.interference_V = 0.01;
+    q.interference_period_m = 320e-9;
+    static double c[4000];
+    t_signal(&q, 3, 4000, 0.0, -1e-9, c); /* h = i nm */
+    double mx = -1, mn = 1, per = 0.0;
+    for (size_t i = 0; i < 4000; i++) {
+        mx = fmax(mx, c[i]);
+        mn = fmin(mn, c[i]);
+        if (i >= 320)
+            per = fmax(per, fabs(c[i] - c[i - 320]));
+    }
+    ENSURE_MSG(fabs(mx - 0.01) < 2e-6 && fabs(mn + 0.01) < 2e-6, "interference: range [%g, %g] V", mn, mx);
+    ENSURE_MSG(per < 1e-12, "interference: not periodic in 320 nm (%g V)", per);
+    double c0 = c[0];
+    t_signal(&q, 4, 1, 0.0, 0.0, c);
+    ENSURE_MSG(c[0] != c0, "interference: the phase is the same for curves 3 and 4");
+
+    /* mains: amplitudes A, A/2, A/3 at 50, 100, 150 Hz, projected over 20 whole periods */
+    q = t_base();
+    q.mains_V = 0.02;
+    q.mains_Hz = 50.0;
+    enum { M = 400 }; /* 0.4 s at 1 kHz */
+    static double m[M];
+    t_signal(&q, 0, M, 0.0, 0.0, m);
+    for (int n = 1; n <= 4; n++) {
+        double sc = 0, cc = 0, w = 2.0 * M_PI * 50.0 * n;
+        for (size_t i = 0; i < M; i++) {
+            sc += m[i] * sin(w * (double)i / 1000.0);
+            cc += m[i] * cos(w * (double)i / 1000.0);
+        }
+        double amp = 2.0 * hypot(sc, cc) / M, want = n <= 3 ? 0.02 / n : 0.0;
+        ENSURE_MSG(fabs(amp - want) < 1e-12, "mains harmonic %d: %g V, want %g V", n, amp, want);
+    }
+}
+
+/* Each artefact draws from its own stream: the white noise of a scene is the same with the random walk and
+ * the 1/f noise on (their difference is their own terms, not a changed draw). */
+static void test_own_streams(void)
+{
+    enum { N = 512 };
+    static double a[N], b[N], c[N];
+    vafm_params p = t_base();
+    p.noise_V_rms = 1e-3;
+    t_signal(&p, 11, N, 0.0, 0.0, a);
+    vafm_params q = p;
+    q.drift_walk_V_per_sqrt_s = 0.01;
+    t_signal(&q, 11, N, 0.0, 0.0, b);
+    vafm_params r = p;
+    r.flicker_corner_Hz = 10.0;
+    t_signal(&r, 11, N, 0.0, 0.0, c);
+    /* the walk's increments are its own: b - a is a random walk starting at 0 whose steps are independent of a */
+    ENSURE(fabs(b[0] - a[0]) < 1e-15);
+    double sxy = 0, sxx = 0, syy = 0;
+    for (size_t i = 1; i < N; i++) {
+        double dw = (b[i] - a[i]) - (b[i - 1] - a[i - 1]);
+        sxy += dw * a[i];
+        sxx += dw * dw;
+        syy += a[i] * a[i];
+    }
+    /* N = 511 pairs: the correlation of independent series has sd 1/√511 = 0.044; 4 sigma */
+    double corr = sxy / sqrt(sxx * syy);
+    ENSURE_MSG(fabs(corr) < 0.18, "walk steps correlate with the white noise: %g", corr);
+    ENSURE_MSG(c[5] != a[5], "1/f noise adds nothing");
+}
+
+/* The random walk: w(t2) - w(t1) ~ N(0, σ²(t2 - t1)) over curves. N = 4000 curves: the sample variance has a
+ * relative sd of √(2/N) = 2.2%; 4 sigma. */
+static void test_random_walk(void)
+{
+    enum { NC = 4000, L = 200 };
+    vafm_params p = t_base();
+    p.drift_walk_V_per_sqrt_s = 0.01;
+    static double v[L];
+    double s2 = 0.0, s1 = 0.0;
+    for (uint64_t i = 0; i < NC; i++) {
+        t_signal(&p, i, L, 0.0, 0.0, v);
+        double d = v[L - 1] - v[0];
+        s1 += d;
+        s2 += d * d;
+    }
+    double var = s2 / NC - (s1 / NC) * (s1 / NC), want = 0.01 * 0.01 * (L - 1) / p.sample_rate_Hz;
+    ENSURE_MSG(fabs(var / want - 1.0) < 4.0 * sqrt(2.0 / NC), "walk variance %g V^2, model %g V^2", var, want);
+}
+
+/* The Hann window's squared DTFT magnitude at frequency offset df (Hz) for L samples at fs, in closed form:
+ * h_n = 1/2 − cos(2πn/L)/2 transforms to D(ω)/2 − D(ω − 2π/L)/4 − D(ω + 2π/L)/4 with the Dirichlet kernel
+ * D(ω) = e^{−iω(L−1)/2} sin(Lω/2)/sin(ω/2). */
+static double t_hann2(double df, int L, double fs)
+{
+    const double w0 = 2.0 * M_PI * df / fs, c[3] = { 0.5, -0.25, -0.25 }, sh[3] = { 0.0, -1.0, 1.0 };
+    double re = 0.0, im = 0.0;
+    for (int k = 0; k < 3; k++) {
+        double w = w0 + sh[k] * 2.0 * M_PI / L, sw = sin(0.5 * w);
+        double r = fabs(sw) < 1e-12 ? (double)L : sin(0.5 * L * w) / sw, ph = -0.5 * w * (L - 1);
+        re += c[k] * r * cos(ph);
+        im += c[k] * r * sin(ph);
+    }
+    return re * re + im * im;
+}
+
+/* 1/f noise: Welch periodogram (Hann, L = 1024 at 1 kHz, K = 2048 segments) at a few bins against the
+ * target spectrum S_w·(1 + f_c/f) (f ≥ 1 mHz) seen through the same window, averaged over 3 adjacent bins.
+ * Statistical error: 1/√(3K) = 1.3% per point; the bank's ripple about 1/f is below 1%. Tolerance 8%. The
+ * white floor alone would be off by a factor 1 + f_c/f (3.6 at 3.9 Hz). */
+static void test_flicker_spectrum(void)
+{
+    enum { L = 1024, K = 2048 };
+    const double fs = 1000.0, fc = 10.0, sw = 1e-3;
+    vafm_params p = t_base();
+    p.noise_V_rms = sw;
+    p.flicker_corner_Hz = fc;
+    vafm_detector d;
+    vafm_detector_begin(&d, &p, 0);
+    ENSURE(d.n_poles > 10 && d.n_poles <= VAFM_FLICKER_POLES_MAX);
+    static const int bins[] = { 4, 8, 16, 64, 200 };
+    enum { NB = sizeof bins / sizeof bins[0] };
+    double acc[NB][3];
+    memset(acc, 0, sizeof acc);
+    double *x = malloc(L * sizeof *x), hsum2 = 0.0;
+    for (int n = 0; n < L; n++) {
+        double h = 0.5 - 0.5 * cos(2.0 * M_PI * n / L);
+        hsum2 += h * h;
+    }
+    uint64_t ns = 0;
+    for (int k = 0; k < K && x; k++) {
+        for (int n = 0; n < L; n++, ns++)
+            vafm_detector_apply(&d, (double)ns / fs, 0.0, 0.0, &x[n], NULL, NULL);
+        for (int b = 0; b < NB; b++)
+            for (int j = -1; j <= 1; j++) {
+                double w = 2.0 * M_PI * (bins[b] + j) / L, re = 0.0, im = 0.0;
+                for (int n = 0; n < L; n++) {
+                    double h = (0.5 - 0.5 * cos(2.0 * M_PI * n / L)) * x[n];
+                    re += h * cos(w * n);
+                    im -= h * sin(w * n);
+                }
+                acc[b][j + 1] += 2.0 * (re * re + im * im) / (fs * hsum2) / K;
+            }
+    }
+    free(x);
+    const double Sw = 2.0 * sw * sw / fs;
+    for (int b = 0; b < NB; b++) {
+        double got = (acc[b][0] + acc[b][1] + acc[b][2]) / 3.0, want = 0.0;
+        for (int j = -1; j <= 1; j++) {
+            double f = (bins[b] + j) * fs / L, num = 0.0;
+            /* ∫ S(f') (|H(f - f')|² + |H(f + f')|²) df' / (f_s Σh²) of the 1/f part, on a fine log grid */
+            for (double lf = log(1e-3); lf < log(fs / 2); lf += 0.002) {
+                double fp = exp(lf), dfp = fp * 0.002;
+                num += Sw * (fc / fp) * (t_hann2(f - fp, L, fs) + t_hann2(f + fp, L, fs)) * dfp;
+            }
+            want += (Sw + num / (fs * hsum2)) / 3.0;
+        }
+        printf("  1/f: %6.3g Hz: %.4g V^2/Hz, model %.4g (ratio %.4f; white alone %.3g)\n", bins[b] * fs / L, got,
+               want, got / want, Sw);
+        ENSURE_MSG(fabs(got / want - 1.0) < 0.08, "1/f spectrum at bin %d (%.3g Hz): %g V^2/Hz, model %g (white %g)",
+                   bins[b], bins[b] * fs / L, got, want, Sw);
+    }
+}
+
+/* ---- the sample ---------------------------------------------------------------------------------- */
+
+typedef struct t_run {
+    size_t n;
+    double h[20000], tip[20000], f[20000];
+} t_run;
+
+static int t_collect(void *user, const vafm_samples *b)
+{
+    t_run *r = user;
+    for (size_t i = 0; i < b->n && r->n < 20000; i++, r->n++) {
+        r->h[r->n] = b->height_m[i];
+        r->tip[r->n] = b->tip_m[i];
+        r->f[r->n] = b->force_N[i];
+    }
+    return 0;
+}
+
+static void t_curve(const vafm_params *p, uint64_t index, t_run *r, vafm_curve_result *res)
+{
+    vafm_sim *s = NULL;
+    memset(r, 0, sizeof *r);
+    ENSURE(vafm_sim_new(&s, p, NULL) == 0);
+    ENSURE(s && vafm_sim_curve(s, index, t_collect, r, res) == 0);
+    vafm_sim_destroy(&s);
+}
+
+/* A random contact point moves every reported height of the curve by the same amount, and nothing else: the
+ * physics relative to the surface is the same curve bit for bit. Over N = 2000 curves the contact points
+ * have mean surface_height_m (sd/√N) and sd contact_point_sd_m (relative sd √(1/(2N)) = 1.6%); 4 sigma. */
+static void test_contact_point(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    vafm_params q = p;
+    q.contact_point_sd_m = 50e-9;
+    static t_run a, b;
+    vafm_curve_result ra, rb;
+    t_curve(&p, 5, &a, &ra);
+    t_curve(&q, 5, &b, &rb);
+    double z = vafm_artefact_contact_point(&q, 5), worst = 0.0;
+    ENSURE(a.n == b.n && ra.flags == rb.flags && ra.pulloff_spring_N == rb.pulloff_spring_N);
+    for (size_t i = 0; i < a.n && i < b.n; i++) {
+        worst = fmax(worst, fabs(b.h[i] - a.h[i] - z));
+        worst = fmax(worst, fabs(b.tip[i] - a.tip[i] - z));
+        ENSURE(a.f[i] == b.f[i]);
+    }
+    ENSURE_MSG(worst < 1e-20 + 1e-15 * fabs(z) * 4, "heights moved by %g m, not %g m", worst, z);
+    ENSURE(rb.surface_height_m == z && fabs(rb.touch_height_m - ra.touch_height_m - z) < 1e-15);
+
+    enum { NC = 2000 };
+    double s1 = 0.0, s2 = 0.0;
+    q.surface_height_m = 1e-6;
+    for (uint64_t i = 0; i < NC; i++) {
+        double d = vafm_artefact_contact_point(&q, i) - 1e-6;
+        s1 += d;
+        s2 += d * d;
+    }
+    double mean = s1 / NC, sd = sqrt(s2 / NC - mean * mean);
+    ENSURE_MSG(fabs(mean) < 4.0 * 50e-9 / sqrt(NC), "contact point mean offset %g m", mean);
+    ENSURE_MSG(fabs(sd / 50e-9 - 1.0) < 4.0 * sqrt(0.5 / NC), "contact point sd %g m", sd);
+}
+
+/* A rising sample: the tip touches when the support meets the moving surface, so the reported touch height
+ * is the no-drift one (relative to the surface) plus the surface's rise by then, to within the change of the
+ * approach speed's lag (athermal, 10% drift against 1 µm/s: well under a nm). The piezo still ramps its
+ * own 200 nm: the first and the last reported heights are the start height. */
+static void test_sample_drift(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.T_K = 0;
+    vafm_params q = p;
+    q.sample_drift_m_per_s = 100e-9;
+    static t_run a, b;
+    vafm_curve_result ra, rb;
+    t_curve(&p, 0, &a, &ra);
+    t_curve(&q, 0, &b, &rb);
+    double rise = q.sample_drift_m_per_s * rb.touch_time_s;
+    ENSURE_MSG(fabs(rb.touch_height_m - rise - ra.touch_height_m) < 0.5e-9,
+               "touch at %g m, drift-free %g m, surface rose %g m", rb.touch_height_m, ra.touch_height_m, rise);
+    ENSURE_MSG(rb.touch_time_s < ra.touch_time_s, "the rising surface is met later (%g s vs %g s)", rb.touch_time_s,
+               ra.touch_time_s);
+    double step = p.v_approach_m_per_s / p.sample_rate_Hz;
+    ENSURE_MSG(fabs(b.h[0] - p.start_height_m) <= step && fabs(b.h[b.n - 1] - p.start_height_m) <= step,
+               "the piezo's ramp: %g m ... %g m", b.h[0], b.h[b.n - 1]);
+}
+
+int main(void)
+{
+    RUN_TEST(test_deterministic_terms);
+    RUN_TEST(test_own_streams);
+    RUN_TEST(test_random_walk);
+    RUN_TEST(test_flicker_spectrum);
+    RUN_TEST(test_contact_point);
+    RUN_TEST(test_sample_drift);
+    return harness_done();
+}
