@@ -17,6 +17,7 @@
 #include "vafm/detector.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
+#include "core/piezo.h"
 
 /* ---- the signal ---------------------------------------------------------------------------------- */
 
@@ -305,8 +306,154 @@ static void test_sample_drift(void)
                "the piezo's ramp: %g m ... %g m", b.h[0], b.h[b.n - 1]);
 }
 
+/* ---- the piezo ------------------------------------------------------------------------------------ */
+
+/* Bouc–Wen against its closed form along a triangle: from rest, a monotone extension by x gives
+ * h = H·L_s·(1 − e^{−x/L_s}); after the reversal h falls linearly (slope H) through zero and then relaxes to
+ * −H·L_s. Rate independent: the same path in 10 or in 1000 steps gives the same h at the turning points. */
+static void test_piezo_hysteresis(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.piezo_hysteresis = 0.1;
+    p.piezo_hysteresis_length_m = 100e-9;
+    const double H = 0.1, Ls = 100e-9, up = 300e-9;
+    for (int n = 10; n <= 1000; n *= 10) {
+        vafm_piezo pz;
+        vafm_piezo_begin(&pz, &p, 0.0);
+        double worst = 0.0;
+        for (int i = 1; i <= n; i++) {
+            double e = up * i / n, ea = vafm_piezo_step(&pz, e, 1e-3);
+            double h = H * Ls * (1.0 - exp(-e / Ls));
+            worst = fmax(worst, fabs((e - ea) - h));
+        }
+        double h_top = pz.h;
+        /* back down: linear until h = 0 (after a travel h_top / H), then toward -H Ls */
+        double back = 0.0;
+        for (int i = 1; i <= n; i++) {
+            double e = up - up * i / n, x = up - e, ea = vafm_piezo_step(&pz, e, 1e-3);
+            double h = x <= h_top / H ? h_top - H * x : -H * Ls * (1.0 - exp(-(x - h_top / H) / Ls));
+            back = fmax(back, fabs((e - ea) - h));
+        }
+        ENSURE_MSG(worst < 1e-20 && back < 1e-20, "n = %d: closed form missed by %g m up, %g m down", n, worst, back);
+        ENSURE_MSG(fabs(h_top - H * Ls * (1.0 - exp(-3.0))) < 1e-21, "n = %d: h at the top %g m", n, h_top);
+    }
+}
+
+/* Creep after a step: C·Δ·log10(1 + t/t0) from 0.01 t0 to 1e4 t0, to the lag bank's fit (3e-6 decades). */
+static void test_piezo_creep(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.piezo_creep = 0.02;
+    p.piezo_creep_t0_s = 0.1;
+    vafm_piezo pz;
+    vafm_piezo_begin(&pz, &p, 0.0);
+    const double D = 1e-6, tstep = 1e-9;
+    vafm_piezo_step(&pz, D, tstep); /* the move: 1 µm in 1 ns */
+    double t = tstep, worst = 0.0;
+    for (double lt = log10(0.01 * 0.1); lt <= log10(1e4 * 0.1); lt += 0.05) {
+        double tn = pow(10.0, lt), ea = vafm_piezo_step(&pz, D, tn - t);
+        t = tn;
+        double want = 0.02 * D * log10(1.0 + t / 0.1);
+        worst = fmax(worst, fabs((ea - D) - want));
+    }
+    ENSURE_MSG(worst < 0.02 * D * 1e-5, "creep: worst deviation %g m (of %g m per decade)", worst, 0.02 * D);
+}
+
+struct t_col {
+    double *hc, *hm;
+    size_t n;
+};
+
+static int t_col_heights(void *u, const vafm_samples *b)
+{
+    struct t_col *c = u;
+    for (size_t i = 0; i < b->n && c->n < 20000; i++, c->n++) {
+        c->hc[c->n] = b->height_m[i];
+        c->hm[c->n] = b->height_measured_m ? b->height_measured_m[i] : NAN;
+    }
+    return 0;
+}
+
+/* In a curve: the files' piezo height is the command (an exact ramp: steps of v/f_s, one turn), the measured
+ * height is where the actuator took the support: its own model along that command, averaged over each
+ * sample (the midpoint of its linear path, to within half an integrator step's share of it). Athermal. */
+static void test_piezo_in_curve(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.T_K = 0;
+    p.piezo_hysteresis = 0.1;
+    p.piezo_hysteresis_length_m = 100e-9;
+    p.piezo_creep = 0.02;
+    vafm_sim *s = NULL;
+    ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+    if (!s)
+        return;
+    static double hc[20000], hm[20000];
+    struct t_col col = { hc, hm, 0 };
+    ENSURE(vafm_sim_curve_begin(s, 0) == 0);
+    ENSURE(vafm_sim_advance(s, 20000, t_col_heights, &col) == 0);
+    const double dt = 1.0 / p.sample_rate_Hz, n_sub = round(dt / vafm_sim_dt(s));
+    vafm_sim_destroy(&s);
+    vafm_piezo pz;
+    vafm_piezo_begin(&pz, &p, -p.start_height_m);
+    double prev = -p.start_height_m, worst_m = 0.0;
+    int turns = 0, off_ramp = 0;
+    for (size_t k = 0; k < col.n; k++) {
+        double e_end = 2.0 * -hc[k] - prev; /* the command's mean is its midpoint */
+        double ea0 = pz.ea, ea1 = vafm_piezo_step(&pz, e_end, dt), mid = -0.5 * (ea0 + ea1);
+        worst_m = fmax(worst_m, fabs(hm[k] - mid) - 0.5 * fabs(ea1 - ea0) / n_sub);
+        if (k > 0) {
+            double step = fabs(hc[k] - hc[k - 1]);
+            turns += step < 1e-18;
+            off_ramp += step >= 1e-18 && fabs(step - p.v_approach_m_per_s * dt) > 1e-18;
+        }
+        prev = e_end;
+    }
+    ENSURE_MSG(turns == 1 && off_ramp == 0, "the command is not one ramp down and up: %d turns, %d odd steps", turns,
+               off_ramp);
+    ENSURE_MSG(worst_m < 1e-16, "measured height vs the actuator model: %g m beyond the bound", worst_m);
+    ENSURE_MSG(fabs(hm[col.n - 1] - hc[col.n - 1]) > 1e-9, "the actuator made no difference (%g m)",
+               hm[col.n - 1] - hc[col.n - 1]);
+}
+
+/* The z sensor: a first-order low-pass (a step settles as 1 − e^{−2π f t}) plus white noise of the given sd
+ * (N = 20000 readings of a still piezo: relative sd of the sd √(1/(2N)) = 0.5%; 4 sigma). */
+static void test_zsensor(void)
+{
+    vafm_params p = t_base();
+    p.zsensor_bandwidth_Hz = 50.0;
+    vafm_detector d;
+    vafm_detector_begin(&d, &p, 0);
+    ENSURE(vafm_detector_height(&d, 0.0, 0.0) == 0.0);
+    double worst = 0.0;
+    for (int i = 1; i <= 100; i++) {
+        double t = i * 1e-3, y = vafm_detector_height(&d, t, 1e-6);
+        worst = fmax(worst, fabs(y - 1e-6 * (1.0 - exp(-2.0 * M_PI * 50.0 * t))));
+    }
+    ENSURE_MSG(worst < 1e-18, "z sensor step response off by %g m", worst);
+    p.zsensor_bandwidth_Hz = 0;
+    p.zsensor_noise_m = 0.3e-9;
+    vafm_detector_begin(&d, &p, 0);
+    double s1 = 0, s2 = 0;
+    enum { N = 20000 };
+    for (int i = 0; i < N; i++) {
+        double y = vafm_detector_height(&d, i * 1e-3, 5e-7) - 5e-7;
+        s1 += y;
+        s2 += y * y;
+    }
+    double sd = sqrt(s2 / N - (s1 / N) * (s1 / N));
+    ENSURE_MSG(fabs(sd / 0.3e-9 - 1.0) < 4.0 * sqrt(0.5 / N), "z sensor noise sd %g m", sd);
+}
+
 int main(void)
 {
+    RUN_TEST(test_piezo_hysteresis);
+    RUN_TEST(test_piezo_creep);
+    RUN_TEST(test_piezo_in_curve);
+    RUN_TEST(test_zsensor);
     RUN_TEST(test_deterministic_terms);
     RUN_TEST(test_own_streams);
     RUN_TEST(test_random_walk);

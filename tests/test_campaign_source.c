@@ -101,7 +101,7 @@ static void t_setup(void)
         ENSURE(vafm_sim_new(&s, &pp, &err) == 0);
         t_buf b = { 0 };
         ENSURE(s && vafm_sim_curve(s, i, t_collect, &b, &t_ref[i]) == 0);
-        vafm_samples all = { b.n, 0, b.c[0], b.c[1], b.c[2], b.c[3], b.c[4], b.seg };
+        vafm_samples all = { b.n, 0, b.c[0], b.c[1], b.c[2], b.c[3], b.c[4], b.seg, NULL };
         t_ref_hash[i] = t_hash_samples(&all);
         for (int c = 0; c < 5; c++)
             free(b.c[c]);

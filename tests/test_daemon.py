@@ -69,6 +69,14 @@ def test_get_set_round_trip_and_range_error(fig4):
     error_ok(fig4.cmd({"cmd": "set", "values": {"no_such": 1}}), "unknown_field", "no_such")
     error_ok(fig4.cmd({"cmd": "set", "preset": "no-such"}), "not_found", "preset")
     error_ok(fig4.cmd({"cmd": "set", "values": {"hwm": 3}}), "read_only", "hwm")
+    # the piezo's actual height is the CLI's only for now: a clear "not yet", nothing changed
+    error_ok(fig4.cmd({"cmd": "set", "values": {"piezo_hysteresis": 0.1}}), "not_implemented", "piezo_hysteresis")
+    assert fig4.cmd({"cmd": "get", "names": ["piezo_hysteresis"]})["values"]["piezo_hysteresis"] == 0
+    # the instrument's ramp words resolve: a ramp rate sets both speeds
+    assert fig4.cmd({"cmd": "set", "values": {"ramp_size_m": 1e-6, "ramp_rate_Hz": 2.0}})["status"] == "ok"
+    v = fig4.cmd({"cmd": "get", "names": ["v_approach_m_per_s", "v_retract_m_per_s"]})["values"]
+    assert v["v_approach_m_per_s"] == 4e-6 and v["v_retract_m_per_s"] == 4e-6, v
+    assert fig4.cmd({"cmd": "set", "values": {"ramp_size_m": 0, "ramp_rate_Hz": 0}})["status"] == "ok"
     allv = fig4.cmd({"cmd": "get"})["values"]
     assert "E_star_Pa" in allv and "speed" in allv
 

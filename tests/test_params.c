@@ -23,7 +23,7 @@
 static int t_dimensionless(const char *name)
 {
     return !strcmp(name, "omega_dt") || !strcmp(name, "omega_dt_far") || !strcmp(name, "near_barrier_kT") ||
-           !strcmp(name, "Q");
+           !strcmp(name, "Q") || !strcmp(name, "piezo_hysteresis") || !strcmp(name, "piezo_creep");
 }
 
 /* The range as the library formats it in its messages ("[%.6g, %.6g]"). */
@@ -340,7 +340,8 @@ static const struct {
     M(setpoint_V), M(dwell_feedback_s), M(tune_rate_Hz),
     M(surface_height_m), M(drift_V_per_s), M(drift_walk_V_per_sqrt_s), M(virtual_deflection_V_per_m),
     M(interference_V), M(interference_period_m), M(flicker_corner_Hz), M(mains_V), M(mains_Hz),
-    M(contact_point_sd_m), M(sample_drift_m_per_s),
+    M(contact_point_sd_m), M(sample_drift_m_per_s), M(piezo_hysteresis), M(piezo_hysteresis_length_m), M(piezo_creep),
+    M(piezo_creep_t0_s), M(zsensor_noise_m), M(zsensor_bandwidth_Hz),
 #undef M
 };
 #define T_NREAL (sizeof t_real_members / sizeof t_real_members[0])

@@ -38,6 +38,7 @@ extern "C" {
 #define VAFM_ARTEFACT_FLICKER_KEY UINT64_C(0x0041524631464e53) /**< "ARF1FNS": 1/f noise */
 #define VAFM_ARTEFACT_PHASE_KEY UINT64_C(0x0041525048415345)   /**< "ARPHASE": mains and interference phases */
 #define VAFM_ARTEFACT_SAMPLE_KEY UINT64_C(0x00415253414d504c)  /**< "ARSAMPL": the curve's contact point */
+#define VAFM_ARTEFACT_ZSENSOR_KEY UINT64_C(0x00415a53454e534f) /**< "AZSENSO": the z sensor's noise */
 
 /** Poles of the 1/f noise: three per decade from 1 mHz to the corner (at most 40). */
 #define VAFM_FLICKER_POLES_MAX 40
@@ -62,6 +63,10 @@ typedef struct vafm_detector {
     double pole_c[VAFM_FLICKER_POLES_MAX];     /**< innovation sd σ√(1 − a²) */
     double pole_x[VAFM_FLICKER_POLES_MAX];     /**< state, V */
     vafm_rng rng_walk, rng_flicker;
+    /* the closed-loop z sensor: white noise and a first-order bandwidth on the measured height */
+    double zs_noise, zs_bw, zs_y, zs_t;
+    int zs_on;
+    vafm_rng rng_zs;
 } vafm_detector;
 
 /** @return 1 when the scene's detector settings change the signal (noise, ADC, offset or an artefact of the
@@ -77,6 +82,11 @@ VAFM_API void vafm_detector_begin(vafm_detector *d, const vafm_params *p, uint64
  *  the rest unchanged. Any output pointer may be NULL. Samples come in time order. */
 VAFM_API void vafm_detector_apply(vafm_detector *d, double t_s, double height_m, double deflection_m, double *volts,
                                   double *deflection_out, double *force_out);
+
+/** The z sensor's reading at time t_s of the piezo's actual height (m; vafm_samples.height_measured_m, or
+ *  height_m for an ideal piezo): a first-order low-pass of zsensor_bandwidth_Hz (from the first sample on)
+ *  plus white noise of zsensor_noise_m rms from its own stream. Unchanged without a z-sensor setting. */
+VAFM_API double vafm_detector_height(vafm_detector *d, double t_s, double height_m);
 
 /** The contact point of curve `index`: the height of the sample surface above the reference plane at t = 0,
  *  m: surface_height_m plus, with contact_point_sd_m > 0, a normal deviate of that sd from the curve's own

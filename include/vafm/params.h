@@ -147,6 +147,14 @@ typedef struct vafm_params {
     /* ... and of the sample (they move the surface the tip meets) */
     double contact_point_sd_m; /**< each curve's surface at a random height: normal with this sd, m */
     double sample_drift_m_per_s; /**< the sample surface rises at this speed during a curve, m/s */
+    /* ... and of the piezo (the support goes where the actuator takes it; the files' height (piezo) is the
+     * command, height (measured) the z sensor's reading of the actual height) */
+    double piezo_hysteresis; /**< Bouc–Wen hysteresis strength H: the loop is 2·H·L_s wide (0: none) */
+    double piezo_hysteresis_length_m; /**< its saturation length L_s, m */
+    double piezo_creep;    /**< logarithmic creep after a move: fraction of the move per decade of time (0: none) */
+    double piezo_creep_t0_s; /**< its reference time t0, s (creep ∝ log10(1 + t/t0)) */
+    double zsensor_noise_m; /**< closed-loop z sensor: white noise of the measured height, m rms (0: none) */
+    double zsensor_bandwidth_Hz; /**< its first-order bandwidth, Hz (0: unlimited) */
     uint8_t reserved[24];
 } vafm_params;
 

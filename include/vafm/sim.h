@@ -35,6 +35,10 @@ typedef struct vafm_samples {
     const double *force_N;      /**< k·deflection, N, positive repulsive */
     const double *tip_m;        /**< true tip height above the undeformed surface, m */
     const uint8_t *segment;     /**< enum vafm_segment */
+    const double *height_measured_m; /**< the piezo's height as its z sensor reads it, m, as height_m: from the
+                                          simulation, where the actuator actually is (hysteresis, creep: an
+                                          ideal sensor), through vafm_detector_height for a real one; NULL:
+                                          equal to height_m (an ideal piezo) */
 } vafm_samples;
 
 /** Receives sample blocks. @return 0 to go on, non-zero to stop the run (VAFM_EABORT). */

@@ -113,7 +113,7 @@ typedef struct vafm_cli_progress {
 /* recording a campaign into one HDF5 file (cli_common.c; vafm campaign, vafm map) */
 typedef struct vafm_cli_rec {
     vafm_recorder *rec;
-    double *mdefl, *mforce; /* measured deflection and force of the curve being recorded (detector on) */
+    double *mdefl, *mforce, *mheight; /* measured deflection, force and height of the curve being recorded */
     size_t mcap;
     int werr_code; /* the first recorder error */
     vafm_error werr;

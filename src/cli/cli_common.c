@@ -485,9 +485,12 @@ static int s_measure(vafm_cli_rec *cp, const vafm_campaign_curve *c, vafm_sample
         double *d = realloc(cp->mdefl, s->n * sizeof *d), *f = d ? realloc(cp->mforce, s->n * sizeof *f) : NULL;
         if (d)
             cp->mdefl = d;
-        if (!f)
+        if (f)
+            cp->mforce = f;
+        double *h = f ? realloc(cp->mheight, s->n * sizeof *h) : NULL;
+        if (!h)
             return -1;
-        cp->mforce = f;
+        cp->mheight = h;
         cp->mcap = s->n;
     }
     vafm_detector det;
@@ -497,6 +500,12 @@ static int s_measure(vafm_cli_rec *cp, const vafm_campaign_curve *c, vafm_sample
     *out = *s;
     out->deflection_m = cp->mdefl;
     out->force_N = cp->mforce;
+    if (det.zs_on) { /* the z sensor reads where the piezo is */
+        const double *ha = s->height_measured_m ? s->height_measured_m : s->height_m;
+        for (size_t i = 0; i < s->n; i++)
+            cp->mheight[i] = vafm_detector_height(&det, s->time_s[i], ha[i]);
+        out->height_measured_m = cp->mheight;
+    }
     return 0;
 }
 
@@ -652,7 +661,8 @@ int vafm_cli_rec_close(vafm_cli_rec *cp, const vafm_cli_rec_opts *co, uint64_t f
     int cr = vafm_recorder_close(&cp->rec, rep, &cerr);
     free(cp->mdefl);
     free(cp->mforce);
-    cp->mdefl = cp->mforce = NULL;
+    free(cp->mheight);
+    cp->mdefl = cp->mforce = cp->mheight = NULL;
     int rc = 0;
     if (cp->fail_status) {
         vafm_cli_error("curve %" PRIu64 " failed: %s; %s holds the %" PRIu64 " curve(s) before it", cp->fail_index,

@@ -59,6 +59,7 @@ int vafm_cli_cmd_run(const vafm_cli_args *a)
 typedef struct s_out {
     FILE *f;
     vafm_detector det; /* the scene's measured chain: deflection and force as the instrument records them */
+    int hm;            /* a 7th column: the measured height (piezo hysteresis/creep or a z sensor) */
 } s_out;
 
 static int s_write_samples(void *user, const vafm_samples *b)
@@ -68,9 +69,16 @@ static int s_write_samples(void *user, const vafm_samples *b)
         double defl = b->deflection_m[i], force = b->force_N[i];
         if (o->det.on)
             vafm_detector_apply(&o->det, b->time_s[i], b->height_m[i], b->deflection_m[i], NULL, &defl, &force);
-        if (fprintf(o->f, "%.17g,%.17g,%.17g,%.17g,%.17g,%u\n", b->time_s[i], b->height_m[i], defl, force,
+        if (fprintf(o->f, "%.17g,%.17g,%.17g,%.17g,%.17g,%u", b->time_s[i], b->height_m[i], defl, force,
                     b->tip_m[i], (unsigned)b->segment[i]) < 0)
             return 1; /* stop: the output is broken */
+        if (o->hm) {
+            double h = b->height_measured_m ? b->height_measured_m[i] : b->height_m[i];
+            if (fprintf(o->f, ",%.17g", vafm_detector_height(&o->det, b->time_s[i], h)) < 0)
+                return 1;
+        }
+        if (fputc('\n', o->f) == EOF)
+            return 1;
     }
     return 0;
 }
@@ -92,8 +100,10 @@ int vafm_cli_cmd_samples(const vafm_cli_args *a)
     vafm_cli_progress_init(&pg, a);
     int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : vafm_sim_curve_begin(sim, index);
     int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
-    fputs("time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
     s_out o = { .f = f };
+    o.hm = sc.p.piezo_hysteresis > 0 || sc.p.piezo_creep > 0 || sc.p.zsensor_noise_m > 0 || sc.p.zsensor_bandwidth_Hz > 0;
+    fputs(o.hm ? "time_s,height_m,deflection_m,force_N,tip_m,segment,height_measured_m\n"
+               : "time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
     vafm_detector_begin(&o.det, &sc.p, index);
     if (!r)
         r = vafm_cli_advance_all(sim, s_write_samples, &o, &pg);

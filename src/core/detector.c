@@ -21,7 +21,8 @@ static int s_artefacts_on(const vafm_params *p)
 
 int vafm_detector_on(const vafm_params *p)
 {
-    return p->noise_V_rms > 0 || p->adc_bits > 0 || p->baseline_offset_V != 0 || s_artefacts_on(p);
+    return p->noise_V_rms > 0 || p->adc_bits > 0 || p->baseline_offset_V != 0 || s_artefacts_on(p) ||
+           p->zsensor_noise_m > 0 || p->zsensor_bandwidth_Hz > 0;
 }
 
 /* The AR(1) bank of the 1/f noise. A first-order process of rate λ = 2π f_j and variance σ² has the one-sided
@@ -79,6 +80,14 @@ void vafm_detector_begin(vafm_detector *d, const vafm_params *p, uint64_t index)
     if (p->mains_V > 0) {
         d->mains_amp = p->mains_V;
         d->mains_w = 2.0 * M_PI * p->mains_Hz;
+    }
+    if (p->zsensor_noise_m > 0 || p->zsensor_bandwidth_Hz > 0) {
+        d->zs_on = 1;
+        d->zs_noise = p->zsensor_noise_m;
+        d->zs_bw = p->zsensor_bandwidth_Hz;
+        d->zs_t = NAN;
+        if (d->zs_noise > 0)
+            vafm_rng_init(&d->rng_zs, p->seed ^ VAFM_ARTEFACT_ZSENSOR_KEY, index);
     }
     if (p->flicker_corner_Hz > 0 && p->noise_V_rms > 0) {
         vafm_rng_init(&d->rng_flicker, p->seed ^ VAFM_ARTEFACT_FLICKER_KEY, index);
@@ -145,6 +154,23 @@ void vafm_detector_apply(vafm_detector *d, double t_s, double height_m, double d
         *deflection_out = defl;
     if (force_out)
         *force_out = d->k * defl;
+}
+
+double vafm_detector_height(vafm_detector *d, double t_s, double height_m)
+{
+    if (!d->zs_on)
+        return height_m;
+    if (d->zs_bw > 0) {
+        /* first order, exact for a height that holds over each interval (zero-order hold of the samples) */
+        if (isnan(d->zs_t))
+            d->zs_y = height_m;
+        else
+            d->zs_y += (1.0 - exp(-2.0 * M_PI * d->zs_bw * (t_s - d->zs_t))) * (height_m - d->zs_y);
+        d->zs_t = t_s;
+    } else {
+        d->zs_y = height_m;
+    }
+    return d->zs_noise > 0 ? d->zs_y + d->zs_noise * vafm_rng_normal(&d->rng_zs) : d->zs_y;
 }
 
 double vafm_artefact_contact_point(const vafm_params *p, uint64_t index)

@@ -143,6 +143,13 @@ static const s_field s_fields[] = {
     REAL(contact_point_sd_m, "m", 0, 1e-4,
          "artefact: each curve's surface at a random height (normal, this sd; own random stream)"),
     REAL(sample_drift_m_per_s, "m/s", -1e-3, 1e-3, "artefact: the sample surface rises at this speed during a curve"),
+    REAL(piezo_hysteresis, "", 0, 0.5,
+         "artefact: piezo hysteresis (Bouc-Wen) strength H: a loop 2*H*L_s wide between command and actual height"),
+    REAL(piezo_hysteresis_length_m, "m", 0, 1e-3, "artefact: the hysteresis' saturation length L_s"),
+    REAL(piezo_creep, "", 0, 0.5, "artefact: piezo creep after a move, as a fraction of the move per decade of time"),
+    REAL(piezo_creep_t0_s, "s", 0, 1e3, "artefact: the creep's reference time t0 (creep ~ log10(1 + t/t0))"),
+    REAL(zsensor_noise_m, "m", 0, 1e-6, "artefact: z sensor white noise on height (measured), rms"),
+    REAL(zsensor_bandwidth_Hz, "Hz", 0, 1e9, "artefact: z sensor first-order bandwidth (0: unlimited)"),
     REAL(surface_height_m, "m", -1e-3, 1e-3,
          "height of the sample surface above the reference plane (a force map's substrate): the piezo heights "
          "a curve reports are measured from that plane; start_height_m and trigger_height_m stay relative to "
@@ -180,6 +187,8 @@ static void s_common(vafm_params *p)
     p->sensitivity_m_per_V = 50e-9; /* a typical optical lever: 50 nm/V */
     p->adc_range_V = 20.0;          /* ±10 V, a typical controller input */
     p->interference_period_m = 335e-9; /* half the 670 nm of a common AFM laser diode */
+    p->piezo_hysteresis_length_m = 1e-6; /* open-loop tube and stack scanners: a loop over a µm of travel */
+    p->piezo_creep_t0_s = 0.1;
     p->mains_Hz = 50.0;
 }
 
@@ -857,6 +866,17 @@ int vafm_params_validate(const vafm_params *p, vafm_error *err)
         vafm_err_set(err, VAFM_EINVAL, "interference_period_m",
                      "interference_period_m = %.6g m: the interference needs a period of at least 1e-09 m",
                      p->interference_period_m);
+        return VAFM_EINVAL;
+    }
+    if (p->piezo_hysteresis > 0 && !(p->piezo_hysteresis_length_m >= 1e-9)) {
+        vafm_err_set(err, VAFM_EINVAL, "piezo_hysteresis_length_m",
+                     "piezo_hysteresis_length_m = %.6g m: the hysteresis needs a saturation length of at least 1e-09 m",
+                     p->piezo_hysteresis_length_m);
+        return VAFM_EINVAL;
+    }
+    if (p->piezo_creep > 0 && !(p->piezo_creep_t0_s >= 1e-6)) {
+        vafm_err_set(err, VAFM_EINVAL, "piezo_creep_t0_s",
+                     "piezo_creep_t0_s = %.6g s: the creep needs a reference time of at least 1e-06 s", p->piezo_creep_t0_s);
         return VAFM_EINVAL;
     }
     if (p->mains_V > 0 && !(p->mains_Hz >= 1)) {

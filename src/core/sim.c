@@ -23,6 +23,7 @@
 #include "vafm/theory.h"
 #include "core/internal.h"
 #include "core/kernel.h"
+#include "core/piezo.h"
 #include "core/well_exact.h"
 
 #define S_BLOCK 512
@@ -77,10 +78,13 @@ struct vafm_sim {
     double touch_t, touch_uspr;
     double surf0_m;     /* artefacts: the curve's contact point above the reference plane, m (vafm/detector.h) */
     double drift_m_per_s, v_drift; /* the sample's drift, m/s and reduced (added to the support's speed) */
+    vafm_piezo pz;      /* the piezo's hysteresis and creep (pz.on: the support follows the actual extension) */
+    double v_cmd;       /* the command's speed in the current phase (reduced, as the support's) */
+    double ucmd_now, ucmd_next; /* with pz.on: the command at this sample boundary and at the next (reduced) */
     vafm_error err;     /* detail of the error that ended the scene (err.code 0: none) */
     /* output block */
     size_t nblk;
-    double *bt, *bh, *bd, *bf, *btip;
+    double *bt, *bh, *bd, *bf, *btip, *bha;
     uint8_t *bseg;
 };
 
@@ -115,7 +119,7 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
     s->p = *p;
     vafm_numerics_check(p, &s->nm, NULL);
     s->it = p->integrator;
-    void *buf = malloc(S_BLOCK * (5 * sizeof(double) + 1));
+    void *buf = malloc(S_BLOCK * (6 * sizeof(double) + 1));
     if (!buf) {
         free(s);
         return VAFM_ENOMEM;
@@ -125,7 +129,8 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
     s->bd = s->bh + S_BLOCK;
     s->bf = s->bd + S_BLOCK;
     s->btip = s->bf + S_BLOCK;
-    s->bseg = (uint8_t *)(s->btip + S_BLOCK);
+    s->bha = s->btip + S_BLOCK;
+    s->bseg = (uint8_t *)(s->bha + S_BLOCK);
 
     vafm_kernel *K = &s->K;
     const vafm_reduced *rd = &s->nm.r;
@@ -254,7 +259,33 @@ static inline double s_height(const vafm_sim *s, double above_contact_m, double 
  * what the drifting surface added. Travel limits, height triggers and the fixed ramp's end are the piezo's. */
 static inline double s_ucmd(const vafm_sim *s)
 {
+    if (s->pz.on)
+        return s->ucmd_now;
     return s->v_drift != 0.0 ? s->K.u_spr - s->v_drift * s->K.t : s->K.u_spr;
+}
+
+/* The piezo's next sample interval: the command goes on at v_cmd, the actuator (hysteresis, creep) decides
+ * where the support gets to by the interval's end, and the support moves there at a constant speed (the
+ * surface's drift added). Called at every sample boundary while the piezo model is on. */
+static void s_piezo_next(vafm_sim *s)
+{
+    vafm_kernel *K = &s->K;
+    const double L = s->nm.sc.length_m, Ts = s->nm.Ts;
+    s->ucmd_now = s->ucmd_next;
+    s->ucmd_next = s->ucmd_now + s->v_cmd * Ts;
+    double ea = vafm_piezo_step(&s->pz, s->ucmd_next * L, Ts * s->nm.sc.time_s);
+    double target = ea / L + s->v_drift * (K->t + Ts);
+    s_kernel_phase(K, (target - K->u_spr) / Ts);
+    s->need_prepare = 1;
+}
+
+/* The command's speed for the phase that starts now (reduced): the support follows it, with the sample's
+ * drift, directly or through the piezo model (then at the next boundary's s_piezo_next). */
+static void s_set_speed(vafm_sim *s, double v)
+{
+    s->v_cmd = v;
+    if (!s->pz.on)
+        s_kernel_phase(&s->K, v + s->v_drift);
 }
 
 static void s_begin(vafm_sim *s, uint64_t index, int scene)
@@ -313,7 +344,11 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     K->t = 0.0;
     K->u_spr = s->uspr_start;
     double v0 = scene == S_SCENE_CURVE ? rd->v_approach : 0.0;
-    s_kernel_phase(K, v0 + s->v_drift);
+    s->pz.on = 0;
+    if (scene == S_SCENE_CURVE && vafm_piezo_on(&s->p))
+        vafm_piezo_begin(&s->pz, &s->p, s->uspr_start * L);
+    s->ucmd_now = s->ucmd_next = s->uspr_start;
+    s_set_speed(s, v0);
     vafm_kernel_set_dt(K, s->nm.dt);
     s->dt_cur = s->nm.dt;
     K->event = 0;
@@ -351,6 +386,8 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
         s->touch_uspr = K->u_spr;
     }
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
+    if (s->pz.on)
+        s_piezo_next(s);
     s->phase = scene == S_SCENE_CURVE ? S_PH_APPROACH : S_PH_TUNE;
     if (scene == S_SCENE_TUNE)
         s->tune_samples = (uint64_t)llround(s->p.tune_duration_s * s->p.sample_rate_Hz);
@@ -681,7 +718,8 @@ static void s_flush(vafm_sim *s, vafm_sample_fn fn, void *user, int *stop)
     if (s->nblk == 0)
         return;
     if (fn) {
-        vafm_samples b = { s->nblk, s->sample_index - s->nblk, s->bt, s->bh, s->bd, s->bf, s->btip, s->bseg };
+        vafm_samples b = { s->nblk, s->sample_index - s->nblk, s->bt, s->bh, s->bd, s->bf, s->btip, s->bseg,
+                           s->pz.on ? s->bha : NULL };
         if (fn(user, &b))
             *stop = 1;
     }
@@ -691,7 +729,7 @@ static void s_flush(vafm_sim *s, vafm_sample_fn fn, void *user, int *stop)
 static void s_start_retract(vafm_sim *s)
 {
     vafm_kernel *K = &s->K;
-    s_kernel_phase(K, -s->nm.r.v_retract + s->v_drift);
+    s_set_speed(s, -s->nm.r.v_retract);
     s->need_prepare = 1; /* the drift term changed with v_spr */
     s->t_retract0 = K->t;
     s->uspr_turn = s_ucmd(s);
@@ -728,8 +766,7 @@ static void s_phase_logic(vafm_sim *s, double force)
         if (trig) {
             s->dwell_left = lround(s->p.dwell_s * s->p.sample_rate_Hz);
             if (s->dwell_left > 0) {
-                s_kernel_phase(K, (s->p.dwell_mode == VAFM_DWELL_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0) +
-                                      s->v_drift);
+                s_set_speed(s, s->p.dwell_mode == VAFM_DWELL_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0);
                 s->need_prepare = 1;
                 s->phase = S_PH_DWELL;
             } else {
@@ -743,7 +780,7 @@ static void s_phase_logic(vafm_sim *s, double force)
             s_start_retract(s);
         else if (s->p.dwell_mode == VAFM_DWELL_FORCE) {
             /* an integral loop on the filtered deflection, acting once per sample: dz/dt = (F_hold − F)/(k τ) */
-            s_kernel_phase(K, s->fb_gain * (s->F_hold - force) + s->v_drift);
+            s_set_speed(s, s->fb_gain * (s->F_hold - force));
             s->need_prepare = 1;
         }
         break;
@@ -837,6 +874,11 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         size_t j = s->nblk++;
         s->bt[j] = t_m * sc->time_s;
         s->bh[j] = s_height(s, -uspr_m * sc->length_m, s->bt[j]);
+        if (s->pz.on) { /* the files' piezo height is the command; where the support was is the actual one */
+            double uc = s->p.antialias == VAFM_ANTIALIAS_MEAN ? 0.5 * (s->ucmd_now + s->ucmd_next) : s->ucmd_next;
+            s->bha[j] = s->bh[j];
+            s->bh[j] = -uc * sc->length_m + s->surf0_m;
+        }
         s->bd[j] = defl * sc->length_m;
         s->bf[j] = force * sc->force_N;
         s->btip[j] = s_height(s, -u_m * sc->length_m, s->bt[j]);
@@ -848,6 +890,8 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
                 s->sample_min_force = force;
         }
         s_phase_logic(s, force);
+        if (s->pz.on && s->phase != S_PH_DONE)
+            s_piezo_next(s);
         if (s->nblk == S_BLOCK)
             s_flush(s, fn, user, &stop);
     }

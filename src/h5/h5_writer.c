@@ -896,8 +896,8 @@ void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_
     vafm_h5_meta_default(&c->meta);
     c->n = s->n;
     c->force_N = s->force_N;
-    /* an ideal height sensor: the measured height is the piezo height */
-    c->height_measured_m = s->height_m;
+    /* the z sensor's reading (the piezo's actual height through the sensor); an ideal piezo: the command */
+    c->height_measured_m = s->height_measured_m ? s->height_measured_m : s->height_m;
     c->height_piezo_m = s->height_m;
     c->segment = s->segment;
     c->time_s = s->time_s;
