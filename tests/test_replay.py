@@ -72,7 +72,7 @@ def test_logged_run_replays_bit_for_bit(fig4, tmp_path):
     assert start["block_samples"] == live[0]["block_samples"]
     assert start["scene"] == live[0]["scene"]  # the file's provenance: the scene at log start
     rp = start["replay"]
-    assert rp["vafm"]["format_version"] == "1.0" and rp["vafm"]["seed"] == live[0]["scene"]["seed"]
+    assert rp["vafm"]["format_version"] == "1.1" and rp["vafm"]["seed"] == live[0]["scene"]["seed"]
     assert rp["software"] == "vafm" and rp["curves_in_file"] == 2 and rp["passes"] == 1
     c0 = rp["curves"][0]
     assert c0["attributes"]["spring constant"] == live[0]["scene"]["k_N_per_m"]
