@@ -436,9 +436,60 @@ static void test_surface_height_param(void)
     ENSURE(vafm_params_validate(&p, NULL) == VAFM_EINVAL);
 }
 
+/* the patterns: stripes' layout, a disc's footprint, domains deterministic from their seed */
+static int t_material(const vafm_map_spec *s, const vafm_params *base, int ix, int iy)
+{
+    vafm_map_truth t;
+    return vafm_map_pixel(s, base, ix, iy, NULL, &t, NULL) ? -1 : t.material;
+}
+
+static void test_patterns(void)
+{
+    vafm_params base;
+    vafm_preset_apply(&base, "contact-silica", NULL);
+    vafm_map_spec s;
+    vafm_map_spec_default(&s);
+    s.nx = 8;
+    s.ny = 2;
+    s.pattern = VAFM_MAP_STRIPES;
+    s.period_m = 5e-6; /* 2 periods over 10 um: a a b b a a b b */
+    int want[8] = { 0, 0, 1, 1, 0, 0, 1, 1 }, ok = 1;
+    for (int ix = 0; ix < 8; ix++)
+        ok &= t_material(&s, &base, ix, 0) == want[ix] && t_material(&s, &base, ix, 1) == want[ix];
+    ENSURE_MSG(ok, "stripes: a a b b a a b b");
+    vafm_map_truth t;
+    vafm_params p;
+    ENSURE(vafm_map_pixel(&s, &base, 2, 0, &p, &t, NULL) == 0);
+    ENSURE(p.E_star_Pa == 1e9 && p.gamma_J_per_m2 == 0.02 && p.contact == base.contact && t.surface_height_m == 0);
+    s.material[1].contact = vafm_contact_hertz; /* hertz: no surface energy */
+    ENSURE(vafm_map_pixel(&s, &base, 2, 0, &p, &t, NULL) == 0 && p.gamma_J_per_m2 == 0 && t.gamma_J_per_m2 == 0);
+    /* domains: the same seed the same blend, another seed another; fraction 0 and 1 the pure phases */
+    vafm_map_spec_default(&s);
+    s.nx = s.ny = 64;
+    s.pattern = VAFM_MAP_DOMAINS;
+    s.domain_m = 1e-6;
+    int n1 = 0, diff = 0;
+    vafm_map_spec s2 = s;
+    s2.domain_seed = 2;
+    for (int iy = 0; iy < 64; iy++)
+        for (int ix = 0; ix < 64; ix++) {
+            int m = t_material(&s, &base, ix, iy);
+            ENSURE(m == t_material(&s, &base, ix, iy));
+            n1 += m;
+            diff += m != t_material(&s2, &base, ix, iy);
+        }
+    printf("  domains 64 x 64, fraction 0.5: %d pixels of b, %d differ with another seed\n", n1, diff);
+    ENSURE(n1 > 64 * 64 / 5 && n1 < 64 * 64 * 4 / 5 && diff > 64 * 64 / 5);
+    s.fraction = 0;
+    ENSURE(t_material(&s, &base, 10, 10) == 0);
+    s.fraction = 1;
+    ENSURE(t_material(&s, &base, 10, 10) == 1);
+}
+
 int main(void)
 {
     RUN_TEST(test_bad_input);
+    RUN_TEST(test_patterns);
     RUN_TEST(test_surface_height_param);
     RUN_TEST(test_uniform_is_single_curve);
     RUN_TEST(test_stripes_hertz_moduli);
