@@ -22,4 +22,4 @@ from .spawn import Daemon
 __all__ = ["CHANNELS", "DEFAULT_PUB", "DEFAULT_REP", "HEADER", "MAGIC", "Client", "Curve", "Daemon",
            "DaemonError", "GapError", "H5File", "Header", "Run", "Stream", "TransportError", "decode_header",
            "load_h5"]
-__version__ = "0.4.0"
+__version__ = "0.5.0"
