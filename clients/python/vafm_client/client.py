@@ -387,11 +387,10 @@ class Stream:
                 if topic == "heartbeat":
                     restart = self._session(p.get("session"))
                     if restart:
-                        self._hb_uptime = None
                         yield "restart", restart
                     # heartbeats keep a 1 s grid of the daemon's clock and a stalled publisher skips the
                     # beats it missed: consecutive uptimes stall_s or more apart reveal a stall, also to a
-                    # client that was not reading at the time
+                    # client that was not reading at the time (a restarted daemon's uptime starts again: no false alarm)
                     up = p.get("uptime_s")
                     if isinstance(up, (int, float)):
                         last, self._hb_uptime = getattr(self, "_hb_uptime", None), up
@@ -430,9 +429,10 @@ class Stream:
                 for run in self._pending.values():
                     run.restarted = True
                 continue
-            if topic in ("run.start", "heartbeat"):
+            if topic in ("run.start", "heartbeat", "campaign.end"):
                 # a run that started and is not the daemon's current one any more, without a run.end: truncated
-                cur = p.get("run_id")
+                # (campaign.end follows the last run.end of a campaign: no run of it is current then)
+                cur = p.get("run_id") if topic != "campaign.end" else None
                 for rid in [r for r, run in self._pending.items() if run.start is not None and r != cur]:
                     run = self._pending.pop(rid)
                     run.truncated = True
