@@ -1010,8 +1010,8 @@ int vafm_cli_listen(int argc, char **argv)
             (m.kind == VAFM_MSG_RUN_START || m.kind == VAFM_MSG_HEARTBEAT ||
              (m.kind == VAFM_MSG_OTHER && !strcmp(m.topic, "campaign.end")))) {
             /* the daemon is past the run (idle, or another run) and its run.end never came */
-            s_err(&x, "run %" PRId64 ": no run.end (the stream stopped mid-run: truncated) after %zu samples: not "
-                  "written", r.run_id, r.n);
+            s_err(&x, "run %" PRId64 ": no run.end (the stream stopped mid-run: truncated, or its end was lost) "
+                  "after %zu samples: not written", r.run_id, r.n);
             failed = 1;
             L.runs_done++;
             L.runs_bad++;

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: MIT
 """Client (commands) and Stream (sample stream) of vafmd; see the package docstring and protocol/wire.md."""
 import json
+import os
 import struct
 import time
 from collections import namedtuple
@@ -121,7 +122,9 @@ class Client:
     def new_client_run_id(self):
         """A client_run_id unique to this client (a retried start with it is answered, not run again)."""
         self._run_ids += 1
-        return f"py-{id(self):x}-{time.monotonic_ns():x}-{self._run_ids}"
+        if not hasattr(self, "_token"):
+            self._token = os.urandom(4).hex()
+        return f"py-{self._token}-{self._run_ids}"
 
     def request(self, obj, timeout=None, retries=None):
         """Send one command (a dict with "cmd") and return its ok reply; raise DaemonError on an error reply,
