@@ -54,8 +54,11 @@ static const char s_usage[] =
     "\nCOMMANDS (JSON on the REP socket, protocol/wire.md): hello get set presets curve tune campaign\n"
     "  replay abort status log shutdown\n"
     "\nSTREAM topics: data, run.start, run.end, campaign.end, event, heartbeat (1 Hz)\n"
+    "\nFAULTS: a fault plan in the config file (\"faults\": {\"seed\", \"script\", \"random\"}, protocol/faults.md)\n"
+    "  or the `faults` command makes the daemon misbehave on purpose, for testing acquisition software\n"
     "\nSIGNALS: SIGINT/SIGTERM end the run in progress (run.end \"aborted\") and exit 0\n"
-    "\nEXIT STATUS: 0 clean shutdown, 1 runtime error (cannot bind), 2 usage or configuration error\n";
+    "\nEXIT STATUS: 0 clean shutdown, 1 runtime error (cannot bind), 2 usage or configuration error,\n"
+    "  3-125 a `kill` fault's status\n";
 
 /* Without CURVE, loopback or local transports only: an open port would be an unauthenticated
  * instrument on the network. */
