@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include "daemon/cmd_json.h"
+#include "daemon/faults.h"
 #include "vafm/wire.h"
 #include "harness.h"
 
@@ -51,6 +52,12 @@ static int s_one(const uint8_t *data, size_t len)
             if (!v && !s_known_code(e.code))
                 ok = -1;
             json_decref(v);
+        } else if (c.kind == VAFMD_CMD_FAULTS && c.fault_plan) {
+            /* a fault plan: accepted, or refused with a known code, a field and a message */
+            static vafmd_fault_plan fp;
+            vafmd_err fe = { 0 };
+            if (vafmd_faults_decode(c.fault_plan, &fp, &fe) && (!s_known_code(fe.code) || !fe.message[0]))
+                ok = -1;
         } else if (c.kind == VAFMD_CMD_LOG) {
             /* a decoded log is a stop alone, or a start with a path of a bounded length and not both flags */
             if (c.log_stop ? (c.log_path || c.log_overwrite || c.log_resume)
@@ -84,6 +91,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 #else
 static const char *const s_corpus[] = {
     "{\"cmd\":\"hello\"}",
+    "{\"cmd\":\"faults\",\"plan\":{\"seed\":3,\"script\":[{\"kind\":\"drop\",\"run\":2,\"block\":5,\"blocks\":3},"
+    "{\"kind\":\"no_reply\",\"cmd\":\"curve\",\"nth\":2},{\"kind\":\"dropout\",\"time_s\":0.1,\"value\":\"stuck\"}],"
+    "\"random\":{\"late\":{\"per_block\":0.1,\"delay_s\":0.2},\"busy\":{\"per_command\":0.5,\"cmd\":\"get\"}}}}",
+    "{\"cmd\":\"faults\",\"clear\":true}",
     "{\"cmd\":\"hello\",\"id\":42}",
     "{\"cmd\":\"get\"}",
     "{\"cmd\":\"get\",\"names\":[\"k_N_per_m\",\"speed\"],\"info\":true}",

@@ -316,7 +316,8 @@ def test_listen_several_runs_and_gaps(tmp_path):
         _, err = lp.communicate(timeout=60)
         assert lp.returncode == 0, err
         f = load_h5(str(out))
-        assert [c.meta["curve id"] for c in f] == ["run 1 index 1", "run 3 index 2"], err
+        # Client.curve gives each start a client_run_id of its own (retries are idempotent): " client ..."
+        assert [c.meta["curve id"].split(" client ")[0] for c in f] == ["run 1 index 1", "run 3 index 2"], err
         assert "is a tune: not written" in err
         d.client.wait_idle()
         d.client.set(block_s=0.001)
@@ -335,7 +336,9 @@ def test_listen_several_runs_and_gaps(tmp_path):
             if lp.poll() is None:
                 lp.kill()
                 lp.communicate()
-        assert lp.returncode == 1 and "lost (sequence gap)" in err, err
+        # the loss shows as a seq gap, or (the tune's run.end lost too, a heartbeat seen first) as a run
+        # that never got its run.end
+        assert lp.returncode == 1 and ("lost (sequence gap)" in err or "no run.end" in err), err
     finally:
         assert d.stop() == 0
 

@@ -18,6 +18,8 @@ struct vafm_client {
     int retries;
     int have_seq;  /* a data seq has been seen: gap detection starts there */
     uint64_t last_seq, gaps;
+    int64_t session; /* the publisher's stream session (heartbeats, data headers), -1: none seen; a change is a
+                        publisher restart: sequence numbers start again, so gap detection starts afresh */
     char code[32]; /* daemon error code of the last request */
     int curve;     /* CURVE keys set: applied to every socket before it connects */
     char server_pub[41], client_pub[41], client_sec[41];
@@ -84,6 +86,7 @@ int vafm_client_new(vafm_client **out, const char *rep_endpoint, const char *pub
         s_err(err, VAFM_ENOMEM, NULL, "out of memory");
         return VAFM_ENOMEM;
     }
+    c->session = -1;
     c->ctx = zmq_ctx_new();
     if (!c->ctx || s_open_req(c) != 0) {
         s_err(err, VAFM_EIO, "endpoint", "cannot connect to '%s': %s", c->rep_ep, zmq_strerror(zmq_errno()));
@@ -372,11 +375,18 @@ static int s_parse_json(vafm_client *c, vafm_client_msg *m, vafm_error *err)
         }
         break;
     }
-    case VAFM_MSG_HEARTBEAT:
+    case VAFM_MSG_HEARTBEAT: {
+        json_int_t sess = json_integer_value(json_object_get(j, "session"));
+        if (sess > 0 && sess != c->session) {
+            if (c->session >= 0)
+                c->have_seq = 0; /* a restarted publisher: its sequence numbers start again */
+            c->session = sess;
+        }
         s_str(j, "state", m->status, sizeof m->status);
         m->samples = s_int(j, "samples");
         m->last_seq = s_int(j, "last_seq");
         break;
+    }
     default:
         break;
     }
@@ -496,6 +506,11 @@ int vafm_client_receive(vafm_client *c, vafm_client_msg *msg, int timeout_ms, va
         const unsigned char *src = zmq_msg_data(&f[2 + k]);
         for (size_t i = 0; i < n; i++) /* explicit little-endian loads: right on any host */
             msg->channels[k][i] = vafm_wire_get_f64(src + 8 * i);
+    }
+    if (h->reserved && (int64_t)h->reserved != c->session) { /* the header's last field: the session */
+        if (c->session >= 0)
+            c->have_seq = 0; /* a restarted publisher (wire.md §4): no gap across it */
+        c->session = h->reserved;
     }
     if (c->have_seq && h->seq > c->last_seq + 1) {
         msg->gap = h->seq - c->last_seq - 1;

@@ -186,6 +186,14 @@ VAFM_API int vafm_h5_resume_check(const char *path, const vafm_params *scene, co
 VAFM_API int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth,
                                    vafm_error *err);
 
+/**
+ * Set a free root attribute (hdf5.md L3): a scalar string named "vafm ..." other than vafm's provenance
+ * attributes (vafmd's log keeps its fault record in "vafm faults"). Replaces an earlier value; durable
+ * at the next flush.
+ * @return 0, VAFM_EINVAL (no writer, or a name that is not free), VAFM_EIO.
+ */
+VAFM_API int vafm_h5_writer_set_note(vafm_h5_writer *w, const char *name, const char *text, vafm_error *err);
+
 /** Write pending ground-truth rows and flush the file to the operating system (H5Fflush). After it
  *  returns, a killed process leaves every curve appended so far readable. @return 0 or VAFM_EIO. */
 VAFM_API int vafm_h5_writer_flush(vafm_h5_writer *w, vafm_error *err);

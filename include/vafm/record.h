@@ -92,6 +92,10 @@ VAFM_API int vafm_recorder_append(vafm_recorder *r, const vafm_record_curve *c, 
 /** Make every appended curve durable now. @return 0 or VAFM_EIO. */
 VAFM_API int vafm_recorder_flush(vafm_recorder *r, vafm_error *err);
 
+/** Set a free root attribute of the file (a string named "vafm ...", vafm_h5_writer_set_note), durable
+ *  with the next flush (the next append's, or the close's). @return 0, VAFM_EINVAL, VAFM_EIO. */
+VAFM_API int vafm_recorder_set_note(vafm_recorder *r, const char *name, const char *text, vafm_error *err);
+
 /** @return curves in the file: kept on resume + appended. */
 VAFM_API uint64_t vafm_recorder_count(vafm_recorder *r);
 

@@ -47,7 +47,7 @@ typedef struct vafm_wire_header {
     double sample_rate_Hz;   /**< @48 output sample rate, Hz */
     int64_t t0_ns;           /**< @56 time of the first sample since the run start, ns (round(first/fs·1e9)) */
     uint32_t flags;          /**< @64 enum vafm_wire_flag, or-ed */
-    uint32_t reserved;       /**< @68 zero */
+    uint32_t reserved;       /**< @68 the stream session (protocol/faults.md §4; 0 from daemons before 0.5) */
 } vafm_wire_header;
 
 #if defined(__cplusplus)

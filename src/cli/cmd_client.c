@@ -565,6 +565,8 @@ typedef struct s_run {
     json_t *start;         /* run.start */
     double fs, t_off;
     uint64_t gaps;
+    int restarted;         /* the publisher restarted (a new session) while the run was received */
+    uint64_t clipped;      /* blocks flagged CLIPPED (ADC saturation) */
     double *col[S_NCH], *time_s;
     uint8_t *seg;
     size_t n, cap;
@@ -599,6 +601,8 @@ static void s_run_reset(s_run *r)
     r->run_id = -1;
     r->active = r->skip = 0;
     r->gaps = 0;
+    r->restarted = 0;
+    r->clipped = 0;
     r->n = 0;
 }
 
@@ -720,9 +724,20 @@ static int s_run_end(s_listen *L, s_run *r, const vafm_client_msg *m)
     const char *kind = json_string_value(json_object_get(r->start, "kind"));
     if (m->gap)
         r->gaps += m->gap; /* blocks lost at the very end show only in run.end's last_seq */
+    size_t nan = 0; /* samples with a NaN measured signal: a detector dropout, recorded as it came */
+    for (size_t i = 0; i < r->n; i++)
+        nan += isnan(r->col[1][i]) || isnan(r->col[2][i]) || (r->map[3] >= 0 && isnan(r->col[3][i]));
     if (r->gaps) {
         s_err(L->x, "run %" PRId64 ": %" PRIu64 " data block(s) lost (sequence gap): not written", r->run_id,
               r->gaps);
+        rc = S_RUNTIME;
+    } else if (r->restarted) {
+        s_err(L->x, "run %" PRId64 ": the publisher restarted (new session) during the run: not written", r->run_id);
+        rc = S_RUNTIME;
+    } else if (nan && L->h5 && kind && !strcmp(kind, "curve")) {
+        s_err(L->x, "run %" PRId64 ": %zu sample(s) have NaN measured signals (detector dropout): not written (the "
+              "HDF5 layout holds finite values only, hdf5.md L16; record to CSV to keep them as they are)",
+              r->run_id, nan);
         rc = S_RUNTIME;
     } else if (strcmp(m->status, "ok")) {
         s_err(L->x, "run %" PRId64 " ended with status %s: not written", r->run_id, m->status);
@@ -740,6 +755,12 @@ static int s_run_end(s_listen *L, s_run *r, const vafm_client_msg *m)
         rc = S_RUNTIME;
     } else
         rc = L->h5 ? s_write_h5(L, r, end) : s_write_csv(L, r);
+    if (!rc && nan)
+        fprintf(stderr, "vafm listen: run %" PRId64 ": %zu sample(s) with NaN measured signals (detector dropout), "
+                "recorded as they came (nan)\n", r->run_id, nan);
+    if (!rc && r->clipped)
+        fprintf(stderr, "vafm listen: run %" PRId64 ": %" PRIu64 " block(s) flagged CLIPPED (ADC saturation), "
+                "recorded as they came\n", r->run_id, r->clipped);
     if (!rc && L->out && strcmp(L->out, "-"))
         fprintf(stderr, "vafm listen: run %" PRId64 " (%s, index %" PRIu64 "): %zu samples%s\n", r->run_id,
                 kind ? kind : "?", s_ju64(r->start, "index"), r->n,
@@ -792,6 +813,8 @@ static int s_run_data(s_listen *L, s_run *r, const vafm_client_msg *m)
 {
     const vafm_wire_header *h = &m->header;
     r->gaps += m->gap;
+    if (h->flags & VAFM_WIRE_FLAG_CLIPPED)
+        r->clipped++;
     if (m->gap)
         s_err(L->x, "run %" PRId64 ": data blocks seq %" PRIu64 "..%" PRIu64 " lost (sequence gap)", r->run_id,
               h->seq - m->gap, h->seq - 1);
@@ -938,6 +961,8 @@ int vafm_cli_listen(int argc, char **argv)
     s_run r = {.run_id = -1};
     vafm_client_msg m = {0};
     int failed = 0, silent_ms = 0;
+    int64_t session = -1; /* the publisher's stream session: a change is a restart (protocol/faults.md) */
+    double hb_uptime = -1; /* the last heartbeat's uptime_s: beats keep a 1 s grid, a stall skips some */
     while (!rc && !s_stop && (runs == 0 || L.runs_done < (uint64_t)runs)) {
         vafm_error e = {0};
         int q = vafm_client_receive(x.c, &m, 250, &e);
@@ -953,6 +978,46 @@ int vafm_cli_listen(int argc, char **argv)
             s_err(&x, "%s", e.message);
             rc = S_RUNTIME;
             break;
+        }
+        /* faults the stream shows (protocol/faults.md): a publisher restart, a stall, a truncated run */
+        int64_t sess = -1;
+        double up = -1;
+        if (m.kind == VAFM_MSG_DATA)
+            sess = m.header.reserved ? (int64_t)m.header.reserved : -1;
+        else if (m.kind == VAFM_MSG_HEARTBEAT && m.json) {
+            json_t *hb = json_loads(m.json, 0, NULL);
+            if (json_is_integer(json_object_get(hb, "session")))
+                sess = json_integer_value(json_object_get(hb, "session"));
+            if (json_is_number(json_object_get(hb, "uptime_s")))
+                up = json_number_value(json_object_get(hb, "uptime_s"));
+            json_decref(hb);
+        }
+        if (sess > 0 && sess != session) {
+            if (session >= 0) {
+                s_err(&x, "the publisher restarted: stream session %" PRId64 " -> %" PRId64 " (sequence numbers start "
+                      "again)", session, sess);
+                if (r.active && !r.skip)
+                    r.restarted = 1;
+            }
+            session = sess;
+        }
+        if (up >= 0) {
+            if (hb_uptime >= 0 && up - hb_uptime >= 1.5)
+                s_err(&x, "the stream stalled: no message for %.1f s (heartbeats included)", up - hb_uptime);
+            hb_uptime = up;
+        }
+        if (r.active && !r.skip && m.run_id != r.run_id &&
+            (m.kind == VAFM_MSG_RUN_START || m.kind == VAFM_MSG_HEARTBEAT ||
+             (m.kind == VAFM_MSG_OTHER && !strcmp(m.topic, "campaign.end")))) {
+            /* the daemon is past the run (idle, or another run) and its run.end never came */
+            s_err(&x, "run %" PRId64 ": no run.end (the stream stopped mid-run: truncated, or its end was lost) "
+                  "after %zu samples: not written", r.run_id, r.n);
+            failed = 1;
+            L.runs_done++;
+            L.runs_bad++;
+            s_run_reset(&r);
+            if (runs && L.runs_done >= (uint64_t)runs)
+                break;
         }
         if (m.run_id < 0 || (want >= 0 && m.run_id != want)) {
             if (m.gap) { /* maybe with the run.start of a run we then miss */

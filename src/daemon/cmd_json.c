@@ -155,7 +155,8 @@ static int s_param_apply(vafm_params *p, const vafm_param_info *f, json_t *v, va
 /* ---- decoding ------------------------------------------------------------------------------------ */
 
 static const char *const s_cmd_names[] = { "hello", "get", "set", "presets", "curve", "tune",
-                                           "abort", "status", "shutdown", "campaign", "log", "replay" };
+                                           "abort", "status", "shutdown", "campaign", "log", "replay",
+                                           "faults" };
 
 const char *vafmd_cmd_name(int kind)
 {
@@ -176,6 +177,7 @@ static const char *const s_cmd_keys[] = {
     [VAFMD_CMD_CAMPAIGN] = " n T_K v_m_per_s k_N_per_m first_index client_run_id ",
     [VAFMD_CMD_LOG] = " path overwrite resume stop ",
     [VAFMD_CMD_REPLAY] = " path curves speed loop client_run_id ",
+    [VAFMD_CMD_FAULTS] = " plan clear ",
 };
 
 static int s_key_allowed(int kind, const char *key)
@@ -352,7 +354,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
             kind = i;
     if (kind < 0) {
         vafmd_err_set(e, VAFMD_E_UNKNOWN_COMMAND, "cmd", "unknown command '%.64s' (known: hello get set presets "
-                      "curve tune abort status shutdown campaign log replay)", json_string_value(cmd));
+                      "curve tune abort status shutdown campaign log replay faults)", json_string_value(cmd));
         return -1;
     }
     const char *key;
@@ -542,6 +544,28 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     }
     if (kind == VAFMD_CMD_REPLAY && s_decode_replay(root, c, e))
         return -1;
+    if (kind == VAFMD_CMD_FAULTS) { /* the plan itself is checked by vafmd_faults_decode (faults.c) */
+        if ((v = json_object_get(root, "clear")) != NULL) {
+            if (!json_is_boolean(v)) {
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "clear", "\"clear\" must be true or false");
+                return -1;
+            }
+            c->fault_clear = json_is_true(v);
+        }
+        if ((v = json_object_get(root, "plan")) != NULL) {
+            if (c->fault_clear) {
+                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "clear", "\"clear\": true takes no \"plan\" (a plan replaces the "
+                              "one in force anyway)");
+                return -1;
+            }
+            if (!json_is_object(v)) {
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "plan", "\"plan\" must be an object {\"seed\", \"script\", "
+                              "\"random\"}");
+                return -1;
+            }
+            c->fault_plan = v;
+        }
+    }
     return 0;
 }
 

@@ -8,6 +8,7 @@
  * started here minus runs the simulation thread reports as done.
  */
 #include <errno.h>
+#include <math.h>
 #include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -68,14 +69,15 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "daemon_version", json_string(VAFMD_VERSION));
     json_object_set_new(r, "library_version", json_string(vafm_version()));
     json_object_set_new(r, "capabilities",
-                        json_pack("[ssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
-                                  "status", "log", "shutdown", "campaign", "replay"));
+                        json_pack("[sssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
+                                  "status", "log", "shutdown", "campaign", "replay", "faults"));
     json_object_set_new(r, "not_implemented", json_array());
     json_object_set_new(r, "security", json_string(d->auth.on ? "curve" : "none"));
     json_t *stream = json_string(d->pub_endpoint); /* NULL for an endpoint that is not UTF-8 */
     json_object_set_new(r, "stream", stream ? stream : json_null());
     json_object_set_new(r, "channels", vafmd_channels_json());
     json_object_set_new(r, "max_request_bytes", json_integer(VAFMD_MAX_CMD_BYTES));
+    json_object_set_new(r, "session", json_integer(atomic_load(&d->sh.session)));
     return r;
 }
 
@@ -179,6 +181,148 @@ static json_t *s_log(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     return r;
 }
 
+/* ---- fault injection (faults.h, protocol/faults.md) ------------------------------------------------ */
+
+/* Faults the simulation thread recorded (its own and the command faults noted to it), and plans it
+ * replaced: taken here, between requests. */
+static void s_faults_poll(vafmd *d)
+{
+    vafmd_fault_rec fr;
+    while (vafmd_ring_pop(&d->fault_ring, &fr))
+        d->fault_last[d->faults_total++ % VAFMD_FAULT_LAST] = fr;
+    vafmd_fault_plan *old;
+    while (vafmd_ring_pop(&d->retire_ring, &old))
+        free(old);
+}
+
+/* {"plan": as given or null, "count": N, "last": [records, oldest first]} */
+static json_t *s_faults_report(vafmd *d)
+{
+    s_faults_poll(d);
+    json_t *o = json_object(), *a = json_array();
+    json_object_set_new(o, "plan", d->fplan_json ? json_incref(d->fplan_json) : json_null());
+    json_object_set_new(o, "count", json_integer((json_int_t)d->faults_total));
+    uint64_t n = d->faults_total < VAFMD_FAULT_LAST ? d->faults_total : VAFMD_FAULT_LAST;
+    for (uint64_t i = d->faults_total - n; i < d->faults_total; i++)
+        json_array_append_new(a, vafmd_fault_rec_json(&d->fault_last[i % VAFMD_FAULT_LAST]));
+    json_object_set_new(o, "last", a);
+    return o;
+}
+
+/* Install a plan (NULL: clear): the control thread's copy here, a heap copy for the simulation thread.
+ * @return 0, or -1 (busy: the ring is full; nothing changed). */
+static int s_faults_install(vafmd *d, const vafmd_fault_plan *p, json_t *given, vafmd_err *e)
+{
+    vafmd_fault_plan *mine = NULL, *sim = NULL;
+    if (p && (!(mine = malloc(sizeof *mine)) || !(sim = malloc(sizeof *sim)))) {
+        free(mine);
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "", "out of memory");
+        return -1;
+    }
+    if (p) {
+        *mine = *p;
+        *sim = *p;
+    }
+    vafmd_sim_cmd sc;
+    memset(&sc, 0, sizeof sc);
+    sc.type = VAFMD_SIM_FAULTS;
+    sc.plan = sim && sim->any_stream ? sim : NULL; /* a plan of command faults only: the stream stays off */
+    if (!vafmd_ring_push(&d->ring, &sc)) {
+        free(mine);
+        free(sim);
+        vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
+        return -1;
+    }
+    if (sim && !sc.plan)
+        free(sim);
+    free(d->fplan);
+    d->fplan = mine;
+    json_decref(d->fplan_json);
+    d->fplan_json = given ? json_deep_copy(given) : NULL;
+    d->fault_requests = 0;
+    memset(d->fault_match, 0, sizeof d->fault_match);
+    return 0;
+}
+
+int vafmd_faults_configure(vafmd *d, json_t *plan, vafmd_err *e)
+{
+    vafmd_fault_plan *p = malloc(sizeof *p);
+    if (!p) {
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "", "out of memory");
+        return -1;
+    }
+    int rc = vafmd_faults_decode(plan, p, e) || s_faults_install(d, p, plan, e) ? -1 : 0;
+    free(p);
+    return rc;
+}
+
+static json_t *s_faults_cmd(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+{
+    if (c->fault_clear && s_faults_install(d, NULL, NULL, e))
+        return NULL;
+    if (c->fault_plan && vafmd_faults_configure(d, c->fault_plan, e))
+        return NULL;
+    json_t *r = s_ok(c);
+    json_object_update(r, s_faults_report(d)); /* the plan now in force, the count and the last faults */
+    return r;
+}
+
+/* The command fault this request gets, if any (-1: none). The `faults` command itself is never faulted,
+ * so that a plan can always be cleared. */
+static int s_command_fault(vafmd *d, const vafmd_cmd *c, vafmd_fault_rec *fr)
+{
+    const vafmd_fault_plan *p = d->fplan;
+    if (__builtin_expect(!p || !p->any_command, 1) || c->kind == VAFMD_CMD_FAULTS)
+        return -1;
+    const char *name = vafmd_cmd_name(c->kind);
+    uint64_t nreq = ++d->fault_requests;
+    int kind = -1;
+    memset(fr, 0, sizeof *fr);
+    for (size_t i = 0; i < p->n_script && kind < 0; i++) {
+        const vafmd_fault_entry *en = &p->script[i];
+        if (vafmd_fault_where(en->kind) != VAFMD_FW_COMMAND || (en->cmd[0] && strcmp(en->cmd, name)))
+            continue;
+        if (++d->fault_match[i] == en->nth) {
+            kind = en->kind;
+            fr->p0 = en->p0;
+            fr->p1 = en->p1;
+            fr->scripted = 1;
+        }
+    }
+    for (int k = 0; k < VAFMD_F_N && kind < 0; k++) {
+        const vafmd_fault_random *rr = &p->rnd[k];
+        if (rr->per != VAFMD_FPER_COMMAND || !(rr->rate > 0) || (rr->cmd[0] && strcmp(rr->cmd, name)))
+            continue;
+        if (vafmd_fault_u01(p->seed, k, nreq, 0) < rr->rate) {
+            kind = k;
+            fr->p0 = rr->p0;
+            fr->p1 = rr->p1;
+        }
+    }
+    if (kind >= 0) {
+        fr->kind = kind;
+        fr->run_id = 0;
+        fr->block = fr->seq = -1;
+        fr->run_time_s = NAN;
+        snprintf(fr->cmd, sizeof fr->cmd, "%s", name);
+    }
+    return kind;
+}
+
+/* Hand an injected command fault to the simulation thread, which numbers, publishes and logs it. */
+static void s_fault_note(vafmd *d, vafmd_fault_rec *fr)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    fr->time_s = (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec; /* made uptime by the simulation thread */
+    vafmd_sim_cmd sc;
+    memset(&sc, 0, sizeof sc);
+    sc.type = VAFMD_SIM_FAULT_NOTE;
+    sc.fault = *fr;
+    for (int i = 0; i < 1000 && !vafmd_ring_push(&d->ring, &sc); i++) /* the control thread may wait */
+        nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
+}
+
 static json_t *s_status(vafmd *d, const vafmd_cmd *c)
 {
     const vafmd_shared *sh = &d->sh;
@@ -223,6 +367,8 @@ static json_t *s_status(vafmd *d, const vafmd_cmd *c)
                                                                                       : d->camp_first))));
     } else
         json_object_set_new(r, "campaign", json_null());
+    json_object_set_new(r, "session", json_integer(atomic_load(&d->sh.session)));
+    json_object_set_new(r, "faults", s_faults_report(d));
     json_object_set_new(r, "auth", json_pack("{s:s,s:I,s:I,s:I}", "mechanism", d->auth.on ? "curve" : "null", "clients",
                                              (json_int_t)d->auth.n_clients, "accepted",
                                              (json_int_t)atomic_load(&d->auth.accepted), "refused",
@@ -588,11 +734,75 @@ static json_t *s_execute(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
     case VAFMD_CMD_SHUTDOWN: *quit = 1; return s_ok(c);
     case VAFMD_CMD_CAMPAIGN: return s_campaign(d, c, e);
     case VAFMD_CMD_LOG: return s_log(d, c, e);
+    case VAFMD_CMD_FAULTS: return s_faults_cmd(d, c, e);
     default: vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "command not handled"); return NULL;
     }
 }
 
-static void s_reply(void *rep, json_t *r)
+/* The command socket is a ROUTER that behaves as REP does for REQ (and DEALER) clients: a request is
+ * [envelope..., empty delimiter, body...]; the reply goes back as [envelope..., empty, reply]. Being a
+ * ROUTER, it can leave a request unanswered (the `no_reply` fault) and still serve every other request
+ * and client: a REP socket must answer each request before it can receive the next. */
+#define S_MAX_ENVELOPE 16
+
+typedef struct s_request {
+    zmq_msg_t env[S_MAX_ENVELOPE]; /* routing frames and the empty delimiter */
+    int n_env;
+    zmq_msg_t body;                /* the first body frame */
+    int parts;                     /* body frames */
+} s_request;
+
+static void s_request_close(s_request *q)
+{
+    for (int i = 0; i < q->n_env; i++)
+        zmq_msg_close(&q->env[i]);
+    q->n_env = 0;
+    zmq_msg_close(&q->body);
+}
+
+/* Receive one whole message. @return 1 a request, 0 nothing usable (dropped, as REP drops a message
+ * without a delimiter), -1 the socket failed. */
+static int s_request_recv(void *sock, s_request *q)
+{
+    q->n_env = 0;
+    q->parts = 0;
+    zmq_msg_init(&q->body);
+    int delim = 0, more = 1, bad = 0;
+    while (more) {
+        zmq_msg_t m;
+        zmq_msg_init(&m);
+        if (zmq_msg_recv(&m, sock, 0) < 0) {
+            zmq_msg_close(&m);
+            if (errno == EINTR && (q->n_env || q->parts))
+                continue;
+            s_request_close(q);
+            return errno == EINTR || errno == EAGAIN ? 0 : -1;
+        }
+        more = zmq_msg_more(&m);
+        if (!delim) {
+            if (q->n_env >= S_MAX_ENVELOPE) {
+                bad = 1;
+                zmq_msg_close(&m);
+                continue;
+            }
+            delim = zmq_msg_size(&m) == 0 && q->n_env > 0;
+            zmq_msg_init(&q->env[q->n_env]);
+            zmq_msg_move(&q->env[q->n_env++], &m);
+            zmq_msg_close(&m);
+        } else if (q->parts++ == 0) {
+            zmq_msg_move(&q->body, &m);
+            zmq_msg_close(&m);
+        } else
+            zmq_msg_close(&m); /* further frames: counted, a "malformed" reply */
+    }
+    if (!delim || bad || !q->parts) {
+        s_request_close(q);
+        return 0;
+    }
+    return 1;
+}
+
+static void s_reply(void *sock, s_request *q, json_t *r)
 {
     char *text = json_dumps(r, JSON_COMPACT);
     json_decref(r);
@@ -600,7 +810,15 @@ static void s_reply(void *rep, json_t *r)
         text = strdup("{\"status\":\"error\",\"code\":\"internal\",\"message\":\"reply encoding failed\","
                       "\"field\":null}");
     if (text) {
-        while (zmq_send(rep, text, strlen(text), 0) < 0 && errno == EINTR)
+        for (int i = 0; i < q->n_env; i++) {
+            zmq_msg_t m;
+            zmq_msg_init(&m);
+            zmq_msg_copy(&m, &q->env[i]);
+            while (zmq_msg_send(&m, sock, ZMQ_SNDMORE) < 0 && errno == EINTR)
+                ;
+            zmq_msg_close(&m);
+        }
+        while (zmq_send(sock, text, strlen(text), 0) < 0 && errno == EINTR)
             ;
         free(text);
     }
@@ -610,8 +828,15 @@ int vafmd_control_loop(vafmd *d)
 {
     int quit = 0;
     while (!quit && !*d->stop) {
+        s_faults_poll(d);
+        int fx = atomic_load_explicit(&d->sh.fault_exit, memory_order_acquire);
+        if (fx) { /* a `kill` fault: stop as a shutdown does (the log is flushed and closed), with its status */
+            d->exit_status = fx;
+            fprintf(stderr, "vafmd: kill fault injected: exiting with status %d\n", fx);
+            break;
+        }
         zmq_pollitem_t it = { d->rep, 0, ZMQ_POLLIN, 0 };
-        int n = zmq_poll(&it, 1, 200);
+        int n = zmq_poll(&it, 1, 50);
         if (n < 0) {
             if (errno == EINTR)
                 continue;
@@ -619,42 +844,43 @@ int vafmd_control_loop(vafmd *d)
         }
         if (n == 0 || !(it.revents & ZMQ_POLLIN))
             continue;
-        zmq_msg_t msg;
-        zmq_msg_init(&msg);
-        if (zmq_msg_recv(&msg, d->rep, 0) < 0) {
-            zmq_msg_close(&msg);
-            if (errno == EINTR || errno == EAGAIN)
-                continue;
+        s_request q;
+        int got = s_request_recv(d->rep, &q);
+        if (got < 0)
             return 1;
-        }
-        /* A request is one frame; further frames are drained so that the REP state machine can reply. */
-        int parts = 1;
-        while (zmq_msg_more(&msg)) {
-            zmq_msg_t more;
-            zmq_msg_init(&more);
-            int rc = zmq_msg_recv(&more, d->rep, 0);
-            int again = rc >= 0 && zmq_msg_more(&more);
-            zmq_msg_close(&more);
-            parts++;
-            if (!again)
-                break;
-        }
+        if (!got)
+            continue;
         vafmd_err e = { 0 };
         vafmd_cmd c;
         json_t *r = NULL;
-        if (parts > 1)
-            vafmd_err_set(&e, VAFMD_E_MALFORMED, "", "a request is one single-frame message (got %d frames)", parts);
+        int fault = -1;
+        vafmd_fault_rec fr;
+        if (q.parts > 1)
+            vafmd_err_set(&e, VAFMD_E_MALFORMED, "", "a request is one single-frame message (got %d frames)", q.parts);
         else {
-            if (vafmd_cmd_decode(zmq_msg_data(&msg), zmq_msg_size(&msg), &c, &e) == 0)
-                r = s_execute(d, &c, &quit, &e);
+            if (vafmd_cmd_decode(zmq_msg_data(&q.body), zmq_msg_size(&q.body), &c, &e) == 0) {
+                fault = s_command_fault(d, &c, &fr);
+                if (fault == VAFMD_F_BUSY) /* not executed: the client is told to retry */
+                    vafmd_err_set(&e, VAFMD_E_BUSY, "", "the daemon is busy (injected fault); retry");
+                else
+                    r = s_execute(d, &c, &quit, &e);
+            }
             if (!r)
                 r = vafmd_error_reply(&e, c.id); /* the id of any request that was a JSON object */
             vafmd_cmd_free(&c);
         }
         if (!r)
             r = vafmd_error_reply(&e, NULL);
-        zmq_msg_close(&msg);
-        s_reply(d->rep, r);
+        if (fault == VAFMD_F_NO_REPLY) /* executed, its reply lost: the client must reopen its socket */
+            json_decref(r);
+        else {
+            if (fault == VAFMD_F_REPLY_DELAY) /* the control thread may wait; the simulation thread never does */
+                nanosleep(&(struct timespec){ (time_t)fr.p0, (long)((fr.p0 - floor(fr.p0)) * 1e9) }, NULL);
+            s_reply(d->rep, &q, r);
+        }
+        s_request_close(&q);
+        if (fault >= 0)
+            s_fault_note(d, &fr);
     }
     return 0;
 }

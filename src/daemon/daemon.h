@@ -8,6 +8,7 @@
  */
 #ifndef VAFMD_DAEMON_H
 #define VAFMD_DAEMON_H
+#include <jansson.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
@@ -16,6 +17,7 @@
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "daemon/spsc_ring.h"
+#include "daemon/faults.h"
 
 #ifndef VAFM_PROJECT_VERSION
 #define VAFM_PROJECT_VERSION "unknown"
@@ -43,7 +45,11 @@ typedef struct vafmd_settings {
 void vafmd_settings_default(vafmd_settings *s);
 
 enum vafmd_run_kind { VAFMD_RUN_CURVE = 0, VAFMD_RUN_TUNE = 1, VAFMD_RUN_REPLAY = 2 };
-enum vafmd_sim_cmd_type { VAFMD_SIM_START = 1, VAFMD_SIM_ABORT = 2, VAFMD_SIM_QUIT = 3 };
+enum vafmd_sim_cmd_type {
+    VAFMD_SIM_START = 1, VAFMD_SIM_ABORT = 2, VAFMD_SIM_QUIT = 3,
+    VAFMD_SIM_FAULTS = 4,     /* a new fault plan (plan; NULL: none); the old one goes back on the retire ring */
+    VAFMD_SIM_FAULT_NOTE = 5, /* a command fault the control thread injected: record and publish it */
+};
 
 /* A campaign (protocol/wire.md, `campaign`): the grid of `vafm campaign`, run curve after curve by the
  * simulation thread on its own. Global curve g (g = point·N + i, its random stream) is run
@@ -78,6 +84,8 @@ typedef struct vafmd_sim_cmd {
     int log;             /* START: 1 = push the run's samples to the HDF5 writer thread */
     char client_run_id[65];
     vafmd_campaign *camp; /* START of a campaign (sim, start_json NULL): ownership passes */
+    vafmd_fault_plan *plan; /* FAULTS: ownership passes (NULL: clear) */
+    vafmd_fault_rec fault;  /* FAULT_NOTE */
 } vafmd_sim_cmd;
 
 /* ---- HDF5 logging (log.c) ------------------------------------------------------------------------
@@ -173,6 +181,9 @@ typedef struct vafmd_log {
                                              writer takes nothing from the ring (forces overflows) */
     pthread_mutex_t err_mu;               /* guards err (writer thread ↔ control thread) */
     char err[512];                        /* last write error, "" if none */
+    vafmd_ring fault_ring;                /* simulation thread → writer: faults injected while logging is on,
+                                             kept in the file's root attribute "vafm faults" (faults.md) */
+    vafmd_fault_rec fault_store[256];
 } vafmd_log;
 
 #define VAFMD_LOOKAHEAD_MAX_BYTES (256u << 20) /* memory of a run's compute-ahead FIFO (sim_thread.c) */
@@ -210,6 +221,8 @@ typedef struct vafmd_shared {
     atomic_uint_least64_t camp_next;   /* global index of its curve in progress (or next) */
     atomic_uint_least64_t queued;      /* blocks computed ahead, not yet released (current run) */
     atomic_uint_least64_t lookahead_blocks; /* capacity of the current (or last) run's FIFO, blocks */
+    atomic_uint_least32_t session;     /* stream session (faults.md): changes with a `restart` fault */
+    atomic_int fault_exit;             /* a `kill` fault: the exit status the daemon must stop with, 0: none */
 } vafmd_shared;
 
 /* CURVE security (auth.c). Configured = a server secret key is given; then both sockets are CURVE
@@ -245,6 +258,19 @@ typedef struct vafmd {
     volatile sig_atomic_t *stop; /* set by SIGINT/SIGTERM */
     vafmd_log log;
     vafmd_auth auth;
+    /* fault injection (faults.h): the control thread's copy of the plan, the plan as given (for the
+     * query), the injected faults the simulation thread reports back, replaced plans to free */
+    vafmd_fault_plan *fplan;
+    json_t *fplan_json;
+    uint64_t fault_requests;          /* requests seen since the plan was set (random command faults) */
+    uint64_t fault_match[VAFMD_FAULT_SCRIPT_MAX]; /* per script entry: matching requests so far */
+    vafmd_ring fault_ring;            /* simulation → control: injected faults (status) */
+    vafmd_fault_rec fault_store[256];
+    vafmd_ring retire_ring;           /* simulation → control: replaced plans, freed here */
+    vafmd_fault_plan *retire_store[VAFMD_RING_CAP * 2];
+    uint64_t faults_total;            /* control thread: faults recorded */
+    vafmd_fault_rec fault_last[VAFMD_FAULT_LAST];
+    int exit_status;                  /* control loop: the process exit status (a kill fault's) */
 } vafmd;
 
 /* sim_thread.c */
@@ -258,4 +284,8 @@ int vafmd_auth_secure(vafmd *d, void *sock);
 void *vafmd_auth_main(void *arg);
 /* control.c: serve until shutdown or a signal. @return 0 on a clean stop. */
 int vafmd_control_loop(vafmd *d);
+/* control.c: check and install a fault plan (the config file's "faults", the `faults` command). @return 0
+ * or -1 with e filled (nothing changed). */
+struct vafmd_err;
+int vafmd_faults_configure(vafmd *d, json_t *plan, struct vafmd_err *e);
 #endif

@@ -195,14 +195,37 @@ void *vafmd_log_main(void *arg)
     vafmd_log *L = &d->log;
     s_curve c;
     memset(&c, 0, sizeof c);
+    json_t *faults = NULL;          /* the faults of the open file (root attribute "vafm faults") */
+    vafm_recorder *faults_of = NULL; /* the recorder they belong to (a new log starts a new list) */
     for (;;) {
         vafmd_log_item it;
         int got = 0;
+        vafmd_fault_rec fr;
         if (L->test_stall && !atomic_load_explicit(&L->quit, memory_order_acquire) && access(L->test_stall, F_OK) == 0) {
             nanosleep(&(struct timespec){ 0, 1000000 }, NULL); /* test hook: a writer that does not keep up */
             continue;
         }
         int st = atomic_load_explicit(&L->state, memory_order_acquire);
+        int fdirty = 0;
+        while (vafmd_ring_pop(&L->fault_ring, &fr)) { /* faults first: a curve's come before its end */
+            if (st == VAFMD_LOG_OFF || !L->w)
+                continue;
+            if (faults_of != L->w) {
+                json_decref(faults);
+                faults = json_array();
+                faults_of = L->w;
+            }
+            json_array_append_new(faults, vafmd_fault_rec_json(&fr));
+            fdirty = 1;
+        }
+        if (fdirty) { /* durable with the next flush: the next curve's append, or the close */
+            char *text = json_dumps(faults, JSON_COMPACT);
+            vafm_error e;
+            memset(&e, 0, sizeof e);
+            if (!text || vafm_recorder_set_note(L->w, "vafm faults", text, &e))
+                s_set_err(L, "the fault record: %s%s", text ? e.message : "out of memory", "");
+            free(text);
+        }
         while (vafmd_ring_pop(&L->ring, &it)) {
             got = 1;
             s_handle(L, &c, &it, st != VAFMD_LOG_OFF);
@@ -215,6 +238,7 @@ void *vafmd_log_main(void *arg)
             if (c.begin)
                 atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
             s_curve_reset(&c);
+            faults_of = NULL; /* the next log starts a list of its own */
             if (vafm_recorder_close(&L->w, NULL, &e))
                 s_set_err(L, "closing the file: %s%s", e.message, "");
             atomic_store_explicit(&L->state, VAFMD_LOG_OFF, memory_order_release);
@@ -229,6 +253,7 @@ void *vafmd_log_main(void *arg)
             nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
     }
     s_curve_free(&c);
+    json_decref(faults);
     /* last one out: the simulation thread has exited (main.c joins it before it sets quit), so the pools
      * it left with blocks still in flight and the free ring's slots are this thread's to free */
     while (L->orphans) {

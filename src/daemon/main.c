@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 #include <jansson.h>
 #include <zmq.h>
 #include "daemon/cmd_json.h"
@@ -53,8 +54,11 @@ static const char s_usage[] =
     "\nCOMMANDS (JSON on the REP socket, protocol/wire.md): hello get set presets curve tune campaign\n"
     "  replay abort status log shutdown\n"
     "\nSTREAM topics: data, run.start, run.end, campaign.end, event, heartbeat (1 Hz)\n"
+    "\nFAULTS: a fault plan in the config file (\"faults\": {\"seed\", \"script\", \"random\"}, protocol/faults.md)\n"
+    "  or the `faults` command makes the daemon misbehave on purpose, for testing acquisition software\n"
     "\nSIGNALS: SIGINT/SIGTERM end the run in progress (run.end \"aborted\") and exit 0\n"
-    "\nEXIT STATUS: 0 clean shutdown, 1 runtime error (cannot bind), 2 usage or configuration error\n";
+    "\nEXIT STATUS: 0 clean shutdown, 1 runtime error (cannot bind), 2 usage or configuration error,\n"
+    "  3-125 a `kill` fault's status\n";
 
 /* Without CURVE, loopback or local transports only: an open port would be an unauthenticated
  * instrument on the network. */
@@ -150,6 +154,7 @@ static int s_curve_config(vafmd *d, const json_t *secret, const json_t *pub, con
 int main(int argc, char **argv)
 {
     static vafmd d;
+    json_t *cfg_faults = NULL; /* the config file's fault plan, installed once the rings exist */
     const char *rep_ep = VAFMD_DEFAULT_REP, *pub_ep = VAFMD_DEFAULT_PUB, *config = NULL, *preset = NULL;
     const char *speed = NULL, *sens = NULL, *hwm = NULL;
     int free_run = 0, curve_required = 0;
@@ -233,9 +238,23 @@ int main(int argc, char **argv)
         json_t *set = json_object();
         const char *key;
         json_object_foreach(cfg, key, v) {
-            if (!strcmp(key, "rep") || !strcmp(key, "pub") || !strcmp(key, "hwm") || !strncmp(key, "curve_", 6))
+            if (!strcmp(key, "rep") || !strcmp(key, "pub") || !strcmp(key, "hwm") || !strncmp(key, "curve_", 6) ||
+                !strcmp(key, "faults"))
                 continue;
             json_object_set(set, key, v);
+        }
+        if ((v = json_object_get(cfg, "faults")) != NULL) { /* a fault plan (protocol/faults.md): checked now */
+            vafmd_fault_plan *fp = malloc(sizeof *fp);
+            vafmd_err fe = { 0 };
+            if (!fp || vafmd_faults_decode(v, fp, &fe)) {
+                fprintf(stderr, "vafmd: config '%s': \"faults\": %s (field %s)\n", config, fp ? fe.message : "out of memory",
+                        fe.field[0] ? fe.field : "plan");
+                free(fp);
+                json_decref(cfg);
+                return 2;
+            }
+            free(fp);
+            cfg_faults = json_incref(v);
         }
         if (preset)
             json_object_set_new(set, "preset", json_string(preset));
@@ -299,7 +318,7 @@ int main(int argc, char **argv)
 
     d.zctx = zmq_ctx_new();
     snprintf(d.pub_endpoint, sizeof d.pub_endpoint, "%s", pub_ep);
-    d.rep = zmq_socket(d.zctx, ZMQ_REP);
+    d.rep = zmq_socket(d.zctx, ZMQ_ROUTER); /* REP to clients; see control.c */
     d.pub = zmq_socket(d.zctx, ZMQ_XPUB);
     int64_t maxmsg = 1 << 20; /* beyond 1 MiB the connection is dropped; 64 KiB..1 MiB get "too_large" */
     int linger = 1000, zero = 0;
@@ -356,9 +375,29 @@ int main(int argc, char **argv)
     vafmd_ring_init(&d.log.ring, d.log.ring_store, sizeof(vafmd_log_item), log_cap);
     vafmd_ring_init(&d.log.notice_ring, d.log.notice_store, sizeof(vafmd_log_notice), VAFMD_LOG_NOTICE_CAP);
     atomic_init(&d.log.state, VAFMD_LOG_OFF);
+    vafmd_ring_init(&d.log.fault_ring, d.log.fault_store, sizeof(vafmd_fault_rec),
+                    sizeof d.log.fault_store / sizeof d.log.fault_store[0]);
     pthread_mutex_init(&d.log.err_mu, NULL);
     d.next_run_id = 1;
     d.stop = &s_stop;
+    vafmd_ring_init(&d.fault_ring, d.fault_store, sizeof(vafmd_fault_rec), sizeof d.fault_store / sizeof d.fault_store[0]);
+    vafmd_ring_init(&d.retire_ring, d.retire_store, sizeof(vafmd_fault_plan *),
+                    sizeof d.retire_store / sizeof d.retire_store[0]);
+    { /* the stream session (faults.md): a nonzero number that changes with each start-up and restart fault */
+        struct timespec ts;
+        clock_gettime(CLOCK_REALTIME, &ts);
+        uint32_t s = (uint32_t)(ts.tv_nsec ^ (ts.tv_sec << 12) ^ ((uint64_t)getpid() << 20));
+        atomic_init(&d.sh.session, s ? s : 1);
+    }
+    if (cfg_faults) {
+        vafmd_err fe = { 0 };
+        int bad = vafmd_faults_configure(&d, cfg_faults, &fe);
+        json_decref(cfg_faults);
+        if (bad) {
+            fprintf(stderr, "vafmd: config: \"faults\": %s\n", fe.message);
+            return 2;
+        }
+    }
 
     /* Only the control thread takes SIGINT/SIGTERM: the simulation thread inherits them blocked. */
     sigset_t block, old;
@@ -412,5 +451,7 @@ int main(int argc, char **argv)
     free(d.auth.clients);
     zmq_ctx_term(d.zctx);
     fprintf(stderr, "vafmd: stopped\n");
-    return rc ? 1 : 0;
+    json_decref(d.fplan_json);
+    free(d.fplan);
+    return rc ? 1 : d.exit_status;
 }

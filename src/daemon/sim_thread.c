@@ -75,6 +75,8 @@ typedef struct s_block {
     int64_t ready;                     /* when its computation ended */
     double *log_t;                     /* a logged run: its samples' times and segments (the logged */
     uint8_t *log_seg;                  /* height, force and tip are ch[0], ch[2], ch[4]), else NULL */
+    int n_frec;                        /* controller faults applied to this block: published after it */
+    vafmd_fault_rec frec[2];
 } s_block;
 
 /* Release lateness of the paced blocks of a run (send time − deadline), for run.end's percentiles: a
@@ -120,6 +122,21 @@ typedef struct s_run {
     uint32_t rel_hist[S_REL_BINS]; /* release lateness histogram (paced runs) */
     uint64_t rel_n;
     int64_t rel_max_ns;
+    /* fault injection (faults.h; untouched without a plan) */
+    int64_t frun_block[VAFMD_F_N]; /* per-run random faults: the block they strike, -1: none */
+    uint64_t fdecided;             /* transport faults decided for blocks below this index */
+    int64_t hold_until;            /* late/jitter: the head block is held until then */
+    int n_held;
+    vafmd_fault_rec held[2];       /* late, jitter: published after the held block */
+    int restart_due;
+    vafmd_fault_rec restart_rec;
+    uint64_t drop_left;            /* blocks still to drop */
+    vafmd_fault_rec drop_rec;
+    uint64_t sat_left, dout_left;  /* controller faults: samples still to alter */
+    double sat_level;
+    int dout_stuck;
+    double last_v[3];              /* vDeflection, deflection, force of the last sample computed */
+    int fault_silent;              /* truncate/kill: the run ends without run.end and is not logged */
 } s_run;
 
 static void s_rel_add(s_run *r, int64_t late_ns)
@@ -159,6 +176,12 @@ typedef struct s_ctx {
     vafmd_log_pool *pool;  /* the log block pool of the current block size, or NULL */
     vafmd_log_pool *retired; /* replaced pools with blocks still at the writer (freed once all are home) */
     size_t pool_test_n;    /* $VAFMD_TEST_LOG_POOL (tests only): at most this many blocks a pool, 0: no limit */
+    vafmd_fault_plan *fp;  /* the fault plan (owned; given back through the retire ring), NULL: none */
+    uint64_t fault_n;      /* faults recorded */
+    int64_t stall_until;   /* a stall: nothing at all is sent until then (0: none) */
+    vafmd_fault_rec stall_rec;
+    int dead;              /* a kill fault: nothing is sent any more; the control thread exits */
+    uint64_t last_run_blocks; /* blocks of the last run: where per-run random faults may strike */
 } s_ctx;
 
 static int64_t s_now(void)
@@ -189,6 +212,8 @@ static void s_set_nodrop(s_ctx *x, int on)
 static int s_send(s_ctx *x, const void *const *part, const size_t *len, int n)
 {
     int dropped = 0;
+    if (x->dead) /* a kill fault: the daemon is gone as far as the stream is concerned */
+        return 0;
     s_set_nodrop(x, 1);
     for (int i = 0; i < n; i++) {
         int flags = ZMQ_DONTWAIT | (i + 1 < n ? ZMQ_SNDMORE : 0);
@@ -226,6 +251,207 @@ static void s_send_text(s_ctx *x, const char *topic, const char *text)
     const void *part[2] = { topic, text };
     size_t len[2] = { strlen(topic), strlen(text) };
     s_send(x, part, len, 2);
+}
+
+/* ---- Fault injection (faults.h, protocol/faults.md) -------------------------------------------------
+ * Without a plan (x->fp NULL) every hook below is skipped by one predictable branch. With one, transport
+ * faults are decided once per block at its release (s_fault_release), controller faults once per block
+ * when its computation completes (s_fault_compute); decisions are stateless hashes of (seed, kind, run,
+ * block), so a plan with a seed reproduces its faults. Each injected fault is recorded after it took
+ * effect: published on the `faults` topic, handed to the control thread (status) and, with logging on,
+ * to the log writer. None of it allocates (jansson's JSON for the topic aside, as for events). */
+
+static double s_run_fs(const s_run *r);
+
+static void s_fault_record(s_ctx *x, vafmd_fault_rec *fr)
+{
+    fr->n = ++x->fault_n;
+    fr->session = (uint32_t)atomic_load_explicit(&x->d->sh.session, memory_order_relaxed);
+    s_send_json(x, "faults", vafmd_fault_rec_json(fr));
+    vafmd_ring_push(&x->d->fault_ring, fr); /* full (control thread far behind): status misses it, counted */
+    if (atomic_load_explicit(&x->d->log.state, memory_order_acquire) == VAFMD_LOG_ON)
+        vafmd_ring_push(&x->d->log.fault_ring, fr);
+}
+
+/* A record of kind k at block bi of the current run. */
+static void s_fault_rec_init(s_ctx *x, vafmd_fault_rec *fr, int k, uint64_t bi, double p0, double p1, int scripted)
+{
+    s_run *r = &x->run;
+    memset(fr, 0, sizeof *fr);
+    fr->kind = k;
+    fr->time_s = (double)(s_now() - x->t_boot) / 1e9;
+    fr->run_id = r->cmd.run_id;
+    fr->block = (int64_t)bi;
+    fr->run_time_s = (double)(bi * r->block_n) / s_run_fs(r);
+    fr->seq = -1;
+    fr->p0 = p0;
+    fr->p1 = p1;
+    fr->scripted = (uint32_t)scripted;
+}
+
+/* Does fault kind k strike block bi of the current run? Its parameters then go to *p0, *p1. */
+static int s_fault_due(s_ctx *x, int k, uint64_t bi, double *p0, double *p1, int *scripted)
+{
+    const vafmd_fault_plan *p = x->fp;
+    const s_run *r = &x->run;
+    for (size_t i = 0; i < p->n_script; i++) {
+        const vafmd_fault_entry *en = &p->script[i];
+        if (en->kind != k || (en->run && en->run != r->cmd.run_id))
+            continue;
+        uint64_t b = en->block >= 0 ? (uint64_t)en->block
+                                    : (uint64_t)floor(en->time_s * s_run_fs(r) / (double)r->block_n);
+        if (b == bi) {
+            *p0 = en->p0;
+            *p1 = en->p1;
+            *scripted = 1;
+            return 1;
+        }
+    }
+    const vafmd_fault_random *rr = &p->rnd[k];
+    if (!(rr->rate > 0))
+        return 0;
+    *p0 = rr->p0;
+    *p1 = rr->p1;
+    *scripted = 0;
+    if (rr->per == VAFMD_FPER_BLOCK)
+        return vafmd_fault_u01(p->seed, k, r->cmd.run_id, bi + 2) < rr->rate;
+    return rr->per == VAFMD_FPER_RUN && r->frun_block[k] == (int64_t)bi;
+}
+
+/* At run start: where this run's per-run random faults strike (a block drawn over the last run's length). */
+static void s_fault_run_begin(s_ctx *x)
+{
+    s_run *r = &x->run;
+    const vafmd_fault_plan *p = x->fp;
+    uint64_t nb = x->last_run_blocks ? x->last_run_blocks : 16;
+    for (int k = 0; k < VAFMD_F_N; k++) {
+        r->frun_block[k] = -1;
+        const vafmd_fault_random *rr = &p->rnd[k];
+        if (rr->per == VAFMD_FPER_RUN && vafmd_fault_u01(p->seed, k, r->cmd.run_id, 0) < rr->rate)
+            r->frun_block[k] = (int64_t)(vafmd_fault_u01(p->seed, k, r->cmd.run_id, 1) * (double)nb);
+    }
+}
+
+/* Controller faults on a block just computed (index bi): ADC saturation and detector dropout act on the
+ * measured chain (vDeflection_V, then deflection_m and force_N derived from it; height and the ground
+ * truth tip_m stay), for `samples` samples from the block's first on, into the following blocks. */
+static void s_fault_compute(s_ctx *x, s_block *b, uint64_t bi)
+{
+    s_run *r = &x->run;
+    if (r->cmd.replay || !b->ch[1] || !b->ch[2] || !b->ch[3])
+        return; /* a replay streams what was recorded */
+    double p0, p1;
+    int sc;
+    b->n_frec = 0;
+    if (s_fault_due(x, VAFMD_F_SATURATE, bi, &p0, &p1, &sc)) {
+        r->sat_left = (uint64_t)p0;
+        r->sat_level = p1;
+        s_fault_rec_init(x, &b->frec[b->n_frec++], VAFMD_F_SATURATE, bi, p0, p1, sc);
+    }
+    if (s_fault_due(x, VAFMD_F_DROPOUT, bi, &p0, &p1, &sc)) {
+        r->dout_left = (uint64_t)p0;
+        r->dout_stuck = p1 != 0;
+        s_fault_rec_init(x, &b->frec[b->n_frec++], VAFMD_F_DROPOUT, bi, p0, p1, sc);
+    }
+    double k = vafm_sim_params(r->cmd.sim)->k_N_per_m;
+    size_t i = 0;
+    if (r->sat_left) {
+        for (; i < b->n && r->sat_left; i++, r->sat_left--) {
+            b->ch[3][i] = r->sat_level;
+            b->ch[1][i] = r->sat_level * r->sens;
+            b->ch[2][i] = k * b->ch[1][i];
+        }
+        b->flags |= VAFM_WIRE_FLAG_CLIPPED;
+    }
+    if (r->dout_left) {
+        if (bi == 0 && !r->dout_stuck) /* nothing before: NaN; stuck at the first sample's values */
+            r->last_v[0] = r->last_v[1] = r->last_v[2] = NAN;
+        else if (bi == 0)
+            r->last_v[0] = b->ch[3][0], r->last_v[1] = b->ch[1][0], r->last_v[2] = b->ch[2][0];
+        for (i = 0; i < b->n && r->dout_left; i++, r->dout_left--) {
+            b->ch[3][i] = r->dout_stuck ? r->last_v[0] : NAN;
+            b->ch[1][i] = r->dout_stuck ? r->last_v[1] : NAN;
+            b->ch[2][i] = r->dout_stuck ? r->last_v[2] : NAN;
+        }
+    }
+    if (b->n) {
+        r->last_v[0] = b->ch[3][b->n - 1];
+        r->last_v[1] = b->ch[1][b->n - 1];
+        r->last_v[2] = b->ch[2][b->n - 1];
+    }
+}
+
+static void s_run_end(s_ctx *x, const char *status, int err_code);
+
+/* Transport faults at the release of the head block (index r->block_index), decided once per block.
+ * @return 1: the block is not released now (held by late/jitter/stall, or the run is over: truncate,
+ * kill), 0: release it (s_release then drops it or restarts the session as decided). */
+static int s_fault_release(s_ctx *x, int64_t now)
+{
+    s_run *r = &x->run;
+    uint64_t bi = r->block_index;
+    if (r->fdecided > bi)
+        return 0;
+    r->fdecided = bi + 1;
+    double p0, p1;
+    int sc;
+    vafmd_fault_rec fr;
+    if (s_fault_due(x, VAFMD_F_KILL, bi, &p0, &p1, &sc) || s_fault_due(x, VAFMD_F_TRUNCATE, bi, &p0, &p1, &sc)) {
+        int kill = s_fault_due(x, VAFMD_F_KILL, bi, &p0, &p1, &sc);
+        s_fault_rec_init(x, &fr, kill ? VAFMD_F_KILL : VAFMD_F_TRUNCATE, bi, p0, p1, sc);
+        fr.seq = (int64_t)atomic_load_explicit(&x->d->sh.seq, memory_order_relaxed);
+        r->fault_silent = 1;
+        s_run_end(x, "ok", 0); /* silent: no run.end, not logged; a campaign goes on (not after a kill) */
+        s_fault_record(x, &fr);
+        if (kill) {
+            x->dead = 1;
+            atomic_store_explicit(&x->d->sh.fault_exit, (int)p0, memory_order_release);
+        }
+        return 1;
+    }
+    int held = 0;
+    if (s_fault_due(x, VAFMD_F_STALL, bi, &p0, &p1, &sc)) {
+        s_fault_rec_init(x, &x->stall_rec, VAFMD_F_STALL, bi, p0, p1, sc);
+        x->stall_until = now + (int64_t)llround(p0 * 1e9);
+        held = 1;
+    }
+    r->n_held = 0;
+    if (s_fault_due(x, VAFMD_F_LATE, bi, &p0, &p1, &sc)) {
+        s_fault_rec_init(x, &r->held[r->n_held++], VAFMD_F_LATE, bi, p0, p1, sc);
+        r->hold_until = now + (int64_t)llround(p0 * 1e9);
+        held = 1;
+    }
+    if (s_fault_due(x, VAFMD_F_JITTER, bi, &p0, &p1, &sc)) {
+        double dly = p0 * vafmd_fault_u01(x->fp->seed, VAFMD_F_JITTER, r->cmd.run_id, bi + (1ULL << 40));
+        s_fault_rec_init(x, &r->held[r->n_held++], VAFMD_F_JITTER, bi, p0, dly, sc);
+        int64_t t = now + (int64_t)llround(dly * 1e9);
+        if (t > r->hold_until)
+            r->hold_until = t;
+        held = 1;
+    }
+    if ((r->restart_due = s_fault_due(x, VAFMD_F_RESTART, bi, &p0, &p1, &sc)) != 0)
+        s_fault_rec_init(x, &r->restart_rec, VAFMD_F_RESTART, bi, p0, p1, sc);
+    if (!r->drop_left && s_fault_due(x, VAFMD_F_DROP, bi, &p0, &p1, &sc)) {
+        r->drop_left = (uint64_t)p0;
+        s_fault_rec_init(x, &r->drop_rec, VAFMD_F_DROP, bi, p0, p1, sc);
+    }
+    return held;
+}
+
+/* After the head block went out (or was dropped): the records of the faults that took effect with it. */
+static void s_fault_released(s_ctx *x, s_block *b)
+{
+    s_run *r = &x->run;
+    for (int i = 0; i < r->n_held; i++)
+        s_fault_record(x, &r->held[i]);
+    r->n_held = 0;
+    if (r->restart_due) {
+        r->restart_due = 0;
+        s_fault_record(x, &r->restart_rec);
+    }
+    for (int i = 0; i < b->n_frec; i++)
+        s_fault_record(x, &b->frec[i]);
+    b->n_frec = 0;
 }
 
 static const char *s_seg_name(int s)
@@ -501,6 +727,15 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
 {
     s_run *r = &x->run;
     vafmd_shared *sh = &x->d->sh;
+    int silent = r->fault_silent; /* truncate/kill: no run.end, not logged (faults.md) */
+    if (r->drop_left) { /* a drop fault that outlasted the run: record the blocks it did drop */
+        r->drop_rec.p0 -= (double)r->drop_left;
+        r->drop_left = 0;
+        if (r->drop_rec.p0 > 0)
+            s_fault_record(x, &r->drop_rec);
+    }
+    if (r->block_index)
+        x->last_run_blocks = r->block_index;
     json_t *j = json_object();
     json_object_set_new(j, "run_id", json_integer((json_int_t)r->cmd.run_id));
     json_object_set_new(j, "client_run_id", r->cmd.client_run_id[0] ? json_string(r->cmd.client_run_id) : json_null());
@@ -556,7 +791,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
             json_object_set_new(o, "steps_free", json_integer((json_int_t)res.steps_free));
             json_object_set_new(o, "surface_height_m", s_num_or_null(res.surface_height_m));
             json_object_set_new(j, "result", o);
-            if (!strcmp(status, "ok") && !(res.flags & VAFM_CURVE_NO_CONTACT) && isfinite(res.detach_time_s))
+            if (!silent && !strcmp(status, "ok") && !(res.flags & VAFM_CURVE_NO_CONTACT) && isfinite(res.detach_time_s))
                 /* time_s from the run's start, as every other stream time; retract_time_s from the retract's
                  * start (the result's detach_time_s) */
                 s_send_json(x, "event", json_pack("{s:I,s:s,s:o,s:o,s:o,s:o}", "run_id", (json_int_t)r->cmd.run_id,
@@ -571,7 +806,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     if (r->log) {
         vafmd_log_end *le = calloc(1, sizeof *le);
         if (le) {
-            le->ok = !strcmp(status, "ok") && !err_code;
+            le->ok = !strcmp(status, "ok") && !err_code && !silent;
             le->broken = r->log_broken;
             if (vafm_sim_result(r->cmd.sim, &le->result))
                 le->ok = 0;
@@ -583,7 +818,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
      * durable in the file. null: this run is not logged. */
     json_object_set_new(j, "log", log_pending ? json_string("pending") : json_null());
     int ok = !strcmp(status, "ok") && !err_code;
-    if (cp && ok)
+    if (cp && ok && !silent)
         atomic_store_explicit(&sh->camp_done, ++cp->done, memory_order_relaxed);
     int job_over = !cp || !ok || cp->next >= cp->total;
     /* a failed curve ends its campaign: campaign.end says which curve and why (wire.md §3.6) */
@@ -601,7 +836,8 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
         atomic_fetch_add_explicit(&sh->jobs_done, 1, memory_order_release);
     }
     if (text) {
-        s_send_text(x, "run.end", text);
+        if (!silent)
+            s_send_text(x, "run.end", text);
         free(text);
     }
     if (cp && job_over)
@@ -655,6 +891,8 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     memset(r, 0, sizeof *r);
     r->cmd = *c;
     r->prev_seg = -1;
+    if (__builtin_expect(x->fp != NULL, 0))
+        s_fault_run_begin(x);
     r->t_start = s_now();
     const vafm_params *p = c->replay ? NULL : vafm_sim_params(c->sim); /* a replay has no scene */
     r->block_n = vafmd_block_samples(p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay), c->set.block_s);
@@ -807,6 +1045,9 @@ static void s_compute(s_ctx *x)
     b->n = r->fill;
     b->flags = (rc != 1 ? VAFM_WIRE_FLAG_LAST : 0) | (r->seg_change ? VAFM_WIRE_FLAG_SEG_CHANGE : 0) |
                (r->det.clipped ? VAFM_WIRE_FLAG_CLIPPED : 0);
+    b->n_frec = 0;
+    if (__builtin_expect(x->fp != NULL, 0))
+        s_fault_compute(x, b, r->block_index + r->qn);
     b->first_seg = r->first_seg;
     b->n_ev = r->n_ev;
     memcpy(b->ev, r->ev, (size_t)r->n_ev * sizeof *r->ev);
@@ -831,6 +1072,17 @@ static void s_release(s_ctx *x, int64_t now)
     s_block *b = &r->q[r->qhead];
     uint32_t flags = b->flags;
     double fs = s_run_fs(r);
+    int drop = 0;
+    if (__builtin_expect(x->fp != NULL, 0)) {
+        if (r->restart_due) { /* a publisher restart: a new session, sequence numbers from 0 again */
+            uint32_t old = (uint32_t)atomic_load_explicit(&sh->session, memory_order_relaxed);
+            uint32_t ns = (uint32_t)(vafmd_fault_u01(x->fp->seed ^ old, VAFMD_F_RESTART, x->fault_n, r->block_index) *
+                                     4294967296.0);
+            atomic_store_explicit(&sh->session, ns && ns != old ? ns : old + 1, memory_order_relaxed);
+            atomic_store_explicit(&sh->seq, 0, memory_order_relaxed);
+        }
+        drop = r->drop_left > 0;
+    }
     if (r->cmd.set.free_run)
         flags |= VAFM_WIRE_FLAG_FREE_RUN;
     else if (b->ready > b->deadline) {
@@ -863,6 +1115,7 @@ static void s_release(s_ctx *x, int64_t now)
         .sample_rate_Hz = fs,
         .t0_ns = (int64_t)llround((double)r->samples / fs * 1e9),
         .flags = flags,
+        .reserved = (uint32_t)atomic_load_explicit(&sh->session, memory_order_relaxed), /* the session */
     };
     unsigned char hb[VAFM_WIRE_HEADER_SIZE];
     const void *part[3 + VAFMD_N_CHANNELS] = { "data", hb };
@@ -875,7 +1128,10 @@ static void s_release(s_ctx *x, int64_t now)
     vafm_wire_header_encode(&h, hb);
     if (!r->cmd.set.free_run) /* the release lateness: the clock read just before the send */
         s_rel_add(r, s_now() - b->deadline);
-    s_send(x, part, len, 2 + h.n_channels);
+    if (__builtin_expect(!drop, 1))
+        s_send(x, part, len, 2 + h.n_channels);
+    else if (r->drop_rec.seq < 0) /* a drop fault: this seq is not sent (subscribers see a gap) */
+        r->drop_rec.seq = (int64_t)h.seq;
     /* logged at release: an unreleased (aborted) block never reaches the writer; after a lost block no
      * further block of the curve is queued (the writer drops it whole) */
     if (r->log && !r->log_broken)
@@ -896,6 +1152,11 @@ static void s_release(s_ctx *x, int64_t now)
     atomic_fetch_add_explicit(&sh->samples, b->n, memory_order_relaxed);
     atomic_fetch_add_explicit(&sh->blocks, 1, memory_order_relaxed);
     atomic_store_explicit(&sh->run_samples, r->samples, memory_order_relaxed);
+    if (__builtin_expect(x->fp != NULL, 0)) {
+        if (drop && --r->drop_left == 0)
+            s_fault_record(x, &r->drop_rec);
+        s_fault_released(x, b);
+    }
     r->qhead = (r->qhead + 1) % r->qcap;
     r->qn--;
     atomic_store_explicit(&sh->queued, r->qn, memory_order_relaxed);
@@ -908,7 +1169,16 @@ static void s_run_step(s_ctx *x)
 {
     s_run *r = &x->run;
     int64_t now = s_now();
+    if (__builtin_expect(x->fp != NULL, 0) && r->hold_until) { /* late/jitter: the stream is held */
+        if (now < r->hold_until) {
+            s_sleep_until(r->hold_until < now + 1000000 ? r->hold_until : now + 1000000);
+            return;
+        }
+        r->hold_until = 0;
+    }
     while (r->qn > 0 && (r->cmd.set.free_run || now >= r->q[r->qhead].deadline)) {
+        if (__builtin_expect(x->fp != NULL, 0) && s_fault_release(x, now))
+            return; /* held (late, jitter, stall) or over (truncate, kill) */
         s_release(x, now);
         now = s_now();
     }
@@ -993,6 +1263,7 @@ static void s_heartbeat(s_ctx *x, int64_t now)
     uint64_t seq = atomic_load(&sh->seq);
     json_t *j = json_object();
     json_object_set_new(j, "state", json_string(x->run.active ? "running" : "idle"));
+    json_object_set_new(j, "session", json_integer(atomic_load_explicit(&sh->session, memory_order_relaxed)));
     json_object_set_new(j, "run_id", x->run.active ? json_integer((json_int_t)x->run.cmd.run_id) : json_null());
     json_object_set_new(j, "last_seq", seq ? json_integer((json_int_t)(seq - 1)) : json_null());
     json_object_set_new(j, "samples", json_integer((json_int_t)atomic_load(&sh->samples)));
@@ -1055,7 +1326,39 @@ void *vafmd_sim_main(void *arg)
     for (;;) {
         vafmd_sim_cmd c;
         int quit = 0;
+        if (__builtin_expect(x->stall_until != 0, 0)) { /* a stall: no message at all, heartbeats included */
+            int64_t now = s_now();
+            if (now < x->stall_until) {
+                s_sleep_until(x->stall_until < now + 1000000 ? x->stall_until : now + 1000000);
+                continue;
+            }
+            x->stall_until = 0;
+            s_fault_record(x, &x->stall_rec);
+        }
         while (vafmd_ring_pop(&x->d->ring, &c)) {
+            if (c.type == VAFMD_SIM_FAULTS) { /* a new plan; the old one goes back to be freed */
+                if (x->fp)
+                    (void)vafmd_ring_push(&x->d->retire_ring, &x->fp); /* full cannot happen (the control thread
+                                                  empties it between requests); then leaked, never freed here */
+                x->fp = c.plan;
+                continue;
+            }
+            if (c.type == VAFMD_SIM_FAULT_NOTE) { /* a command fault: time it from the daemon's start */
+                c.fault.time_s -= (double)x->t_boot / 1e9;
+                s_fault_record(x, &c.fault);
+                continue;
+            }
+            if (x->dead && c.type == VAFMD_SIM_START) { /* killed: runs are no longer started */
+                if (c.camp) {
+                    vafm_sim_destroy(&c.camp->sim);
+                    free(c.camp->lists);
+                    free(c.camp);
+                }
+                vafm_sim_destroy(&c.sim);
+                free(c.start_json);
+                vafmd_replay_free(&c.replay);
+                continue;
+            }
             if (c.type == VAFMD_SIM_START) {
                 if (x->run.active) /* the control thread prevents this; never leak the run either way */
                     s_run_end(x, "aborted", VAFM_EABORT);
@@ -1085,7 +1388,7 @@ void *vafmd_sim_main(void *arg)
             if (next_hb < now) /* after a long stall: keep the 1 Hz grid, skip the missed beats */
                 next_hb = now + S_NS - (now - next_hb) % S_NS;
         }
-        if (!x->run.active && x->camp) /* a campaign goes on by itself */
+        if (!x->run.active && x->camp && !x->dead) /* a campaign goes on by itself */
             s_camp_next(x);
         if (x->run.active)
             s_run_step(x);
@@ -1105,6 +1408,7 @@ void *vafmd_sim_main(void *arg)
             L->orphans = p;
         }
     }
+    free(x->fp); /* at exit, not on the real-time path */
     free(x);
     return NULL;
 }

@@ -837,6 +837,31 @@ int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_
     return rc;
 }
 
+int vafm_h5_writer_set_note(vafm_h5_writer *w, const char *name, const char *text, vafm_error *err)
+{
+    if (!w || w->tag != S_TAG || !name || !text) {
+        vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_writer_set_note: no writer, name or text given");
+        return VAFM_EINVAL;
+    }
+    static const char *const own[] = { VAFM_H5I_A_FORMAT, VAFM_H5I_A_SCENE, VAFM_H5I_A_GRID, VAFM_H5I_A_SEED,
+                                       VAFM_H5I_A_CREATED, VAFM_H5I_A_TRUTH };
+    int bad = strncmp(name, "vafm ", 5) != 0 || !strncmp(name, VAFM_H5I_A_TRUTH_PART, strlen(VAFM_H5I_A_TRUTH_PART));
+    for (size_t i = 0; i < sizeof own / sizeof own[0]; i++)
+        bad |= !strcmp(name, own[i]);
+    if (bad) {
+        vafm_h5i_err(err, VAFM_EINVAL, "name", "%s: '%s' is not a free note name (\"vafm ...\", not one of the "
+                     "provenance attributes)", w->path, name);
+        return VAFM_EINVAL;
+    }
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    int rc = vafm_h5i_put_str(w->file, name, text) ? VAFM_EIO : 0;
+    if (rc)
+        vafm_h5i_err_hdf5(err, rc, "/", "%s: root attribute '%s' cannot be written", w->path, name);
+    vafm_h5i_quiet_end(&q);
+    return rc;
+}
+
 int vafm_h5_writer_flush(vafm_h5_writer *w, vafm_error *err)
 {
     if (!w || w->tag != S_TAG) {

@@ -291,6 +291,16 @@ int vafm_recorder_flush(vafm_recorder *r, vafm_error *err)
     return rc;
 }
 
+int vafm_recorder_set_note(vafm_recorder *r, const char *name, const char *text, vafm_error *err)
+{
+    if (!r)
+        return VAFM_EINVAL;
+    pthread_mutex_lock(&r->mu);
+    int rc = vafm_h5_writer_set_note(r->w, name, text, err);
+    pthread_mutex_unlock(&r->mu);
+    return rc;
+}
+
 uint64_t vafm_recorder_count(vafm_recorder *r)
 {
     if (!r)

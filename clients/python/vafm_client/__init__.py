@@ -15,11 +15,12 @@ The 72-byte data header is decoded here with struct, per wire.md §4 (no C code 
 `Daemon` (vafm_client.spawn) starts a private vafmd on ipc:// endpoints, for tests and examples.
 """
 from .client import (CHANNELS, DEFAULT_PUB, DEFAULT_REP, HEADER, MAGIC, Client, DaemonError, GapError,
-                     Header, Run, Stream, TransportError, decode_header)
+                     Header, Run, Stream, TransportError, TruncatedError, decode_header)
 from .h5 import Curve, H5File, load_h5
 from .spawn import Daemon
 
 __all__ = ["CHANNELS", "DEFAULT_PUB", "DEFAULT_REP", "HEADER", "MAGIC", "Client", "Curve", "Daemon",
-           "DaemonError", "GapError", "H5File", "Header", "Run", "Stream", "TransportError", "decode_header",
+           "DaemonError", "GapError", "H5File", "Header", "Run", "Stream", "TransportError", "TruncatedError",
+           "decode_header",
            "load_h5"]
 __version__ = "0.5.0"

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: MIT
 """Client (commands) and Stream (sample stream) of vafmd; see the package docstring and protocol/wire.md."""
 import json
+import os
 import struct
 import time
 from collections import namedtuple
@@ -40,6 +41,11 @@ class GapError(Exception):
     """Data blocks were lost (a jump in the header's seq): the run is incomplete."""
 
 
+class TruncatedError(GapError):
+    """The run never got its run.end (the stream stopped mid-run, or the publisher restarted during it):
+    the run is incomplete."""
+
+
 def decode_header(buf):
     """Decode a data header (bytes of at least 72). Raises TransportError on a bad magic or version."""
     if len(buf) < HEADER.size:
@@ -60,16 +66,27 @@ def _apply_curve(sock, curve):
     sock.curve_secretkey = client_secret
 
 
+# Commands a resend cannot change anything with (a start is made idempotent by its client_run_id).
+_IDEMPOTENT = {"hello", "get", "status", "presets"}
+
+
 class Client:
     """Commands over a REQ socket. Every method returns the reply dict or raises DaemonError/TransportError.
 
-    A lost reply (timeout) closes and reopens the REQ socket (lazy pirate); `retries` resends then, which
-    is only safe for idempotent commands: `curve`/`tune` are made so with a client_run_id."""
+    Lazy pirate: a lost reply (no reply within `timeout`) closes and reopens the REQ socket and resends the
+    request, at most `retries` times, but only when a resend is safe: read-only commands (hello, get, status,
+    presets, a faults query) and starts that carry a client_run_id (the daemon answers a repeated one with
+    the same run, "duplicate": true). `curve`, `tune` and `campaign` give every start a client_run_id of
+    their own unless one is passed. A `busy` error reply (the daemon asks for a retry) is retried after a
+    short pause, `busy_retries` times. `log` records what happened (timeouts, reopened sockets, retries)."""
 
-    def __init__(self, endpoint=DEFAULT_REP, timeout=10.0, retries=0, context=None, curve=None):
+    def __init__(self, endpoint=DEFAULT_REP, timeout=10.0, retries=2, context=None, curve=None, busy_retries=5):
         """curve: (server_public, client_public, client_secret) Z85 keys for a daemon with CURVE; a daemon
         that refuses them sends nothing, so requests time out (TransportError)."""
         self.endpoint, self.timeout, self.retries, self._curve_keys = endpoint, timeout, retries, curve
+        self.busy_retries = busy_retries
+        self.log = []  # (time.monotonic(), text) of every timeout, reopen and retry
+        self._run_ids = 0
         self._own_ctx = context is None
         self.ctx = context or zmq.Context()
         self.sock = None
@@ -96,22 +113,51 @@ class Client:
     def __exit__(self, *exc):
         self.close()
 
+    @staticmethod
+    def idempotent(obj):
+        """May this request be sent again when its reply was lost?"""
+        return obj.get("cmd") in _IDEMPOTENT or obj.get("client_run_id") is not None or \
+            (obj.get("cmd") == "faults" and set(obj) <= {"cmd", "id"})
+
+    def new_client_run_id(self):
+        """A client_run_id unique to this client (a retried start with it is answered, not run again)."""
+        self._run_ids += 1
+        if not hasattr(self, "_token"):
+            self._token = os.urandom(4).hex()
+        return f"py-{self._token}-{self._run_ids}"
+
     def request(self, obj, timeout=None, retries=None):
-        """Send one command (a dict with "cmd") and return its ok reply; raise DaemonError on an error reply."""
+        """Send one command (a dict with "cmd") and return its ok reply; raise DaemonError on an error reply,
+        TransportError when no reply came (after the retries a non-idempotent request does not get)."""
         timeout = self.timeout if timeout is None else timeout
         retries = self.retries if retries is None else retries
+        if not self.idempotent(obj):
+            retries = 0
         data = json.dumps(obj).encode()
-        for _ in range(retries + 1):
+        attempt = busy = 0
+        while True:
             self.sock.send(data)
             if self.sock.poll(int(timeout * 1000)):
                 reply = json.loads(self.sock.recv())
                 if not isinstance(reply, dict):
                     raise TransportError("reply is not a JSON object")
+                if reply.get("status") == "error" and reply.get("code") == "busy" and busy < self.busy_retries:
+                    busy += 1
+                    self.log.append((time.monotonic(), f"{obj.get('cmd')}: busy, retry {busy}"))
+                    time.sleep(0.02 * busy)
+                    continue
                 if reply.get("status") != "ok":
                     raise DaemonError(reply)
                 return reply
-            self._open()  # a REQ socket still waiting for its reply cannot send again
-        raise TransportError(f"no reply from {self.endpoint} within {timeout} s ({retries + 1} attempts)")
+            # lazy pirate: a REQ socket still waiting for its reply cannot send again: close, reopen
+            self._open()
+            self.log.append((time.monotonic(), f"{obj.get('cmd')}: no reply within {timeout} s, socket reopened"
+                             + (", resending" if attempt < retries else "")))
+            attempt += 1
+            if attempt > retries:
+                break
+        raise TransportError(f"no reply from {self.endpoint} within {timeout} s ({attempt} attempt(s)"
+                             + ("" if self.idempotent(obj) else "; not resent: not idempotent") + ")")
 
     def hello(self):
         return self.request({"cmd": "hello"})
@@ -143,17 +189,23 @@ class Client:
         return self.request(req)["applies_to"]
 
     def curve(self, index=0, client_run_id=None):
-        req = {"cmd": "curve", "index": index}
-        if client_run_id is not None:
-            req["client_run_id"] = client_run_id
+        req = {"cmd": "curve", "index": index, "client_run_id": client_run_id or self.new_client_run_id()}
         return self.request(req)
 
     def tune(self, duration_s=None, index=0, client_run_id=None):
-        req = {"cmd": "tune", "index": index}
+        req = {"cmd": "tune", "index": index, "client_run_id": client_run_id or self.new_client_run_id()}
         if duration_s is not None:
             req["duration_s"] = duration_s
-        if client_run_id is not None:
-            req["client_run_id"] = client_run_id
+        return self.request(req)
+
+    def faults(self, plan=None, clear=False, **kw):
+        """Set (plan: a dict, protocol/faults.md), clear, or (neither) query the daemon's fault plan. Returns
+        the reply: the plan in force, the count of faults injected and the last ones."""
+        req = {"cmd": "faults"}
+        if clear:
+            req["clear"] = True
+        if plan is not None or kw:
+            req["plan"] = dict(plan or {}, **kw)
         return self.request(req)
 
     def wait_idle(self, timeout=30.0, poll=0.005):
@@ -186,11 +238,22 @@ class Run:
         self.gaps = 0
         self.channels = {}
         self.segment = self.time_s = None
+        self.truncated = False   # no run.end came: the stream stopped mid-run (a later run or heartbeat says so)
+        self.restarted = False   # the publisher restarted (new session) while the run was being received
+        self.nan_samples = 0     # samples whose measured signals are NaN (detector dropout): kept as they are
+        self.clipped_blocks = 0  # blocks flagged CLIPPED (ADC saturation): kept as they are
+        self.warnings = []       # what is wrong with the run, in words
 
     @property
     def complete(self):
-        return self.start is not None and self.end is not None and self.gaps == 0 and \
-            sum(h.n_samples for h in self.headers) == self.end["samples"]
+        """All of the run arrived, as it was sent (it may still carry NaN or clipped samples: `warnings`)."""
+        return self.start is not None and self.end is not None and self.gaps == 0 and not self.truncated and \
+            not self.restarted and sum(h.n_samples for h in self.headers) == self.end["samples"]
+
+    @property
+    def clean(self):
+        """Complete, and no sample is NaN and no block clipped."""
+        return self.complete and not self.nan_samples and not self.clipped_blocks
 
     def __getitem__(self, name):
         return self.channels[name]
@@ -213,6 +276,22 @@ class Run:
                             if h.first_sample <= e["sample"] < h.first_sample + h.n_samples), n)
                 seg[e["sample"]:lim] = SEGMENTS[e["to"]]
         self.segment = seg
+        # measured signals are recorded as they came: a detector dropout stays NaN, a saturation clipped
+        meas = [self.channels[k] for k in ("vDeflection_V", "deflection_m", "force_N") if k in self.channels]
+        if meas and n:
+            self.nan_samples = int(np.isnan(np.vstack(meas)).any(axis=0).sum())
+        self.clipped_blocks = sum(1 for h in self.headers if h.flags & FLAG_CLIPPED)
+        if self.gaps:
+            self.warnings.append(f"{self.gaps} data block(s) lost (sequence gap)")
+        if self.truncated:
+            self.warnings.append("no run.end: the stream stopped mid-run (truncated)")
+        if self.restarted:
+            self.warnings.append("the publisher restarted (new session) during the run")
+        if self.nan_samples:
+            self.warnings.append(f"{self.nan_samples} sample(s) with NaN measured signals (detector dropout), "
+                                 "kept as NaN")
+        if self.clipped_blocks:
+            self.warnings.append(f"{self.clipped_blocks} block(s) flagged CLIPPED (ADC saturation)")
         if self.start:
             fs = self.start["sample_rate_Hz"]
             # the time `vafm samples` prints: interval centre with antialias=mean, end with point (csv.md)
@@ -225,8 +304,12 @@ class Stream:
     heartbeat, so a run started afterwards is seen from its first message. Counts lost data blocks (gaps in
     seq) in `gaps`."""
 
-    def __init__(self, endpoint=DEFAULT_PUB, timeout=20.0, rcvhwm=None, context=None, curve=None):
-        self.endpoint, self.timeout = endpoint, timeout
+    def __init__(self, endpoint=DEFAULT_PUB, timeout=20.0, rcvhwm=None, context=None, curve=None, stall_s=1.5):
+        """stall_s: a wait of this long with no message at all (heartbeats come at 1 Hz) is reported as a
+        stall of the publisher (`reports`), once it ends; `timeout` still bounds any wait."""
+        self.endpoint, self.timeout, self.stall_s = endpoint, timeout, stall_s
+        self.session = None  # the publisher's session (heartbeats, data headers): a change is a restart
+        self.reports = []    # detected faults: dicts with "kind" gap|truncated|restart|stall|dropout|saturate
         self._own_ctx = context is None
         self.ctx = context or zmq.Context()
         self.sock = self.ctx.socket(zmq.SUB)
@@ -257,15 +340,33 @@ class Stream:
     def __exit__(self, *exc):
         self.close()
 
+    def _session(self, new):
+        """A session seen (heartbeat, data header): None, or the restart it reveals (also reported)."""
+        if not new:
+            return None  # a daemon without sessions
+        old, self.session = self.session, new
+        if old is None or old == new:
+            return None
+        rep = {"kind": "restart", "old_session": old, "new_session": new, "last_seq": self.last_seq}
+        self.reports.append(rep)
+        self.last_seq = None  # sequence numbers start again: no gap across a restart
+        return rep
+
     def messages(self, timeout=None, deadline=None):
-        """Yield (topic, payload): for "data" (Header, [numpy arrays], gap), else the decoded JSON.
+        """Yield (topic, payload): for "data" (Header, [numpy arrays], gap), else the decoded JSON; and the
+        client's own findings as topics "restart" (the publisher's session changed: its sequence numbers
+        started again) and "stall" (no message for stall_s or more, heartbeats included).
         Raises TransportError when nothing arrives within `timeout` seconds, or at the time.monotonic()
         `deadline` (heartbeats never let the stream fall silent, so a lost run.end needs a deadline)."""
         timeout = self.timeout if timeout is None else timeout
         while True:
             wait = timeout if deadline is None else min(timeout, deadline - time.monotonic())
+            t0 = time.monotonic()
             if wait <= 0 or not self.sock.poll(int(wait * 1000)):
-                raise TransportError(f"stream {self.endpoint}: nothing expected within {timeout} s")
+                silent = time.monotonic() - t0
+                raise TransportError(f"stream {self.endpoint}: nothing expected within {timeout} s"
+                                     + (f" (no message at all for {silent:.1f} s, heartbeats included: the "
+                                        "publisher stalls or is gone)" if silent >= self.stall_s else ""))
             parts = self.sock.recv_multipart()
             topic = parts[0].decode("ascii", "replace")
             if topic == "data":
@@ -273,15 +374,34 @@ class Stream:
                 chans = [np.frombuffer(p, "<f8") for p in parts[2:2 + h.n_channels]]
                 if len(chans) != h.n_channels or any(len(c) != h.n_samples for c in chans):
                     raise TransportError(f"data block {h.seq}: frames do not match the header")
+                restart = self._session(h.reserved)  # the header's last field carries the session
+                if restart:
+                    yield "restart", restart
                 gap = 0
                 if self.last_seq is not None and h.seq > self.last_seq + 1:
                     gap = h.seq - self.last_seq - 1
                     self.gaps += gap
+                    self.reports.append({"kind": "gap", "run_id": h.run_id, "blocks": gap, "seq": self.last_seq + 1})
                 if self.last_seq is None or h.seq > self.last_seq:
                     self.last_seq = h.seq
                 yield topic, (h, chans, gap)
-            elif topic in ("run.start", "run.end", "event", "heartbeat", "campaign.end"):
-                yield topic, json.loads(parts[1])
+            elif topic in ("run.start", "run.end", "event", "heartbeat", "campaign.end", "faults"):
+                p = json.loads(parts[1])
+                if topic == "heartbeat":
+                    restart = self._session(p.get("session"))
+                    if restart:
+                        yield "restart", restart
+                    # heartbeats keep a 1 s grid of the daemon's clock and a stalled publisher skips the
+                    # beats it missed: consecutive uptimes stall_s or more apart reveal a stall, also to a
+                    # client that was not reading at the time (a restarted daemon's uptime starts again: no false alarm)
+                    up = p.get("uptime_s")
+                    if isinstance(up, (int, float)):
+                        last, self._hb_uptime = getattr(self, "_hb_uptime", None), up
+                        if last is not None and up - last >= self.stall_s:
+                            rep = {"kind": "stall", "silent_s": up - last, "uptime_s": up}
+                            self.reports.append(rep)
+                            yield "stall", rep
+                yield topic, p
             # other topics: ignored (wire.md §6)
 
     def runs(self, timeout=None, include_partial=False, deadline=None):
@@ -306,8 +426,24 @@ class Stream:
                 return runs, x
 
     def _runs_and(self, timeout, include_partial, deadline):
-        """("run", Run) at each run.end and ("campaign.end", message)."""
+        """("run", Run) at each run.end (or once a run is known to be truncated) and ("campaign.end", message)."""
         for topic, p in self.messages(timeout, deadline):
+            if topic == "restart":  # every run being received lost its continuity
+                for run in self._pending.values():
+                    run.restarted = True
+                continue
+            if topic in ("run.start", "heartbeat", "campaign.end"):
+                # a run that started and is not the daemon's current one any more, without a run.end: truncated
+                # (campaign.end follows the last run.end of a campaign: no run of it is current then)
+                cur = p.get("run_id") if topic != "campaign.end" else None
+                for rid in [r for r, run in self._pending.items() if run.start is not None and r != cur]:
+                    run = self._pending.pop(rid)
+                    run.truncated = True
+                    self.reports.append({"kind": "truncated", "run_id": rid, "samples": sum(h.n_samples for h in run.headers)})
+                    run._finish()
+                    yield "run", run
+                if topic == "heartbeat":
+                    continue
             if topic == "campaign.end":
                 yield topic, p
             elif topic == "data":
@@ -333,9 +469,15 @@ class Stream:
                         self.last_seq = p["last_seq"]
                     # run.end is authoritative: this also counts blocks lost before the first one seen
                     run.gaps = max(run.gaps, p.get("blocks", 0) - len(run.headers))
+                    if run.gaps and not any(r.get("run_id") == run.run_id and r["kind"] == "gap" for r in self.reports):
+                        self.reports.append({"kind": "gap", "run_id": run.run_id, "blocks": run.gaps, "seq": None})
                     if run.start is None and not include_partial:
                         continue
                     run._finish()
+                    if run.nan_samples:
+                        self.reports.append({"kind": "dropout", "run_id": run.run_id, "samples": run.nan_samples})
+                    if run.clipped_blocks:
+                        self.reports.append({"kind": "saturate", "run_id": run.run_id, "blocks": run.clipped_blocks})
                     yield "run", run
 
     def run(self, run_id, timeout=None, strict=True):
@@ -345,6 +487,8 @@ class Stream:
         timeout = self.timeout if timeout is None else timeout
         for run in self.runs(timeout, deadline=time.monotonic() + timeout):
             if run.run_id == run_id:
+                if strict and (run.truncated or run.restarted):
+                    raise TruncatedError(f"run {run_id}: " + "; ".join(run.warnings))
                 if strict and not run.complete:
                     raise GapError(f"run {run_id}: {run.gaps} data block(s) lost")
                 return run
