@@ -119,12 +119,12 @@ void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double 
         nz = o->p3[1][0] * y + o->p3[1][1] * z;
         nI = o->p3[2][0] * y + o->p3[2][1] * z;
         if (K->thermal) {
-            double x1 = vafm_rng_normal_inline(&K->rng), x2 = vafm_rng_normal_inline(&K->rng);
+            double x1 = s_kernel_normal(K), x2 = s_kernel_normal(K);
             if (o->overdamped) {
                 ny += o->c3[0][0] * x1;
                 nI += o->c3[2][0] * x1 + o->c3[2][2] * x2;
             } else {
-                double x3 = vafm_rng_normal_inline(&K->rng);
+                double x3 = s_kernel_normal(K);
                 ny += o->c3[0][0] * x1;
                 nz += o->c3[1][0] * x1 + o->c3[1][1] * x2;
                 nI += o->c3[2][0] * x1 + o->c3[2][1] * x2 + o->c3[2][2] * x3;
@@ -133,13 +133,13 @@ void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double 
     } else if (o->overdamped) {
         ny = o->a * y;
         if (K->thermal)
-            ny += o->sd * vafm_rng_normal_inline(&K->rng);
+            ny += o->sd * s_kernel_normal(K);
         nz = 0.0;
     } else {
         ny = o->e11 * y + o->e12 * z;
         nz = o->e21 * y + o->e22 * z;
         if (K->thermal) {
-            double x1 = vafm_rng_normal_inline(&K->rng), x2 = vafm_rng_normal_inline(&K->rng);
+            double x1 = s_kernel_normal(K), x2 = s_kernel_normal(K);
             ny += o->l11 * x1;
             nz += o->l21 * x1 + o->l22 * x2;
         }

@@ -47,7 +47,8 @@ typedef struct vafm_kernel {
     const vafm_jkr_table *jtab; /* tabulated JKR branch (NULL: solve exactly every step) */
     int thermal;       /* kT > 0: draw random numbers */
     int uniform_noise; /* VAFM_NOISE_UNIFORM */
-    vafm_rng rng;
+    vafm_rng rng;      /* the stream; read only through rq (draws computed ahead, rng_philox.h) */
+    vafm_rngq rq;
     double dt;
     vafm_kcoef co[2];  /* [0] out of contact, [1] in contact */
     /* state */
@@ -66,12 +67,25 @@ typedef struct vafm_kernel {
     uint64_t steps, steps_contact, steps_free;
 } vafm_kernel;
 
+/** A standard normal draw of the kernel's stream. */
+static inline double s_kernel_normal(vafm_kernel *K)
+{
+    return vafm_rngq_normal(&K->rq, &K->rng);
+}
+
 /** A unit-variance random number of the scene's distribution (gaussian or uniform on ±√3). */
 static inline double s_kernel_noise(vafm_kernel *K)
 {
     if (K->uniform_noise)
-        return 1.7320508075688772 * (2.0 * vafm_rng_uniform_inline(&K->rng) - 1.0);
-    return vafm_rng_normal_inline(&K->rng);
+        return 1.7320508075688772 * (2.0 * vafm_rngq_uniform(&K->rq, &K->rng) - 1.0);
+    return s_kernel_normal(K);
+}
+
+/** Start the kernel's stream: stream `stream` of `seed`, nothing drawn ahead. */
+static inline void s_kernel_rng_init(vafm_kernel *K, uint64_t seed, uint64_t stream)
+{
+    vafm_rng_init(&K->rng, seed, stream);
+    vafm_rngq_reset(&K->rq);
 }
 
 /* The hot part of the state, copied into a local by an integrator's loop so that the compiler keeps
