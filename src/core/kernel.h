@@ -328,6 +328,8 @@ void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int ove
 void vafm_free_ou_integrate(vafm_free_ou *o, const vafm_kernel *K);
 /** One exact step of length o->h (out of contact, support at constant speed). */
 void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o);
+/** n such steps (the same as n calls of vafm_free_ou_step). */
+void vafm_free_ou_steps(vafm_kernel *K, const vafm_free_ou *o, long n);
 
 /** The propagator of a harmonic well of stiffness `stiff`, friction rate eta, at temperature kT. */
 void vafm_well_ou_setup(vafm_free_ou *o, double m, double stiff, double eta, double kT, double h, int overdamped);

@@ -615,8 +615,7 @@ static int s_step_interval(vafm_sim *s, uint64_t *budget)
                 s->mode_free = 1;
                 s->mode_well = 0;
             }
-            for (long i = 0; i < s->n_free; i++)
-                vafm_free_ou_step(K, &s->ou);
+            vafm_free_ou_steps(K, &s->ou, s->n_free);
             s_budget_take(budget, (uint64_t)s->n_free);
         } else if (far && s->well_ok && s_well_interval(s)) {
             s->mode_well = 1;
