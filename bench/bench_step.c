@@ -186,8 +186,7 @@ static uint64_t s_kwork_run(void *ctx)
     vafm_kernel *K = &w->K;
     if (w->free_ou) {
         K->dt = w->ou.h;
-        for (long i = 0; i < S_KERNEL_CHUNK; i++)
-            vafm_free_ou_step(K, &w->ou);
+        vafm_free_ou_steps(K, &w->ou, S_KERNEL_CHUNK); /* as the scene does a sample interval's steps */
         return S_KERNEL_CHUNK;
     }
     long left = S_KERNEL_CHUNK;
@@ -528,7 +527,7 @@ static void s_write_md(FILE *f, const s_bench *b, const s_rtf *o, int n_rtf)
                "u_spr = -5 (tensile, half way along the retract) with the tabulated JKR branch (contact_table = 1, "
                "the default), contact-newton: the same with the Newton solve every step (contact_table = 0); "
                "out of contact 20 R from the surface (integrator steps, as free_exact = 0); free-exact: one exact "
-               "free-cantilever step (vafm_free_ou_step).\n");
+               "free-cantilever step (vafm_free_ou_steps, a chunk per call as the scene does).\n");
     fprintf(f, "- scene: whole curves through vafm_sim (pressed in 0.1 R, height trigger, retract through the "
                "pull-off) and thermal tunes 20 R off the surface, wall time / result.steps; includes sampling, "
                "phase logic and contact events.\n");

@@ -103,70 +103,97 @@ void vafm_free_ou_integrate(vafm_free_ou *o, const vafm_kernel *K)
     }
 }
 
-void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o)
+/* n exact steps about the centre line c0 + c1·τ, the state in locals (the random draws may write K). */
+static VAFM_KALWAYS void s_ou_steps(vafm_kernel *K, const vafm_free_ou *o, double c0, double c1, int in_contact, long n)
 {
-    vafm_well_ou_step(K, o, K->uspr0, K->v_spr, 0);
-}
-
-void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double c1, int in_contact)
-{
-    const double tau0 = (double)K->n * K->dt;
-    double y = K->u - (c0 + c1 * tau0), z = K->w - c1;
-    double ny, nz, nI = 0.0;
-    if (o->integrate) {
-        /* (y, z, I) jointly: the sample mean gets the exact integral of the path over the step */
-        ny = o->p3[0][0] * y + o->p3[0][1] * z;
-        nz = o->p3[1][0] * y + o->p3[1][1] * z;
-        nI = o->p3[2][0] * y + o->p3[2][1] * z;
-        if (K->thermal) {
-            double x1 = vafm_rng_normal_inline(&K->rng), x2 = vafm_rng_normal_inline(&K->rng);
-            if (o->overdamped) {
-                ny += o->c3[0][0] * x1;
-                nI += o->c3[2][0] * x1 + o->c3[2][2] * x2;
-            } else {
-                double x3 = vafm_rng_normal_inline(&K->rng);
-                ny += o->c3[0][0] * x1;
-                nz += o->c3[1][0] * x1 + o->c3[1][1] * x2;
-                nI += o->c3[2][0] * x1 + o->c3[2][1] * x2 + o->c3[2][2] * x3;
+    const double dt = K->dt, k = K->k, uspr0 = K->uspr0, v_spr = K->v_spr;
+    const int thermal = K->thermal;
+    int64_t kn = K->n;
+    double u = K->u, w = K->w, u_spr = K->u_spr, fs = 0.0;
+    double acc_u = K->acc_u, acc_uspr = K->acc_uspr, fs_min = K->fs_min;
+    for (long step = 0; step < n; step++) {
+        const double tau0 = (double)kn * dt;
+        double y = u - (c0 + c1 * tau0), z = w - c1;
+        double ny, nz, nI = 0.0;
+        if (o->integrate) {
+            /* (y, z, I) jointly: the sample mean gets the exact integral of the path over the step */
+            ny = o->p3[0][0] * y + o->p3[0][1] * z;
+            nz = o->p3[1][0] * y + o->p3[1][1] * z;
+            nI = o->p3[2][0] * y + o->p3[2][1] * z;
+            if (thermal) {
+                double x1 = s_kernel_normal(K), x2 = s_kernel_normal(K);
+                if (o->overdamped) {
+                    ny += o->c3[0][0] * x1;
+                    nI += o->c3[2][0] * x1 + o->c3[2][2] * x2;
+                } else {
+                    double x3 = s_kernel_normal(K);
+                    ny += o->c3[0][0] * x1;
+                    nz += o->c3[1][0] * x1 + o->c3[1][1] * x2;
+                    nI += o->c3[2][0] * x1 + o->c3[2][1] * x2 + o->c3[2][2] * x3;
+                }
+            }
+        } else if (o->overdamped) {
+            ny = o->a * y;
+            if (thermal)
+                ny += o->sd * s_kernel_normal(K);
+            nz = 0.0;
+        } else {
+            ny = o->e11 * y + o->e12 * z;
+            nz = o->e21 * y + o->e22 * z;
+            if (thermal) {
+                double x1 = s_kernel_normal(K), x2 = s_kernel_normal(K);
+                ny += o->l11 * x1;
+                nz += o->l21 * x1 + o->l22 * x2;
             }
         }
-    } else if (o->overdamped) {
-        ny = o->a * y;
-        if (K->thermal)
-            ny += o->sd * vafm_rng_normal_inline(&K->rng);
-        nz = 0.0;
-    } else {
-        ny = o->e11 * y + o->e12 * z;
-        nz = o->e21 * y + o->e22 * z;
-        if (K->thermal) {
-            double x1 = vafm_rng_normal_inline(&K->rng), x2 = vafm_rng_normal_inline(&K->rng);
-            ny += o->l11 * x1;
-            nz += o->l21 * x1 + o->l22 * x2;
+        kn++;
+        const double tau = (double)kn * dt;
+        u_spr = uspr0 + v_spr * tau;
+        u = c0 + c1 * tau + ny;
+        w = c1 + nz;
+        fs = k * (u_spr - u);
+        if (o->integrate) { /* the step's time averages: centre line at mid-step plus I/h */
+            const double mid = tau0 + 0.5 * o->h;
+            acc_u += c0 + c1 * mid + nI / o->h;
+            acc_uspr += uspr0 + v_spr * mid;
+        } else {
+            acc_u += u;
+            acc_uspr += u_spr;
         }
+        if (fs < fs_min)
+            fs_min = fs;
     }
-    K->n++;
-    const double tau = (double)K->n * K->dt;
-    K->t = K->t0 + tau;
-    K->u_spr = K->uspr0 + K->v_spr * tau;
-    K->u = c0 + c1 * tau + ny;
-    K->w = c1 + nz;
-    double fs = K->k * (K->u_spr - K->u);
+    if (n <= 0)
+        return;
+    K->n = kn;
+    K->t = K->t0 + (double)kn * dt;
+    K->u_spr = u_spr;
+    K->u = u;
+    K->w = w;
     if (!in_contact) {
         K->Fc = 0.0;
         K->f = fs;
     }
-    if (o->integrate) { /* the step's time averages: centre line at mid-step plus I/h */
-        const double mid = tau0 + 0.5 * o->h;
-        K->acc_u += c0 + c1 * mid + nI / o->h;
-        K->acc_uspr += K->uspr0 + K->v_spr * mid;
-    } else {
-        K->acc_u += K->u;
-        K->acc_uspr += K->u_spr;
-    }
-    K->acc_n++;
-    if (fs < K->fs_min)
-        K->fs_min = fs;
-    K->steps++;
-    K->steps_free++;
-    K->steps_contact += (uint64_t)(in_contact != 0);
+    K->acc_u = acc_u;
+    K->acc_uspr = acc_uspr;
+    K->acc_n += n;
+    K->fs_min = fs_min;
+    K->steps += (uint64_t)n;
+    K->steps_free += (uint64_t)n;
+    K->steps_contact += in_contact ? (uint64_t)n : 0u;
+}
+
+void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o)
+{
+    s_ou_steps(K, o, K->uspr0, K->v_spr, 0, 1);
+}
+
+void vafm_free_ou_steps(vafm_kernel *K, const vafm_free_ou *o, long n)
+{
+    s_ou_steps(K, o, K->uspr0, K->v_spr, 0, n);
+}
+
+void vafm_well_ou_step(vafm_kernel *K, const vafm_free_ou *o, double c0, double c1, int in_contact)
+{
+    s_ou_steps(K, o, c0, c1, in_contact, 1);
 }

@@ -14,28 +14,54 @@ static void s_prepare(vafm_kernel *K)
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
 }
 
-static long s_run(vafm_kernel *K, long n)
+/* The step loop of one contact state (kind: VAFM_KLOOP_*, a constant); c holds that state's coefficients. */
+static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
 {
     const double dt = K->dt, half_dt_m = 0.5 * dt / K->m, inv_m = 1.0 / K->m;
     const double drift = K->m * K->v_spr;
     const int thermal = K->thermal;
-    const vafm_jkr_table *jtab = K->jtab;
+    const vafm_kcoef c = K->co[K->in_contact];
+    vafm_kinv v;
+    s_kinv_load(K, &v);
     vafm_khot h;
     s_khot_load(K, &h);
     long i = 0;
     while (i < n) {
-        const vafm_kcoef *c = &K->co[h.in_contact];
         const double f = h.f + drift;
-        const double beta = thermal ? c->gjf_sig * s_kernel_noise(K) : 0.0;
-        h.u += c->gjf_b * (dt * h.w + half_dt_m * dt * f + half_dt_m * beta);
-        s_khot_post_move(K, jtab, &h);
-        h.w = c->gjf_a * h.w + half_dt_m * (c->gjf_a * f + h.f + drift) + c->gjf_b * inv_m * beta;
+        const double beta = thermal ? c.gjf_sig * s_kernel_noise(K) : 0.0;
+        h.u += c.gjf_b * (dt * h.w + half_dt_m * dt * f + half_dt_m * beta);
+        s_khot_post_move_k(K, &v, &h, kind);
+        h.w = c.gjf_a * h.w + half_dt_m * (c.gjf_a * f + h.f + drift) + c.gjf_b * inv_m * beta;
         i++;
         if (h.event)
             break;
     }
     s_khot_store(K, &h, i);
     return i;
+}
+
+static long s_run_free(vafm_kernel *K, long n)
+{
+    return s_loop(K, n, VAFM_KLOOP_FREE);
+}
+
+static long s_run_table(vafm_kernel *K, long n)
+{
+    return s_loop(K, n, VAFM_KLOOP_TABLE);
+}
+
+static long s_run_any(vafm_kernel *K, long n)
+{
+    return s_loop(K, n, VAFM_KLOOP_ANY);
+}
+
+static long s_run(vafm_kernel *K, long n)
+{
+    switch (s_kernel_loop_kind(K)) {
+    case VAFM_KLOOP_FREE: return s_run_free(K, n);
+    case VAFM_KLOOP_TABLE: return s_run_table(K, n);
+    default: return s_run_any(K, n);
+    }
 }
 
 static const vafm_integrator_type s_type = {

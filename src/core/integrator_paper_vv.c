@@ -25,25 +25,63 @@ static void s_prepare(vafm_kernel *K)
     K->f = s_total(K, &K->co[K->in_contact], f, K->w);
 }
 
-static long s_run(vafm_kernel *K, long n)
+/* The step loop of one contact state (kind: VAFM_KLOOP_*, a constant). The total force after a step is
+ * built with the coefficients of the state after it (c, or on a contact change the new state's). */
+static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
 {
     const double dt = K->dt, half_dt_m = 0.5 * dt / K->m;
-    const vafm_jkr_table *jtab = K->jtab;
+    const double drift = K->m * K->v_spr;
+    const int thermal = K->thermal;
+    const vafm_kcoef c = K->co[K->in_contact];
+    vafm_kinv v;
+    s_kinv_load(K, &v);
     vafm_khot h;
     s_khot_load(K, &h);
     long i = 0;
     while (i < n) {
         h.w += half_dt_m * h.f; /* h.f holds the total force of the last evaluation */
         h.u += dt * h.w;
-        s_khot_post_move(K, jtab, &h);
-        h.f = s_total(K, &K->co[h.in_contact], h.f, h.w);
+        s_khot_post_move_k(K, &v, &h, kind);
+        if (h.event) {
+            h.f = s_total(K, &K->co[h.in_contact], h.f, h.w);
+            h.w += half_dt_m * h.f;
+            i++;
+            break;
+        }
+        /* s_total() on the loop's constants */
+        double ft = h.f - c.zeta * h.w + drift;
+        if (thermal)
+            ft += c.vv_sig * s_kernel_noise(K);
+        h.f = ft;
         h.w += half_dt_m * h.f;
         i++;
-        if (h.event)
-            break;
     }
     s_khot_store(K, &h, i);
     return i;
+}
+
+static long s_run_free(vafm_kernel *K, long n)
+{
+    return s_loop(K, n, VAFM_KLOOP_FREE);
+}
+
+static long s_run_table(vafm_kernel *K, long n)
+{
+    return s_loop(K, n, VAFM_KLOOP_TABLE);
+}
+
+static long s_run_any(vafm_kernel *K, long n)
+{
+    return s_loop(K, n, VAFM_KLOOP_ANY);
+}
+
+static long s_run(vafm_kernel *K, long n)
+{
+    switch (s_kernel_loop_kind(K)) {
+    case VAFM_KLOOP_FREE: return s_run_free(K, n);
+    case VAFM_KLOOP_TABLE: return s_run_table(K, n);
+    default: return s_run_any(K, n);
+    }
 }
 
 static const vafm_integrator_type s_type = {

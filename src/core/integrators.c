@@ -53,3 +53,24 @@ void vafm_kernel_set_dt(vafm_kernel *K, double dt)
         c->bd_sig = sqrt(2.0 * K->kT * dt / c->zeta);
     }
 }
+
+VAFM_KCOLD vafm_kfs vafm_kernel_contact_eval(const vafm_kernel *K, double u, double s)
+{
+    vafm_kfs r;
+    r.s = s;
+    if (K->jtab)
+        r.F = vafm_jkr_table_force(K->jtab, &K->contact, u, &r.s);
+    else if (K->is_jkr)
+        r.F = vafm_jkr_force_inline(&K->contact, u, &r.s, NULL);
+    else
+        r.F = K->cforce(&K->contact, u, &r.s, NULL);
+    return r;
+}
+
+VAFM_KCOLD vafm_kfs vafm_kernel_table_far(const vafm_kernel *K, double u, double s)
+{
+    vafm_kfs r;
+    r.s = s;
+    r.F = vafm_jkr_force_inline(&K->contact, u, &r.s, NULL);
+    return r;
+}

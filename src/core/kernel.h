@@ -47,7 +47,8 @@ typedef struct vafm_kernel {
     const vafm_jkr_table *jtab; /* tabulated JKR branch (NULL: solve exactly every step) */
     int thermal;       /* kT > 0: draw random numbers */
     int uniform_noise; /* VAFM_NOISE_UNIFORM */
-    vafm_rng rng;
+    vafm_rng rng;      /* the stream; read only through rq (draws computed ahead, rng_philox.h) */
+    vafm_rngq rq;
     double dt;
     vafm_kcoef co[2];  /* [0] out of contact, [1] in contact */
     /* state */
@@ -66,12 +67,25 @@ typedef struct vafm_kernel {
     uint64_t steps, steps_contact, steps_free;
 } vafm_kernel;
 
+/** A standard normal draw of the kernel's stream. */
+static inline double s_kernel_normal(vafm_kernel *K)
+{
+    return vafm_rngq_normal(&K->rq, &K->rng);
+}
+
 /** A unit-variance random number of the scene's distribution (gaussian or uniform on ±√3). */
 static inline double s_kernel_noise(vafm_kernel *K)
 {
     if (K->uniform_noise)
-        return 1.7320508075688772 * (2.0 * vafm_rng_uniform_inline(&K->rng) - 1.0);
-    return vafm_rng_normal_inline(&K->rng);
+        return 1.7320508075688772 * (2.0 * vafm_rngq_uniform(&K->rq, &K->rng) - 1.0);
+    return s_kernel_normal(K);
+}
+
+/** Start the kernel's stream: stream `stream` of `seed`, nothing drawn ahead. */
+static inline void s_kernel_rng_init(vafm_kernel *K, uint64_t seed, uint64_t stream)
+{
+    vafm_rng_init(&K->rng, seed, stream);
+    vafm_rngq_reset(&K->rq);
 }
 
 /* The hot part of the state, copied into a local by an integrator's loop so that the compiler keeps
@@ -161,6 +175,126 @@ static inline void s_khot_post_move(const vafm_kernel *K, const vafm_jkr_table *
     h->steps_contact += (uint64_t)h->in_contact;
 }
 
+/* ---- per-state step loops ----------------------------------------------------------------------
+ *
+ * A contact change ends run() after that step, so within one call the contact state is fixed: each
+ * integrator has one loop per state (out of contact; in contact with the tabulated JKR branch; in
+ * contact with any other solver), and the loop's constants (coefficients of the state, support
+ * motion, the table) are copied into locals once. The arithmetic is the same, in the same order, as
+ * s_khot_post_move()'s, so a curve is the same bit for bit whichever loop ran it. */
+
+#if defined(__GNUC__)
+#define VAFM_KALWAYS inline __attribute__((always_inline))
+#define VAFM_KCOLD __attribute__((noinline, cold))
+#else
+#define VAFM_KALWAYS inline
+#define VAFM_KCOLD
+#endif
+
+enum { VAFM_KLOOP_FREE, VAFM_KLOOP_TABLE, VAFM_KLOOP_ANY };
+
+/** Which loop a run() starting now takes. */
+static inline int s_kernel_loop_kind(const vafm_kernel *K)
+{
+    if (!K->in_contact)
+        return VAFM_KLOOP_FREE;
+    return K->jtab ? VAFM_KLOOP_TABLE : VAFM_KLOOP_ANY;
+}
+
+/* The constants of one run() call. */
+typedef struct vafm_kinv {
+    double dt, uspr0, v_spr, k, u_detach, u_touch;
+    double inv_h, x_end, s_m, c2; /* the table: 1/h, its last interval's end (n − 1), s_m, 2c */
+    const double *node;
+} vafm_kinv;
+
+static inline void s_kinv_load(const vafm_kernel *K, vafm_kinv *v)
+{
+    v->dt = K->dt;
+    v->uspr0 = K->uspr0;
+    v->v_spr = K->v_spr;
+    v->k = K->k;
+    v->u_detach = K->contact.u_detach;
+    v->u_touch = K->contact.u_touch;
+    v->s_m = K->contact.s_m;
+    v->c2 = 2.0 * K->contact.c; /* exact: the same as the factor 2.0 * c inside the force */
+    if (K->jtab) {
+        v->inv_h = K->jtab->inv_h;
+        v->x_end = (double)(K->jtab->n - 1);
+        v->node = K->jtab->node;
+    } else {
+        v->inv_h = v->x_end = 0.0;
+        v->node = NULL;
+    }
+}
+
+typedef struct vafm_kfs {
+    double F, s; /* contact force and √a */
+} vafm_kfs;
+
+/* The contact force at u by the kernel's solver (table, inline JKR or the type's) from the warm start s:
+ * on the first step of a contact (s = 0) and beyond the table's end (integrators.c; out of line, rare). */
+vafm_kfs vafm_kernel_contact_eval(const vafm_kernel *K, double u, double s);
+/* The exact inline JKR solver, for a point beyond the table. */
+vafm_kfs vafm_kernel_table_far(const vafm_kernel *K, double u, double s);
+
+/* vafm_jkr_table_force() on the loop's constants (the same expressions). */
+static VAFM_KALWAYS double s_kinv_table_force(const vafm_kernel *K, const vafm_kinv *v, double u, double *s_io)
+{
+    const double du = u - v->u_detach;
+    const double xi = sqrt(du);
+    const double x = xi * v->inv_h;
+    if (!(x < v->x_end)) {
+        const vafm_kfs r = vafm_kernel_table_far(K, u, *s_io);
+        *s_io = r.s;
+        return r.F;
+    }
+    const int i = (int)x;
+    const double f = x - (double)i, g = 1.0 - f;
+    const double *p = v->node + 2 * i;
+    const double t = g * g * (1.0 + 2.0 * f) * p[0] + f * f * (1.0 + 2.0 * g) * p[2] + f * g * (g * p[1] - f * p[3]);
+    const double s = v->s_m + t, s3 = s * s * s;
+    *s_io = s;
+    return s3 * ((4.0 / 3.0) * s3 - v->c2);
+}
+
+/** s_khot_post_move() for a loop of the given kind (a compile-time constant). */
+static VAFM_KALWAYS void s_khot_post_move_k(const vafm_kernel *K, const vafm_kinv *v, vafm_khot *h, const int kind)
+{
+    if (kind == VAFM_KLOOP_ANY) {
+        s_khot_post_move(K, K->jtab, h);
+        return;
+    }
+    h->n++;
+    const double tau = (double)h->n * v->dt;
+    h->u_spr = v->uspr0 + v->v_spr * tau;
+    if (kind == VAFM_KLOOP_TABLE) {
+        if (h->u < v->u_detach) {
+            h->in_contact = 0;
+            h->event = -1;
+            h->Fc = 0.0;
+        } else {
+            h->Fc = s_kinv_table_force(K, v, h->u, &h->s);
+        }
+    } else if (h->u >= v->u_touch) {
+        h->in_contact = 1;
+        h->event = 1;
+        const vafm_kfs r = vafm_kernel_contact_eval(K, h->u, 0.0);
+        h->Fc = r.F;
+        h->s = r.s;
+    } else {
+        h->Fc = 0.0;
+    }
+    const double fs = v->k * (h->u_spr - h->u);
+    h->f = fs - h->Fc;
+    h->acc_u += h->u;
+    h->acc_uspr += h->u_spr;
+    h->acc_n++;
+    if (fs < h->fs_min)
+        h->fs_min = fs;
+    h->steps_contact += (uint64_t)h->in_contact;
+}
+
 /** Set the step-size dependent coefficients of both contact states. */
 void vafm_kernel_set_dt(vafm_kernel *K, double dt);
 
@@ -194,6 +328,8 @@ void vafm_free_ou_setup(vafm_free_ou *o, const vafm_kernel *K, double h, int ove
 void vafm_free_ou_integrate(vafm_free_ou *o, const vafm_kernel *K);
 /** One exact step of length o->h (out of contact, support at constant speed). */
 void vafm_free_ou_step(vafm_kernel *K, const vafm_free_ou *o);
+/** n such steps (the same as n calls of vafm_free_ou_step). */
+void vafm_free_ou_steps(vafm_kernel *K, const vafm_free_ou *o, long n);
 
 /** The propagator of a harmonic well of stiffness `stiff`, friction rate eta, at temperature kT. */
 void vafm_well_ou_setup(vafm_free_ou *o, double m, double stiff, double eta, double kT, double h, int overdamped);

@@ -289,13 +289,19 @@ VAFM_RNG_HIDDEN const double vafm_zig_f[257] = {
     0x1.f446ac979f084p-1, 0x1.0000000000000p+0,
 };
 
-/* Uniform in (0, 1], for the logarithms of the tail. */
-static inline double s_open01(vafm_rng *r)
+/* The slow path reads its further draws from r directly (q = NULL) or through the queue q. */
+static inline uint64_t s_next(vafm_rngq *q, vafm_rng *r)
 {
-    return (double)((vafm_rng_u64_inline(r) >> 11) + 1u) * 0x1.0p-53;
+    return q ? vafm_rngq_u64(q, r) : vafm_rng_u64_inline(r);
 }
 
-VAFM_RNG_HIDDEN VAFM_RNG_COLD double vafm_rng_normal_slow(vafm_rng *r, uint64_t u)
+/* Uniform in (0, 1], for the logarithms of the tail. */
+static inline double s_open01(vafm_rngq *q, vafm_rng *r)
+{
+    return (double)((s_next(q, r) >> 11) + 1u) * 0x1.0p-53;
+}
+
+static inline double s_normal_slow(vafm_rngq *q, vafm_rng *r, uint64_t u)
 {
     for (;;) {
         const unsigned i = (unsigned)(u & 0xffu);
@@ -308,18 +314,175 @@ VAFM_RNG_HIDDEN VAFM_RNG_COLD double vafm_rng_normal_slow(vafm_rng *r, uint64_t 
             /* Tail x > r (Marsaglia 1964): x = r + e1 / r, accept if 2 e2 > (e1 / r)^2, e1, e2 ~ Exp(1). */
             double t, e;
             do {
-                t = -log(s_open01(r)) * ZIG_INV_R;
-                e = -log(s_open01(r));
+                t = -log(s_open01(q, r)) * ZIG_INV_R;
+                e = -log(s_open01(q, r));
             } while (e + e < t * t);
             x = ZIG_R + t;
             return neg ? -x : x;
         }
         /* Wedge of layer i, X[i+1] <= x < X[i]: a uniform height in [F[i], F[i+1]) under the curve. */
-        const double y = vafm_zig_f[i] + vafm_rng_uniform_inline(r) * (vafm_zig_f[i + 1] - vafm_zig_f[i]);
+        const double y = vafm_zig_f[i] + (double)(s_next(q, r) >> 11) * 0x1.0p-53 * (vafm_zig_f[i + 1] - vafm_zig_f[i]);
         if (y < exp(-0.5 * x * x))
             return neg ? -x : x;
-        u = vafm_rng_u64_inline(r);
+        u = s_next(q, r);
     }
+}
+
+VAFM_RNG_HIDDEN VAFM_RNG_COLD double vafm_rng_normal_slow(vafm_rng *r, uint64_t u)
+{
+    return s_normal_slow(NULL, r, u);
+}
+
+VAFM_RNG_HIDDEN VAFM_RNG_COLD double vafm_rngq_normal_slow(vafm_rngq *q, vafm_rng *r, uint64_t u)
+{
+    return s_normal_slow(q, r, u);
+}
+
+/* ---- blocks ahead ---------------------------------------------------------------------------- */
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+
+/* Four blocks side by side, two per vector: each 64-bit lane holds one block's 32-bit word in its low
+ * half (pmuludq multiplies the low halves; the high halves carry junk that no later step reads). */
+static void s_blocks4(const uint32_t ctr[4], const uint32_t key[2], uint32_t *out)
+{
+    const uint64_t base = (uint64_t)ctr[0] | (uint64_t)ctr[1] << 32;
+    const uint64_t b0 = base, b1 = base + 1, b2 = base + 2, b3 = base + 3;
+    __m128i c0a = _mm_set_epi64x((long long)(b1 & 0xffffffffu), (long long)(b0 & 0xffffffffu));
+    __m128i c0b = _mm_set_epi64x((long long)(b3 & 0xffffffffu), (long long)(b2 & 0xffffffffu));
+    __m128i c1a = _mm_set_epi64x((long long)(b1 >> 32), (long long)(b0 >> 32));
+    __m128i c1b = _mm_set_epi64x((long long)(b3 >> 32), (long long)(b2 >> 32));
+    __m128i c2a = _mm_set1_epi64x(ctr[2]), c2b = c2a;
+    __m128i c3a = _mm_set1_epi64x(ctr[3]), c3b = c3a;
+    const __m128i m0 = _mm_set1_epi64x(VAFM_PHILOX_M0), m1 = _mm_set1_epi64x(VAFM_PHILOX_M1);
+    uint32_t k0 = key[0], k1 = key[1];
+    for (int round = 0; round < 10; round++) {
+        const __m128i kk0 = _mm_set1_epi64x(k0), kk1 = _mm_set1_epi64x(k1);
+        const __m128i p0a = _mm_mul_epu32(m0, c0a), p0b = _mm_mul_epu32(m0, c0b);
+        const __m128i p1a = _mm_mul_epu32(m1, c2a), p1b = _mm_mul_epu32(m1, c2b);
+        c0a = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p1a, 32), c1a), kk0);
+        c0b = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p1b, 32), c1b), kk0);
+        c2a = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p0a, 32), c3a), kk1);
+        c2b = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p0b, 32), c3b), kk1);
+        c1a = p1a;
+        c1b = p1b;
+        c3a = p0a;
+        c3b = p0b;
+        k0 += VAFM_PHILOX_W0;
+        k1 += VAFM_PHILOX_W1;
+    }
+    /* low halves to words: x01 = c0, c1 of both blocks, x23 = c2, c3; then block by block */
+    const __m128i x01a = _mm_unpacklo_epi32(_mm_shuffle_epi32(c0a, 0x08), _mm_shuffle_epi32(c1a, 0x08));
+    const __m128i x23a = _mm_unpacklo_epi32(_mm_shuffle_epi32(c2a, 0x08), _mm_shuffle_epi32(c3a, 0x08));
+    const __m128i x01b = _mm_unpacklo_epi32(_mm_shuffle_epi32(c0b, 0x08), _mm_shuffle_epi32(c1b, 0x08));
+    const __m128i x23b = _mm_unpacklo_epi32(_mm_shuffle_epi32(c2b, 0x08), _mm_shuffle_epi32(c3b, 0x08));
+    _mm_storeu_si128((__m128i *)(void *)(out + 0), _mm_unpacklo_epi64(x01a, x23a));
+    _mm_storeu_si128((__m128i *)(void *)(out + 4), _mm_unpackhi_epi64(x01a, x23a));
+    _mm_storeu_si128((__m128i *)(void *)(out + 8), _mm_unpacklo_epi64(x01b, x23b));
+    _mm_storeu_si128((__m128i *)(void *)(out + 12), _mm_unpackhi_epi64(x01b, x23b));
+}
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#include <immintrin.h>
+#define S_HAVE_AVX2_BLOCKS 1
+
+/* Eight blocks, four per vector, on CPUs with AVX2 (chosen at run time; the same words). */
+__attribute__((target("avx2"))) static void s_blocks8_avx2(const uint32_t ctr[4], const uint32_t key[2], uint32_t *out)
+{
+    const uint64_t base = (uint64_t)ctr[0] | (uint64_t)ctr[1] << 32;
+    uint64_t lo[8], hi[8];
+    for (unsigned j = 0; j < 8; j++) {
+        lo[j] = (base + j) & 0xffffffffu;
+        hi[j] = (base + j) >> 32;
+    }
+    /* lanes: a = blocks 0, 1 | 4, 5 and b = 2, 3 | 6, 7, so that the in-lane transpose below puts
+     * blocks 0-3 in the low 128-bit halves and 4-7 in the high ones */
+    __m256i c0a = _mm256_set_epi64x((long long)lo[5], (long long)lo[4], (long long)lo[1], (long long)lo[0]);
+    __m256i c0b = _mm256_set_epi64x((long long)lo[7], (long long)lo[6], (long long)lo[3], (long long)lo[2]);
+    __m256i c1a = _mm256_set_epi64x((long long)hi[5], (long long)hi[4], (long long)hi[1], (long long)hi[0]);
+    __m256i c1b = _mm256_set_epi64x((long long)hi[7], (long long)hi[6], (long long)hi[3], (long long)hi[2]);
+    __m256i c2a = _mm256_set1_epi64x(ctr[2]), c2b = c2a;
+    __m256i c3a = _mm256_set1_epi64x(ctr[3]), c3b = c3a;
+    const __m256i m0 = _mm256_set1_epi64x(VAFM_PHILOX_M0), m1 = _mm256_set1_epi64x(VAFM_PHILOX_M1);
+    uint32_t k0 = key[0], k1 = key[1];
+    for (int round = 0; round < 10; round++) {
+        const __m256i kk0 = _mm256_set1_epi64x(k0), kk1 = _mm256_set1_epi64x(k1);
+        const __m256i p0a = _mm256_mul_epu32(m0, c0a), p0b = _mm256_mul_epu32(m0, c0b);
+        const __m256i p1a = _mm256_mul_epu32(m1, c2a), p1b = _mm256_mul_epu32(m1, c2b);
+        c0a = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1a, 32), c1a), kk0);
+        c0b = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1b, 32), c1b), kk0);
+        c2a = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0a, 32), c3a), kk1);
+        c2b = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0b, 32), c3b), kk1);
+        c1a = p1a;
+        c1b = p1b;
+        c3a = p0a;
+        c3b = p0b;
+        k0 += VAFM_PHILOX_W0;
+        k1 += VAFM_PHILOX_W1;
+    }
+    /* per 128-bit half as in s_blocks4: lo64 = the half's first block, hi64 = its second */
+    const __m256i x01a = _mm256_unpacklo_epi32(_mm256_shuffle_epi32(c0a, 0x08), _mm256_shuffle_epi32(c1a, 0x08));
+    const __m256i x23a = _mm256_unpacklo_epi32(_mm256_shuffle_epi32(c2a, 0x08), _mm256_shuffle_epi32(c3a, 0x08));
+    const __m256i x01b = _mm256_unpacklo_epi32(_mm256_shuffle_epi32(c0b, 0x08), _mm256_shuffle_epi32(c1b, 0x08));
+    const __m256i x23b = _mm256_unpacklo_epi32(_mm256_shuffle_epi32(c2b, 0x08), _mm256_shuffle_epi32(c3b, 0x08));
+    const __m256i la = _mm256_unpacklo_epi64(x01a, x23a), ha = _mm256_unpackhi_epi64(x01a, x23a); /* 0 | 4, 1 | 5 */
+    const __m256i lb = _mm256_unpacklo_epi64(x01b, x23b), hb = _mm256_unpackhi_epi64(x01b, x23b); /* 2 | 6, 3 | 7 */
+    _mm256_storeu_si256((__m256i *)(void *)(out + 0), _mm256_permute2x128_si256(la, ha, 0x20));  /* 0, 1 */
+    _mm256_storeu_si256((__m256i *)(void *)(out + 8), _mm256_permute2x128_si256(lb, hb, 0x20));  /* 2, 3 */
+    _mm256_storeu_si256((__m256i *)(void *)(out + 16), _mm256_permute2x128_si256(la, ha, 0x31)); /* 4, 5 */
+    _mm256_storeu_si256((__m256i *)(void *)(out + 24), _mm256_permute2x128_si256(lb, hb, 0x31)); /* 6, 7 */
+}
+#endif
+#else
+static void s_blocks4(const uint32_t ctr[4], const uint32_t key[2], uint32_t *out)
+{
+    const uint64_t base = (uint64_t)ctr[0] | (uint64_t)ctr[1] << 32;
+    for (unsigned j = 0; j < 4; j++) {
+        const uint64_t b = base + j;
+        const uint32_t c[4] = { (uint32_t)b, (uint32_t)(b >> 32), ctr[2], ctr[3] };
+        s_philox4x32_10(c, key, out + 4 * j);
+    }
+}
+#endif
+
+VAFM_RNG_HIDDEN void vafm_philox4x32_10_blocks(const uint32_t ctr[4], const uint32_t key[2], unsigned nb, uint32_t *out)
+{
+    uint32_t c[4] = { ctr[0], ctr[1], ctr[2], ctr[3] };
+    unsigned j = 0;
+#ifdef S_HAVE_AVX2_BLOCKS
+    if (__builtin_cpu_supports("avx2")) {
+        for (; j + 8 <= nb; j += 8) {
+            s_blocks8_avx2(c, key, out + 4 * j);
+            const uint64_t b = ((uint64_t)c[0] | (uint64_t)c[1] << 32) + 8;
+            c[0] = (uint32_t)b;
+            c[1] = (uint32_t)(b >> 32);
+        }
+    }
+#endif
+    for (; j < nb; j += 4) {
+        s_blocks4(c, key, out + 4 * j);
+        const uint64_t b = ((uint64_t)c[0] | (uint64_t)c[1] << 32) + 4;
+        c[0] = (uint32_t)b;
+        c[1] = (uint32_t)(b >> 32);
+    }
+}
+
+VAFM_RNG_HIDDEN uint64_t vafm_rngq_u64_slow(vafm_rngq *q, vafm_rng *r)
+{
+    /* the unread words first (at most one: reads take two), then what is left of r's current block */
+    unsigned k = 0;
+    while (q->pos < q->len)
+        q->w[k++] = q->w[q->pos++];
+    while (r->pos < 4)
+        q->w[k++] = r->buf[r->pos++];
+    vafm_philox4x32_10_blocks(r->ctr, r->key, VAFM_RNGQ_BLOCKS, q->w + k);
+    const uint64_t b = ((uint64_t)r->ctr[0] | (uint64_t)r->ctr[1] << 32) + VAFM_RNGQ_BLOCKS;
+    r->ctr[0] = (uint32_t)b;
+    r->ctr[1] = (uint32_t)(b >> 32);
+    q->pos = 2;
+    q->len = k + 4 * VAFM_RNGQ_BLOCKS;
+    return (uint64_t)q->w[0] | (uint64_t)q->w[1] << 32;
 }
 
 VAFM_API void vafm_philox4x32_10(const uint32_t ctr[4], const uint32_t key[2], uint32_t out[4])

@@ -139,6 +139,62 @@ static inline double vafm_rng_normal_inline(vafm_rng *r)
     return vafm_rng_normal_slow(r, u);
 }
 
+/* ---- draws ahead: the kernel's queue ------------------------------------------------------------
+ *
+ * A vafm_rngq holds words of a stream computed ahead, VAFM_RNGQ_BLOCKS Philox blocks at a time (the
+ * blocks are independent, so their rounds run side by side: SSE2 on x86-64, two blocks per vector).
+ * The stream seen through a queue q on a generator r is q's unread words followed by r's stream: the
+ * same words in the same order as r alone would give, only computed earlier. Whoever reads r through a
+ * queue must read it only through that queue; an all-zero queue is empty (reads start at r as it is),
+ * and re-initialising r requires emptying the queue (vafm_rngq_reset). */
+#define VAFM_RNGQ_BLOCKS 8
+
+typedef struct vafm_rngq {
+    unsigned pos, len;                    /* next unread word, words held */
+    uint32_t w[4 * VAFM_RNGQ_BLOCKS + 4]; /* room for the leftover words of a partly read block */
+} vafm_rngq;
+
+static inline void vafm_rngq_reset(vafm_rngq *q)
+{
+    q->pos = q->len = 0;
+}
+
+/** Refill q from r (keeps q's unread words in front) and return the next 64-bit draw. */
+VAFM_RNG_HIDDEN uint64_t vafm_rngq_u64_slow(vafm_rngq *q, vafm_rng *r);
+/** The rest of the ziggurat through a queue (as vafm_rng_normal_slow). */
+VAFM_RNG_HIDDEN VAFM_RNG_COLD double vafm_rngq_normal_slow(vafm_rngq *q, vafm_rng *r, uint64_t u);
+/** nb (a multiple of 4) consecutive blocks from counter ctr (the 64-bit block counter carries), key: out[4·nb]. */
+VAFM_RNG_HIDDEN void vafm_philox4x32_10_blocks(const uint32_t ctr[4], const uint32_t key[2], unsigned nb, uint32_t *out);
+
+static inline uint64_t vafm_rngq_u64(vafm_rngq *q, vafm_rng *r)
+{
+    const unsigned p = q->pos;
+    if (VAFM_RNG_LIKELY(p + 2 <= q->len)) {
+        q->pos = p + 2;
+        return (uint64_t)q->w[p] | (uint64_t)q->w[p + 1] << 32;
+    }
+    return vafm_rngq_u64_slow(q, r);
+}
+
+static inline double vafm_rngq_uniform(vafm_rngq *q, vafm_rng *r)
+{
+    return (double)(vafm_rngq_u64(q, r) >> 11) * 0x1.0p-53;
+}
+
+/** vafm_rng_normal_inline() through a queue: the same transform of the same draws. */
+static inline double vafm_rngq_normal(vafm_rngq *q, vafm_rng *r)
+{
+    const uint64_t u = vafm_rngq_u64(q, r);
+    const unsigned i = (unsigned)(u & 0xffu);
+    const uint64_t j = u >> 11;
+    if (VAFM_RNG_LIKELY(j < vafm_zig_k[i])) {
+        const int64_t s = -(int64_t)((u >> 8) & 1u);   /* 0 or -1 */
+        const int64_t sj = ((int64_t)j ^ s) - s;       /* +-j, exact */
+        return (double)sj * vafm_zig_w[i];
+    }
+    return vafm_rngq_normal_slow(q, r, u);
+}
+
 #ifdef __cplusplus
 }
 #endif

@@ -292,7 +292,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
 {
     vafm_kernel *K = &s->K;
     const vafm_reduced *rd = &s->nm.r;
-    vafm_rng_init(&K->rng, s->p.seed, index);
+    s_kernel_rng_init(K, s->p.seed, index);
     s->scene = scene;
     s->index = index;
     memset(&s->err, 0, sizeof s->err);
@@ -371,9 +371,9 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
         K->w = v0;
     }
     if (K->thermal && sigma_u > 0) {
-        K->u += sigma_u * vafm_rng_normal_inline(&K->rng);
+        K->u += sigma_u * s_kernel_normal(K);
         if (!s->it->overdamped)
-            K->w += sqrt(K->kT / K->m) * vafm_rng_normal_inline(&K->rng);
+            K->w += sqrt(K->kT / K->m) * s_kernel_normal(K);
     }
     /* pressed in, the body stays on the branch unless the draw took it below u_detach; free, it is in
      * contact only if the draw reached the surface */
@@ -568,7 +568,7 @@ static int s_well_interval(vafm_sim *s)
     if (K->thermal) {
         double xi[3];
         for (int i = 0; i < 3; i++)
-            xi[i] = vafm_rng_normal_inline(&K->rng);
+            xi[i] = s_kernel_normal(K);
         for (int i = 0; i < 3; i++)
             for (int j = 0; j <= i; j++)
                 nx[i] += W.chol[i][j] * xi[j];
@@ -652,8 +652,7 @@ static int s_step_interval(vafm_sim *s, uint64_t *budget)
                 s->mode_free = 1;
                 s->mode_well = 0;
             }
-            for (long i = 0; i < s->n_free; i++)
-                vafm_free_ou_step(K, &s->ou);
+            vafm_free_ou_steps(K, &s->ou, s->n_free);
             s_budget_take(budget, (uint64_t)s->n_free);
         } else if (far && s->well_ok && s_well_interval(s)) {
             s->mode_well = 1;
