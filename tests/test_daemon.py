@@ -596,6 +596,69 @@ def test_campaign_equals_cli_campaign_and_is_logged(fig4, tmp_path):
     vafm_info_ok(log)
 
 
+def test_map_equals_cli_map_and_is_logged(tmp_path):
+    """`map` (issue #15): a 3 x 3 dome streams one run per pixel in scan order (curve = iy*nx + ix), each
+    run.start names its pixel (indices, position, true E* and height), its force and height samples equal the
+    CLI's `vafm map` file bit for bit, and the daemon's log is a conforming map file. Bad specs name their
+    field. Paced, the lateral moves take instrument time."""
+    h5py = pytest.importorskip("h5py")
+    if not VAFM_CLI:
+        pytest.skip("VAFM_CLI not set")
+    spec = {"nx": 3, "ny": 3, "size_x_m": 6e-6, "size_y_m": 6e-6, "pattern": "dome", "a_E_star_Pa": 1e6,
+            "b_E_star_Pa": 6.7e3, "height_m": 3e-7, "radius_m": 2.5e-6}
+    ref = tmp_path / "cli.h5"
+    pp = ",".join(f"{k}={v!r}" for k, v in spec.items() if k not in ("nx", "ny", "size_x_m", "size_y_m", "pattern"))
+    subprocess.run([VAFM_CLI, "map", "--preset", "cell-liquid", "--nx", "3", "--ny", "3", "--size", "6e-6",
+                    "--pattern", "dome", "--pattern-param", pp, "--threads", "1", "--out", str(ref), "--quiet"],
+                   check=True, capture_output=True, timeout=120)
+    d = Daemon("--preset", "cell-liquid", "--free-run")
+    try:
+        error_ok(d.cmd({"cmd": "map", "map": {"nx": 0}}), "out_of_range", "nx")
+        error_ok(d.cmd({"cmd": "map", "map": {"nx": 2, "bogus": 1}}), "unknown_field", "bogus")
+        error_ok(d.cmd({"cmd": "map", "map": {"nx": 2, "ny": 2}, "first_index": 4}), "out_of_range", "first_index")
+        error_ok(d.cmd({"cmd": "map"}), "missing_field", "map")
+        log = tmp_path / "daemon.h5"
+        assert d.cmd({"cmd": "log", "path": str(log)})["status"] == "ok"
+        s = d.sub()
+        settle(d, s)
+        r = d.cmd({"cmd": "map", "map": spec, "client_run_id": "map-1"})
+        assert r["status"] == "ok" and r["curves"] == 9, r
+        runs, cend = collect_campaign(s, r["campaign_id"])
+        assert cend["status"] == "ok" and cend["curves_done"] == 9, cend
+        assert d.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 9
+        with h5py.File(ref, "r") as fr, h5py.File(log, "r") as fl:
+            for g, (start, blocks, _, end) in enumerate(runs):
+                m = start["campaign"]["map"]
+                assert (m["ix"], m["iy"], m["nx"], m["ny"]) == (g % 3, g // 3, 3, 3) and start["index"] == g
+                assert m["x_m"] == fr[str(g)].attrs["position x"] and m["y_m"] == fr[str(g)].attrs["position y"]
+                assert m["E_star_Pa"] == start["scene"]["E_star_Pa"]
+                assert m["surface_height_m"] == start["scene"]["surface_height_m"]
+                for chan, ds in (("force_N", "force"), ("height_m", "height (piezo)")):
+                    got = stream_channel(blocks, chan).view(np.uint64)
+                    assert np.array_equal(fr[str(g)][ds][:].view(np.uint64), got), (g, chan)
+                    assert np.array_equal(fl[str(g)][ds][:].view(np.uint64), got), (g, chan)
+                for a in ("grid index x", "grid index y", "grid shape x", "position x", "position y"):
+                    assert fl[str(g)].attrs[a] == fr[str(g)].attrs[a], (g, a)
+            assert fr["4"].attrs["grid index x"] == 1 and runs[4][0]["campaign"]["map"]["material"] == 1
+        vafm_info_ok(log)
+    finally:
+        assert d.stop() == 0
+    # paced at 100x: the 8 lateral moves of 2 um at 1 um/s take 8 x 2 s / 100 = 0.16 s of the wall time
+    d = Daemon("--preset", "cell-liquid", "--speed", "100")
+    try:
+        s = d.sub()
+        settle(d, s)
+        t0 = time.monotonic()
+        r = d.cmd({"cmd": "map", "map": {"nx": 3, "ny": 3, "size_x_m": 6e-6, "size_y_m": 6e-6},
+                   "lateral_speed_m_per_s": 1e-6})
+        runs, cend = collect_campaign(s, r["campaign_id"])
+        wall = time.monotonic() - t0
+        curves = sum(e["result"]["duration_s"] for _, _, _, e in runs) / 100
+        assert cend["status"] == "ok" and wall >= curves + 0.8 * 0.16, (wall, curves)
+    finally:
+        assert d.stop() == 0
+
+
 def test_campaign_abort_first_index_and_progress():
     d = Daemon("--preset", "paper-fig4", "--speed", "0.5")  # ~0.1 s curves paced to ~0.2 s each
     s = d.sub()

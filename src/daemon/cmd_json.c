@@ -154,9 +154,69 @@ static int s_param_apply(vafm_params *p, const vafm_param_info *f, json_t *v, va
 
 /* ---- decoding ------------------------------------------------------------------------------------ */
 
+/* `map`: the spec's fields by vafm_map_set's names (numbers for numbers, strings for the pattern, the start
+ * mode and the materials' contact models), first_index below the pixel count, the lateral speed. */
+static int s_decode_map(json_t *root, vafmd_cmd *c, vafmd_err *e)
+{
+    json_t *m = json_object_get(root, "map"), *v;
+    if (!m) {
+        vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "map", "'map' needs \"map\": {\"nx\": ..., \"ny\": ..., \"size_x_m\": "
+                      "..., \"pattern\": ...} (the fields of vafm map's spec)");
+        return -1;
+    }
+    if (!json_is_object(m)) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "map", "\"map\" must be an object of the map's fields");
+        return -1;
+    }
+    vafm_map_spec_default(&c->map);
+    const char *key;
+    json_object_foreach(m, key, v) {
+        char text[64];
+        if (json_is_string(v))
+            snprintf(text, sizeof text, "%s", json_string_value(v));
+        else if (json_is_integer(v))
+            snprintf(text, sizeof text, "%" JSON_INTEGER_FORMAT, json_integer_value(v));
+        else if (json_is_real(v))
+            snprintf(text, sizeof text, "%.17g", json_real_value(v));
+        else {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, key, "map.%.40s must be a number or a string", key);
+            return -1;
+        }
+        vafm_error verr = { 0 };
+        int r = vafm_map_set(&c->map, key, text, &verr);
+        if (r) {
+            vafmd_err_set(e, r == VAFM_ENOTFOUND ? VAFMD_E_UNKNOWN_FIELD : VAFMD_E_OUT_OF_RANGE, key, "map.%s",
+                          verr.message);
+            return -1;
+        }
+    }
+    size_t pixels = vafm_map_pixels(&c->map);
+    c->camp_n = 1;
+    if ((v = json_object_get(root, "first_index")) != NULL) {
+        if (!json_is_integer(v) || json_integer_value(v) < 0 || (uint64_t)json_integer_value(v) >= pixels) {
+            vafmd_err_set(e, json_is_integer(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "first_index",
+                          "\"first_index\" must be an integer in [0, %zu] (the map's pixels, iy*nx + ix)",
+                          pixels ? pixels - 1 : 0);
+            return -1;
+        }
+        c->camp_first = (uint64_t)json_integer_value(v);
+    }
+    c->map_lateral_speed = 20e-6; /* a typical force-map lateral move */
+    if ((v = json_object_get(root, "lateral_speed_m_per_s")) != NULL) {
+        double x = json_is_number(v) ? json_number_value(v) : NAN;
+        if (!json_is_number(v) || !(x >= 1e-9 && x <= 1e-2)) {
+            vafmd_err_set(e, json_is_number(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "lateral_speed_m_per_s",
+                          "lateral_speed_m_per_s must be a number in [1e-09, 0.01] m/s");
+            return -1;
+        }
+        c->map_lateral_speed = x;
+    }
+    return 0;
+}
+
 static const char *const s_cmd_names[] = { "hello", "get", "set", "presets", "curve", "tune",
                                            "abort", "status", "shutdown", "campaign", "log", "replay",
-                                           "faults" };
+                                           "faults", "map" };
 
 const char *vafmd_cmd_name(int kind)
 {
@@ -178,6 +238,7 @@ static const char *const s_cmd_keys[] = {
     [VAFMD_CMD_LOG] = " path overwrite resume stop ",
     [VAFMD_CMD_REPLAY] = " path curves speed loop client_run_id ",
     [VAFMD_CMD_FAULTS] = " plan clear ",
+    [VAFMD_CMD_MAP] = " map first_index lateral_speed_m_per_s client_run_id ",
 };
 
 static int s_key_allowed(int kind, const char *key)
@@ -504,6 +565,8 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
             }
         }
     }
+    if (kind == VAFMD_CMD_MAP && s_decode_map(root, c, e))
+        return -1;
     if (kind == VAFMD_CMD_LOG) {
         static const char *const flags[] = { "overwrite", "resume", "stop" };
         int *dst[] = { &c->log_overwrite, &c->log_resume, &c->log_stop };

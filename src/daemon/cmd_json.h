@@ -14,7 +14,7 @@
 enum vafmd_cmd_kind {
     VAFMD_CMD_HELLO, VAFMD_CMD_GET, VAFMD_CMD_SET, VAFMD_CMD_PRESETS, VAFMD_CMD_CURVE, VAFMD_CMD_TUNE,
     VAFMD_CMD_ABORT, VAFMD_CMD_STATUS, VAFMD_CMD_SHUTDOWN, VAFMD_CMD_CAMPAIGN, VAFMD_CMD_LOG,
-    VAFMD_CMD_REPLAY, VAFMD_CMD_FAULTS,
+    VAFMD_CMD_REPLAY, VAFMD_CMD_FAULTS, VAFMD_CMD_MAP,
 };
 
 /* Stable error codes (protocol/wire.md lists them). */
@@ -68,7 +68,9 @@ typedef struct vafmd_cmd {
     int64_t replay_loop;     /* replay: passes over the selection, 0 = until abort */
     uint64_t camp_n;       /* campaign: curves per grid point (≥ 1) */
     json_t *camp_list[3];  /* campaign: borrowed T_K, v_m_per_s, k_N_per_m arrays of numbers, or NULL */
-    uint64_t camp_first;   /* campaign: first_index (0 if absent) */
+    uint64_t camp_first;   /* campaign, map: first_index (0 if absent) */
+    vafm_map_spec map;     /* map: the spec (vafm_map_set of each key of "map") */
+    double map_lateral_speed; /* map: lateral_speed_m_per_s */
     json_t *fault_plan;    /* faults: borrowed plan object (set/replace), or NULL */
     int fault_clear;       /* faults: 1 = "clear": true */
 } vafmd_cmd;

@@ -69,8 +69,8 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "daemon_version", json_string(VAFMD_VERSION));
     json_object_set_new(r, "library_version", json_string(vafm_version()));
     json_object_set_new(r, "capabilities",
-                        json_pack("[sssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
-                                  "status", "log", "shutdown", "campaign", "replay", "faults"));
+                        json_pack("[ssssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
+                                  "status", "log", "shutdown", "campaign", "replay", "faults", "map"));
     json_object_set_new(r, "not_implemented", json_array());
     json_object_set_new(r, "security", json_string(d->auth.on ? "curve" : "none"));
     json_t *stream = json_string(d->pub_endpoint); /* NULL for an endpoint that is not UTF-8 */
@@ -593,13 +593,30 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             *lp++ = json_number_value(json_array_get(c->camp_list[l], i));
     }
     cp->base = d->scene;
+    if (c->kind == VAFMD_CMD_MAP) {
+        /* a force map: a campaign whose grid is the pixels, each curve the pixel's scene (vafm_map_pixel) */
+        cp->is_map = 1;
+        cp->map = c->map;
+        cp->lateral_speed_m_per_s = c->map_lateral_speed;
+        vafm_error merr = { 0 };
+        int mrc = vafm_map_validate(&cp->map, &cp->base, &merr);
+        if (!mrc)
+            mrc = vafm_map_campaign(&cp->map, &cp->spec);
+        if (mrc) {
+            vafmd_err_set(e, VAFMD_E_INVALID_SCENE, merr.field, "%s",
+                          merr.message[0] ? merr.message : vafm_strerror(mrc));
+            free(cp->lists);
+            free(cp);
+            return NULL;
+        }
+    }
     cp->spec.T_K = lists[0];
     cp->spec.n_T = n[0];
     cp->spec.v_m_per_s = lists[1];
     cp->spec.n_v = n[1];
     cp->spec.k_N_per_m = lists[2];
     cp->spec.n_k = n[2];
-    cp->spec.curves_per_point = c->camp_n;
+    cp->spec.curves_per_point = c->camp_n; /* a map: 1 */
     cp->spec.first_curve = c->camp_first;
     size_t points = vafm_campaign_points(&cp->spec);
     cp->total = c->camp_n * (uint64_t)points; /* ≤ 1e9 · 1e5: no overflow */
@@ -733,6 +750,7 @@ static json_t *s_execute(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
     }
     case VAFMD_CMD_SHUTDOWN: *quit = 1; return s_ok(c);
     case VAFMD_CMD_CAMPAIGN: return s_campaign(d, c, e);
+    case VAFMD_CMD_MAP: return s_campaign(d, c, e); /* a campaign over the map's pixels */
     case VAFMD_CMD_LOG: return s_log(d, c, e);
     case VAFMD_CMD_FAULTS: return s_faults_cmd(d, c, e);
     default: vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "command not handled"); return NULL;

@@ -14,6 +14,7 @@
 #include <stdatomic.h>
 #include <stdint.h>
 #include "vafm/campaign.h"
+#include "vafm/map.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "daemon/spsc_ring.h"
@@ -69,6 +70,11 @@ typedef struct vafmd_campaign {
     vafmd_settings set;            /* settings in force for the whole campaign */
     int log;                       /* 1: log its curves */
     char client_run_id[65];
+    /* a force map (the `map` command): a campaign over its pixels, one curve each (curve = iy·nx + ix) */
+    int is_map;
+    vafm_map_spec map;             /* spec.point_user points here */
+    double lateral_speed_m_per_s;  /* the lateral move between pixels takes distance / this (paced runs) */
+    int64_t move_until_ns;         /* the move to the next pixel ends then (0: none under way) */
 } vafmd_campaign;
 
 /* One command for the simulation thread (copied through the ring). */
@@ -123,6 +129,9 @@ typedef struct vafmd_log_begin {
     size_t point;        /* campaign grid point (0 outside campaigns) */
     int detector;        /* 1: detector signals on: force is measured, the file gets no "tip position" */
     char client_run_id[65];
+    int is_map;          /* a force map's pixel: the file gets afmformats' map attributes */
+    vafm_map_spec map;
+    vafm_map_truth pixel;
 } vafmd_log_begin;
 
 typedef struct vafmd_log_end {

@@ -113,6 +113,10 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
                              .run_id = c->begin->run_id, .client_run_id = c->begin->client_run_id,
                              .sensitivity_m_per_V = c->begin->p.sensitivity_m_per_V,
                              .measured_force = c->begin->detector };
+    if (c->begin->is_map) {
+        rc.map = &c->begin->map;
+        rc.pixel = &c->begin->pixel;
+    }
     vafm_error e;
     memset(&e, 0, sizeof e);
     int r = vafm_recorder_append(L->w, &rc, &e);

@@ -915,6 +915,12 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
             lb->point = c->camp ? c->camp->sim_point : 0;
             lb->detector = r->det.on;
             memcpy(lb->client_run_id, c->client_run_id, sizeof lb->client_run_id);
+            if (c->camp && c->camp->is_map) { /* the file gets the pixel's map attributes */
+                lb->is_map = 1;
+                lb->map = c->camp->map;
+                vafm_map_pixel(&c->camp->map, &c->camp->base, (int)(c->index % (uint64_t)c->camp->map.nx),
+                               (int)(c->index / (uint64_t)c->camp->map.nx), NULL, &lb->pixel, NULL);
+            }
         }
         s_log_push(r, VAFMD_LOG_BEGIN, lb);
     }
@@ -1209,6 +1215,20 @@ static void s_camp_next(s_ctx *x)
     vafmd_shared *sh = &x->d->sh;
     uint64_t g = cp->next, first = cp->spec.first_curve;
     size_t point = (size_t)(g / cp->spec.curves_per_point);
+    if (cp->is_map && g != first && !cp->set.free_run) {
+        /* the lateral move from the last pixel to this one takes instrument time (paced: at the speed factor) */
+        int64_t now = s_now();
+        if (cp->move_until_ns == 0) {
+            int nx = cp->map.nx;
+            double dx = (double)((int)(g % (uint64_t)nx) - (int)((g - 1) % (uint64_t)nx)) * cp->map.size_x_m / nx;
+            double dy = (double)((int)(g / (uint64_t)nx) - (int)((g - 1) / (uint64_t)nx)) * cp->map.size_y_m / cp->map.ny;
+            double t = hypot(dx, dy) / cp->lateral_speed_m_per_s / cp->set.speed;
+            cp->move_until_ns = now + (int64_t)(t * 1e9) + 1;
+        }
+        if (now < cp->move_until_ns)
+            return; /* the loop looks again within a millisecond */
+        cp->move_until_ns = 0;
+    }
     vafm_params pp;
     int rc = vafm_campaign_point_params(&cp->base, &cp->spec, point, &pp);
     if (!rc && point != cp->sim_point) {
@@ -1233,6 +1253,16 @@ static void s_camp_next(s_ctx *x)
     json_object_set_new(cj, "T_K", json_real(pp.T_K));
     json_object_set_new(cj, "v_m_per_s", json_real(pp.v_retract_m_per_s));
     json_object_set_new(cj, "k_N_per_m", json_real(pp.k_N_per_m));
+    if (cp->is_map) { /* the pixel: its grid indices, position and ground truth */
+        int ix = (int)(g % (uint64_t)cp->map.nx), iy = (int)(g / (uint64_t)cp->map.nx);
+        vafm_map_truth t;
+        memset(&t, 0, sizeof t);
+        vafm_map_pixel(&cp->map, &cp->base, ix, iy, NULL, &t, NULL);
+        json_object_set_new(cj, "map", json_pack("{s:i,s:i,s:i,s:i,s:f,s:f,s:i,s:f,s:f,s:f}", "ix", ix, "iy", iy,
+                                                 "nx", cp->map.nx, "ny", cp->map.ny, "x_m", t.x_m, "y_m", t.y_m,
+                                                 "material", t.material, "E_star_Pa", t.E_star_Pa, "gamma_J_per_m2",
+                                                 t.gamma_J_per_m2, "surface_height_m", t.surface_height_m));
+    }
     vafmd_sim_cmd c;
     memset(&c, 0, sizeof c);
     c.type = VAFMD_SIM_START;
