@@ -42,29 +42,7 @@ static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
     return i;
 }
 
-static long s_run_free(vafm_kernel *K, long n)
-{
-    return s_loop(K, n, VAFM_KLOOP_FREE);
-}
-
-static long s_run_table(vafm_kernel *K, long n)
-{
-    return s_loop(K, n, VAFM_KLOOP_TABLE);
-}
-
-static long s_run_any(vafm_kernel *K, long n)
-{
-    return s_loop(K, n, VAFM_KLOOP_ANY);
-}
-
-static long s_run(vafm_kernel *K, long n)
-{
-    switch (s_kernel_loop_kind(K)) {
-    case VAFM_KLOOP_FREE: return s_run_free(K, n);
-    case VAFM_KLOOP_TABLE: return s_run_table(K, n);
-    default: return s_run_any(K, n);
-    }
-}
+VAFM_KERNEL_RUN_PER_LOOP(s_loop)
 
 static const vafm_integrator_type s_type = {
     .name = "baoab",

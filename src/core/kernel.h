@@ -201,6 +201,21 @@ static inline int s_kernel_loop_kind(const vafm_kernel *K)
     return K->jtab ? VAFM_KLOOP_TABLE : VAFM_KLOOP_ANY;
 }
 
+/* Each integrator's run(): its step loop s_loop(K, n, kind), inlined once per contact state so that each copy
+ * keeps that state's constants in registers, and the dispatch on the state a run starts in. */
+#define VAFM_KERNEL_RUN_PER_LOOP(loop)                                                                             \
+    static long s_run_free(vafm_kernel *K, long n) { return loop(K, n, VAFM_KLOOP_FREE); }                       \
+    static long s_run_table(vafm_kernel *K, long n) { return loop(K, n, VAFM_KLOOP_TABLE); }                     \
+    static long s_run_any(vafm_kernel *K, long n) { return loop(K, n, VAFM_KLOOP_ANY); }                         \
+    static long s_run(vafm_kernel *K, long n)                                                                    \
+    {                                                                                                            \
+        switch (s_kernel_loop_kind(K)) {                                                                         \
+        case VAFM_KLOOP_FREE: return s_run_free(K, n);                                                           \
+        case VAFM_KLOOP_TABLE: return s_run_table(K, n);                                                         \
+        default: return s_run_any(K, n);                                                                         \
+        }                                                                                                        \
+    }
+
 /* The constants of one run() call. */
 typedef struct vafm_kinv {
     double dt, uspr0, v_spr, k, u_detach, u_touch;
