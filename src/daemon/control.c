@@ -263,7 +263,9 @@ static json_t *s_faults_cmd(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     if (c->fault_plan && vafmd_faults_configure(d, c->fault_plan, e))
         return NULL;
     json_t *r = s_ok(c);
-    json_object_update(r, s_faults_report(d)); /* the plan now in force, the count and the last faults */
+    json_t *rep = s_faults_report(d); /* the plan now in force, the count and the last faults */
+    json_object_update(r, rep);       /* (copies the members: the report itself is ours to free) */
+    json_decref(rep);
     return r;
 }
 

@@ -250,6 +250,7 @@ int main(int argc, char **argv)
                 fprintf(stderr, "vafmd: config '%s': \"faults\": %s (field %s)\n", config, fp ? fe.message : "out of memory",
                         fe.field[0] ? fe.field : "plan");
                 free(fp);
+                json_decref(set);
                 json_decref(cfg);
                 return 2;
             }
