@@ -147,6 +147,24 @@ else
     bad "existing file under mpirun" "status $st: $(head -c 300 "$TMP/u.out")"
 fi
 
+# A force map (issue #15) on 2 ranks: the file of the plain `vafm map`, and a rank with another map is refused.
+MAP0=(map --preset cell-liquid --ny 3 --size 6e-6 --pattern dome --pattern-param radius_m=2e-6,height_m=2e-7 -q)
+MAP=("${MAP0[@]}" --nx 4)
+if "$VAFM" "${MAP[@]}" -o "$TMP/mapref.h5" >/dev/null 2>&1 &&
+    timeout 120 "${MPI[@]}" -np 2 "$VAFM" "${MAP[@]}" -o "$TMP/map2.h5" >"$TMP/map2.out" 2>&1; then
+    same "mpirun -np 2 vafm map equals the plain map" "$TMP/mapref.h5" "$TMP/map2.h5"
+else
+    bad "mpirun -np 2 vafm map" "$(tail -c 300 "$TMP/map2.out")"
+fi
+timeout 60 "${MPI[@]}" -np 1 "$VAFM" "${MAP[@]}" -o "$TMP/mapmix.h5" : -np 1 "$VAFM" "${MAP0[@]}" --nx 5 \
+    -o "$TMP/mapmix.h5" >"$TMP/mapmix.out" 2>&1
+st=$?
+if [ $st -ne 0 ] && grep -qF "rank 1: the scene or grid differs" "$TMP/mapmix.out" && [ ! -e "$TMP/mapmix.h5" ]; then
+    ok "a rank with another map is refused (status $st, no file)"
+else
+    bad "a rank with another map is refused" "status $st: $(head -c 300 "$TMP/mapmix.out")"
+fi
+
 # A rank with another scene (MPMD launch: rank 1 gets --T=301) is refused before any file exists.
 timeout 60 "${MPI[@]}" -np 1 "$VAFM" campaign "${SCENE[@]}" -n 2 -o "$TMP/mix.h5" -q : \
     -np 1 "$VAFM" campaign "${SCENE[@]}" -n 2 -o "$TMP/mix.h5" -q --T=301 >"$TMP/mix.out" 2>&1

@@ -217,7 +217,8 @@ static uint64_t s_fingerprint(const vafm_params *p, const vafm_campaign_spec *s)
         if (len >= sizeof buf)
             len = sizeof buf - 1;
     }
-    len += (size_t)snprintf(buf + len, sizeof buf - len, "|N=%" PRIu64, s->curves_per_point);
+    len += (size_t)snprintf(buf + len, sizeof buf - len, "|N=%" PRIu64 "|P=%zu|%.4000s", s->curves_per_point,
+                            s->point_fn ? s->n_points : 0, s->map_json ? s->map_json : "");
     if (len >= sizeof buf)
         len = sizeof buf - 1;
     uint64_t h = 1469598103934665603ULL;

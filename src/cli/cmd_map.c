@@ -78,37 +78,51 @@ static void s_map_summary(FILE *o, const vafm_cli_scene *sc, const vafm_map_spec
     vafm_h5_reader_destroy(&r);
 }
 
-int vafm_cli_cmd_map(const vafm_cli_args *a)
+/* One map, single-process (mpi NULL) or as one MPI rank (campaign_mpi.h), as vafm campaign: every rank
+ * builds the same grid from the same arguments and checks it against rank 0's; rank 0 alone writes. */
+static int s_map(const vafm_cli_args *a, vafm_cli_mpi *mpi)
 {
     vafm_map_spec ms;
     vafm_cli_scene sc;
     vafm_cli_rec_opts co;
     uint64_t threads = 0;
+    int root = vafm_cli_mpi_rank(mpi) == 0;
     int rc = s_map_parse(a, &ms);
     if (!rc && a->val[O_THREADS])
         rc = vafm_cli_parse_u64("--threads", a->val[O_THREADS], 0, 256, &threads);
-    if (rc || (rc = vafm_cli_resolve_scene(a, &sc, 1)) != 0 || (rc = vafm_cli_rec_parse(a, &co)) != 0)
-        return rc;
+    if (!rc)
+        rc = vafm_cli_resolve_scene(a, &sc, 1);
+    if (!rc && root)
+        rc = vafm_cli_rec_parse(a, &co);
     /* every pixel's scene, checked before the file is created (a bad map leaves no file behind) */
     vafm_error err;
     memset(&err, 0, sizeof err);
-    int r = vafm_map_validate(&ms, &sc.p, &err);
+    int r = rc ? 0 : vafm_map_validate(&ms, &sc.p, &err);
     if (r) {
         vafm_cli_error("vafm map: %s", err.message[0] ? err.message : vafm_strerror(r));
-        return vafm_cli_exit_of(r);
+        rc = vafm_cli_exit_of(r);
     }
     char map_json[4096];
     vafm_campaign_spec grid;
     memset(&grid, 0, sizeof grid);
-    if (vafm_map_to_json(&ms, map_json, sizeof map_json) < 0 || vafm_map_campaign(&ms, &grid)) {
+    if (!rc && (vafm_map_to_json(&ms, map_json, sizeof map_json) < 0 || vafm_map_campaign(&ms, &grid))) {
         vafm_cli_error("vafm map: the map's spec cannot be stored");
-        return VAFM_CLI_EXIT_RUNTIME;
+        rc = VAFM_CLI_EXIT_RUNTIME;
     }
     grid.map_json = map_json;
     grid.threads = (int)threads;
     grid.keep_samples = 1;
-    if ((rc = vafm_cli_rec_size_check(a, &co, &sc.p, &grid)) != 0)
+    if (!rc && root)
+        rc = vafm_cli_rec_size_check(a, &co, &sc.p, &grid);
+    if ((rc = vafm_cli_mpi_agree(mpi, rc, &sc.p, &grid)) != 0)
         return rc;
+    if (!root) { /* compute only: rank 0 writes */
+        vafm_error werr;
+        memset(&werr, 0, sizeof werr);
+        if (!(rc = vafm_cli_mpi_agree(mpi, 0, NULL, NULL))) /* rank 0 opened the file */
+            rc = vafm_cli_mpi_run(mpi, &sc.p, &grid, NULL, NULL, &werr) ? VAFM_CLI_EXIT_RUNTIME : VAFM_CLI_EXIT_OK;
+        return rc;
+    }
 
     vafm_cli_rec cp;
     memset(&cp, 0, sizeof cp);
@@ -116,7 +130,10 @@ int vafm_cli_cmd_map(const vafm_cli_args *a)
     cp.base = &sc.p;
     vafm_cli_progress_init(&cp.pg, a);
     double t_start = cp.pg.t0;
-    if ((rc = vafm_cli_rec_open(&cp, &co, &sc, &grid)) != 0)
+    rc = vafm_cli_rec_open(&cp, &co, &sc, &grid);
+    if (mpi && (rc = vafm_cli_mpi_agree(mpi, rc, NULL, NULL)) != 0 && cp.rec)
+        vafm_recorder_close(&cp.rec, NULL, NULL);
+    if (rc)
         return rc;
     uint64_t first = vafm_recorder_count(cp.rec), total = vafm_campaign_points(&grid);
     grid.first_curve = first < total ? first : total;
@@ -125,12 +142,25 @@ int vafm_cli_cmd_map(const vafm_cli_args *a)
         fprintf(stderr, "vafm: %s holds %" PRIu64 " of the map's %" PRIu64 " curves; running the rest\n", co.out, first,
                 total);
     memset(&err, 0, sizeof err);
-    r = vafm_campaign_run(&sc.p, &grid, vafm_cli_rec_curve, &cp, &err);
+    r = mpi ? vafm_cli_mpi_run(mpi, &sc.p, &grid, vafm_cli_rec_curve, &cp, &err)
+            : vafm_campaign_run(&sc.p, &grid, vafm_cli_rec_curve, &cp, &err);
     vafm_cli_progress_end(&cp.pg);
     vafm_recorder_report rep;
     rc = vafm_cli_rec_close(&cp, &co, first, r, &err, &rep);
     double wall = vafm_cli_now() - t_start;
-    if (!rc)
+    if (!rc) {
         s_map_summary(stdout, &sc, &ms, &co, &cp, &rep, first, wall);
+        vafm_cli_mpi_describe(mpi, stdout);
+    }
     return rc;
+}
+
+/* MPI starts only under an MPI launcher or with --mpi: plain `vafm map` never touches it. */
+int vafm_cli_cmd_map(const vafm_cli_args *a)
+{
+    vafm_cli_mpi *mpi = NULL;
+    int rc = vafm_cli_mpi_begin(a->on[O_MPI], &mpi);
+    if (!rc)
+        rc = s_map(a, mpi);
+    return vafm_cli_mpi_end(&mpi, rc);
 }

@@ -393,7 +393,7 @@ static const vafm_cli_command s_commands[] = {
       "                       writes FILE, identical to the single-process file (README: Campaigns on MPI)\n", 0, NULL },
     { "map", vafm_cli_cmd_map,
       S_GENERAL | M(O_NX) | M(O_NY) | M(O_SIZE) | M(O_PATTERN) | M(O_PPARAM) | M(O_OUT) | M(O_THREADS) |
-          M(O_RESUME) | M(O_OVERWRITE) | M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET),
+          M(O_RESUME) | M(O_OVERWRITE) | M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET) | M(O_MPI),
       1, "a force map: one curve per pixel over a heterogeneous sample into one HDF5 file, resumable",
       "vafm map --out FILE.h5 [--nx NX] [--ny NY] [--size S|SX,SY] [--pattern NAME] [--pattern-param LIST]\n"
       "         [SCENE] [--threads T] [--resume | --overwrite] [--flush-interval S] [--gzip L] [--progress | --quiet]\n"
@@ -413,7 +413,8 @@ static const vafm_cli_command s_commands[] = {
       "                       afmformats' map attributes (grid shape/size/center/index, position) and the\n"
       "                       ground truth (E*, gamma, surface height of each pixel); protocol/hdf5.md\n"
       "  --threads T          worker threads (default 0: all cores); the file does not depend on it\n"
-      "  --resume, --overwrite, --flush-interval S, --gzip L, --progress, -q: as for vafm campaign\n", 0, NULL },
+      "  --resume, --overwrite, --flush-interval S, --gzip L, --progress, -q, --mpi: as for vafm campaign\n"
+      "                       (`mpirun -np R vafm map ...`: the pixels split over R ranks, the file the same)\n", 0, NULL },
     { "info", vafm_cli_cmd_info, S_GENERAL | M(O_JSON), 0,
       "summarise an HDF5 force-curve file (vafm's or another program's) and check its conformance",
       "vafm info FILE [--json]\n"
