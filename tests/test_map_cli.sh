@@ -128,4 +128,67 @@ else
     echo "skip - python example force_map.py (h5py or matplotlib missing)"
 fi
 
+# A measured map as the sample (--sample GRID.h5, pattern grid): the file's ground truth at every pixel is the
+# grid's bilinear interpolation there (E*, height; clamped at the edges), to rounding; hostile grids are refused
+# naming the dataset or attribute, before any curve runs.
+if "$PY" -c 'import h5py, numpy' 2>/dev/null; then
+    "$PY" - "$TMP" <<'EOF'
+import sys, h5py, numpy as np
+d = sys.argv[1]
+y, x = np.mgrid[0:3, 0:4]
+with h5py.File(d + "/grid.h5", "w") as f:
+    f["E_star_Pa"] = 5e3 + 2e3 * x + 1e3 * y * x           # Pa, varies bilinearly and more
+    f["height_m"] = 1e-7 * (x + y) ** 2 / 25                # m
+    for k, v in (("x0_m", -3e-6), ("y0_m", -2e-6), ("dx_m", 2e-6), ("dy_m", 2e-6)):
+        f.attrs[k] = v
+with h5py.File(d + "/nan.h5", "w") as f:
+    a = np.full((3, 3), 6e3); a[1, 1] = np.nan
+    f["E_star_Pa"] = a
+    for k, v in (("x0_m", 0.0), ("y0_m", 0.0), ("dx_m", 1e-6), ("dy_m", 1e-6)):
+        f.attrs[k] = v
+with h5py.File(d + "/noattr.h5", "w") as f:
+    f["height_m"] = np.zeros((2, 2))
+with h5py.File(d + "/shape.h5", "w") as f:
+    f["E_star_Pa"] = np.full((3, 3), 6e3); f["height_m"] = np.zeros((2, 3))
+    for k, v in (("x0_m", 0.0), ("y0_m", 0.0), ("dx_m", 1e-6), ("dy_m", 1e-6)):
+        f.attrs[k] = v
+EOF
+    run map --preset cell-liquid --nx 5 --ny 4 --size 8e-6,6e-6 --sample "$TMP/grid.h5" --out "$TMP/grid_map.h5" -q
+    if [ "$rc" -eq 0 ] && "$PY" - "$TMP/grid_map.h5" >"$TMP/gout" 2>&1 <<'EOF'
+import sys, h5py, numpy as np
+f = h5py.File(sys.argv[1], "r")
+truth = np.concatenate([f.attrs[k] for k in sorted(a for a in f.attrs if a.startswith("vafm ground truth"))])
+y, x = np.mgrid[0:3, 0:4]
+E = 5e3 + 2e3 * x + 1e3 * y * x; H = 1e-7 * (x + y) ** 2 / 25
+def bil(v, px, py):
+    u = min(max((px + 3e-6) / 2e-6, 0), 3); w = min(max((py + 2e-6) / 2e-6, 0), 2)
+    i = min(int(np.floor(u)), 2); j = min(int(np.floor(w)), 1); tu, tw = u - i, w - j
+    lo = v[j, i] + (v[j, i + 1] - v[j, i]) * tu; hi = v[j + 1, i] + (v[j + 1, i + 1] - v[j + 1, i]) * tu
+    return lo + (hi - lo) * tw
+worst = 0
+for row in truth:
+    g = f[str(int(row["curve"]))]
+    px, py = g.attrs["position x"], g.attrs["position y"]
+    worst = max(worst, abs(row["E_star_Pa"] / bil(E, px, py) - 1), abs(row["surface_height_m"] - bil(H, px, py)) / 1e-7)
+assert len(truth) == 20 and worst < 1e-12, worst
+print(f"20 pixels, worst relative deviation {worst:.2g}")
+EOF
+    then ok "--sample grid: every pixel's E* and height are the grid's bilinear interpolation ($(cat "$TMP/gout"))"
+    else bad "--sample grid" "exit $rc: $(head -c 400 "$TMP/err") $(head -c 400 "$TMP/gout")"; fi
+    expect_fail "--sample: a NaN in the grid names the dataset and the point" 2 "E_star_Pa[1][1]" -- \
+        map --preset cell-liquid --nx 2 --ny 2 --sample "$TMP/nan.h5" --out "$TMP/g1.h5"
+    expect_fail "--sample: a missing origin names the attribute" 2 "x0_m" -- \
+        map --preset cell-liquid --nx 2 --ny 2 --sample "$TMP/noattr.h5" --out "$TMP/g2.h5"
+    expect_fail "--sample: datasets of different shapes are refused" 2 "height_m" "3 x 3" -- \
+        map --preset cell-liquid --nx 2 --ny 2 --sample "$TMP/shape.h5" --out "$TMP/g3.h5"
+    expect_fail "--sample: not a file" 2 "--sample" -- map --nx 2 --ny 2 --sample "$TMP/none.h5" --out "$TMP/g4.h5"
+    expect_fail "--pattern grid without --sample says what it needs" 2 "grid" "measured map" -- \
+        map --nx 2 --ny 2 --pattern grid --out "$TMP/g5.h5"
+    if [ ! -e "$TMP/g1.h5" ] && [ ! -e "$TMP/g2.h5" ] && [ ! -e "$TMP/g3.h5" ] && [ ! -e "$TMP/g5.h5" ]; then
+        ok "--sample: refused grids leave no file"
+    else bad "--sample: refused grids leave no file"; fi
+else
+    echo "skip - --sample grid (h5py missing)"
+fi
+
 harness_done

@@ -22,6 +22,7 @@
 #define VAFM_H5_H
 
 #include "vafm/campaign.h"
+#include "vafm/map.h"
 #include "vafm/common.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
@@ -276,6 +277,16 @@ VAFM_API int vafm_h5_reader_truth(const vafm_h5_reader *r, uint64_t curve, vafm_
  *         "[rule] file: object: what is wrong".
  */
 VAFM_API int vafm_h5_check(const char *path, vafm_error *err);
+
+/**
+ * A measured map to use as a virtual sample (vafm/map.h, pattern grid): the 2-D float datasets E_star_Pa,
+ * gamma_J_per_m2 and height_m at the root (at least one; each [ny][nx], 2 to 65536 points a side, at most 2^24,
+ * every value finite and in the scene's range) and the root attributes x0_m, y0_m (point (0, 0)) and dx_m,
+ * dy_m (spacing, (0, 1e-2] m); protocol/hdf5.md, "Map grids". @return 0 with *out (free it with
+ * vafm_h5_map_grid_free), or VAFM_EFORMAT / VAFM_EIO / VAFM_ENOMEM with err naming the dataset or attribute.
+ */
+VAFM_API int vafm_h5_map_grid_load(const char *path, vafm_map_grid **out, vafm_error *err);
+VAFM_API void vafm_h5_map_grid_free(vafm_map_grid **g);
 
 #ifdef __cplusplus
 }

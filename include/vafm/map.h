@@ -47,7 +47,21 @@ enum vafm_map_pattern {
                                (a cell on a hard substrate) */
     VAFM_MAP_DOMAINS = 4, /**< a random two-phase blend: smoothed value noise on a lattice of spacing domain_m from
                                domain_seed, material 1 where it is below `fraction` (about that area fraction); flat */
+    VAFM_MAP_GRID = 5,    /**< a measured map (vafm_map_spec.grid, e.g. from vafm_h5_map_grid_load): E*, γ and the
+                               surface height interpolated bilinearly at each pixel (clamped at the grid's edges), on
+                               material 0's contact model; a value the grid lacks is material 0's (height: 0) */
 };
+
+/** A measured map to sample from (pattern "grid"): values on a regular grid of points. */
+typedef struct vafm_map_grid {
+    int nx, ny;                   /**< grid points along x and y, ≥ 2 each */
+    double x0_m, y0_m;            /**< position of point (0, 0), m */
+    double dx_m, dy_m;            /**< spacing of the points along x and y, m, > 0 */
+    const double *E_star_Pa;      /**< nx·ny contact moduli, Pa, row-major [iy·nx + ix]; NULL: material 0's */
+    const double *gamma_J_per_m2; /**< nx·ny surface energies, J/m²; NULL: material 0's */
+    const double *height_m;       /**< nx·ny surface heights above the substrate, m; NULL: flat */
+    const char *source;           /**< where it came from (a file name; recorded in the map's JSON), or NULL */
+} vafm_map_grid;
 
 /** How each pixel's approach starts. */
 enum vafm_map_start {
@@ -85,7 +99,8 @@ typedef struct vafm_map_spec {
     double fraction;         /**< domains: threshold of the noise, about the area fraction of material 1,
                                   [0, 1] (default 0.5) */
     int start;               /**< enum vafm_map_start (default surface) */
-    uint8_t reserved[32];
+    const vafm_map_grid *grid; /**< pattern grid: the measured map (borrowed: it must outlive the spec's use) */
+    uint8_t reserved[24];
 } vafm_map_spec;
 
 /** Ground truth of one pixel. */

@@ -80,7 +80,26 @@ static void s_map_summary(FILE *o, const vafm_cli_scene *sc, const vafm_map_spec
 
 /* One map, single-process (mpi NULL) or as one MPI rank (campaign_mpi.h), as vafm campaign: every rank
  * builds the same grid from the same arguments and checks it against rank 0's; rank 0 alone writes. */
+static int s_map_run(const vafm_cli_args *a, vafm_cli_mpi *mpi, const vafm_map_grid *mg);
+
 static int s_map(const vafm_cli_args *a, vafm_cli_mpi *mpi)
+{
+    vafm_map_grid *mg = NULL;
+    if (a->val[O_SAMPLE]) { /* a measured map as the sample: read (and bounded) before anything else */
+        vafm_error gerr;
+        memset(&gerr, 0, sizeof gerr);
+        int r = vafm_h5_map_grid_load(a->val[O_SAMPLE], &mg, &gerr);
+        if (r) {
+            vafm_cli_error("vafm map: --sample %s: %s", a->val[O_SAMPLE], gerr.message);
+            return vafm_cli_exit_of(r);
+        }
+    }
+    int rc = s_map_run(a, mpi, mg);
+    vafm_h5_map_grid_free(&mg);
+    return rc;
+}
+
+static int s_map_run(const vafm_cli_args *a, vafm_cli_mpi *mpi, const vafm_map_grid *mg)
 {
     vafm_map_spec ms;
     vafm_cli_scene sc;
@@ -88,6 +107,10 @@ static int s_map(const vafm_cli_args *a, vafm_cli_mpi *mpi)
     uint64_t threads = 0;
     int root = vafm_cli_mpi_rank(mpi) == 0;
     int rc = s_map_parse(a, &ms);
+    if (!rc && mg) {
+        ms.pattern = VAFM_MAP_GRID;
+        ms.grid = mg;
+    }
     if (!rc && a->val[O_THREADS])
         rc = vafm_cli_parse_u64("--threads", a->val[O_THREADS], 0, 256, &threads);
     if (!rc)

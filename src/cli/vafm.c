@@ -40,6 +40,7 @@ static const s_option s_options[VAFM_CLI_NOPT] = {
     [O_NX] = { "--nx", NULL, 1 },           [O_NY] = { "--ny", NULL, 1 },
     [O_SIZE] = { "--size", NULL, 1 },       [O_PATTERN] = { "--pattern", NULL, 1 },
     [O_PPARAM] = { "--pattern-param", NULL, 1 },
+    [O_SAMPLE] = { "--sample", NULL, 1 },
 };
 
 #define M(o) (1u << (o))
@@ -392,7 +393,7 @@ static const vafm_cli_command s_commands[] = {
       "                       ranks (x --threads each, default: the rank's share of its node's cores); rank 0\n"
       "                       writes FILE, identical to the single-process file (README: Campaigns on MPI)\n", 0, NULL },
     { "map", vafm_cli_cmd_map,
-      S_GENERAL | M(O_NX) | M(O_NY) | M(O_SIZE) | M(O_PATTERN) | M(O_PPARAM) | M(O_OUT) | M(O_THREADS) |
+      S_GENERAL | M(O_NX) | M(O_NY) | M(O_SIZE) | M(O_PATTERN) | M(O_PPARAM) | M(O_SAMPLE) | M(O_OUT) | M(O_THREADS) |
           M(O_RESUME) | M(O_OVERWRITE) | M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET) | M(O_MPI),
       1, "a force map: one curve per pixel over a heterogeneous sample into one HDF5 file, resumable",
       "vafm map --out FILE.h5 [--nx NX] [--ny NY] [--size S|SX,SY] [--pattern NAME] [--pattern-param LIST]\n"
@@ -403,6 +404,9 @@ static const vafm_cli_command s_commands[] = {
       "                       material a then b), disc | dome (a body of material b, radius_m, height_m, on a\n"
       "                       substrate of material a; dome: a spherical cap), domains (a random blend of a and\n"
       "                       b from domain_seed, domain size domain_m, fraction of b)\n"
+      "  --sample GRID.h5     a measured map as the sample (pattern grid): E_star_Pa, gamma_J_per_m2, height_m as\n"
+      "                       2-D datasets with x0_m, y0_m, dx_m, dy_m (protocol/hdf5.md, Map grids),\n"
+      "                       interpolated bilinearly at each pixel on material a's contact model\n"
       "  --pattern-param LIST NAME=VALUE,...: period_m (5e-6), radius_m (3e-6), height_m (0.5e-6), domain_m (1e-6),\n"
       "                       domain_seed (1), fraction (0.5), center_x_m, center_y_m (0), start (surface: the\n"
       "                       approach starts start_height_m above the local surface, the default; fixed: above\n"

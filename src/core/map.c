@@ -59,7 +59,7 @@ static int s_open_low(const s_mfield *f)
     return f->kind == S_REAL && f->min == 0 && !strcmp(f->unit, "m") && strcmp(f->name, "height_m");
 }
 
-static const char *const s_patterns[] = { "uniform", "stripes", "disc", "dome", "domains" };
+static const char *const s_patterns[] = { "uniform", "stripes", "disc", "dome", "domains", "grid" };
 #define S_NPATTERNS ((int)(sizeof s_patterns / sizeof s_patterns[0]))
 static const char *const s_starts[] = { "surface", "fixed" };
 
@@ -103,7 +103,7 @@ int vafm_map_pattern_find(const char *name, vafm_error *err)
     for (int i = 0; name && i < S_NPATTERNS; i++)
         if (!strcmp(name, s_patterns[i]))
             return i;
-    vafm_err_set(err, VAFM_ENOTFOUND, "pattern", "pattern '%s' is not known (uniform, stripes, disc, dome, domains)",
+    vafm_err_set(err, VAFM_ENOTFOUND, "pattern", "pattern '%s' is not known (uniform, stripes, disc, dome, domains, grid)",
                  name ? name : "");
     return VAFM_ENOTFOUND;
 }
@@ -146,7 +146,7 @@ static int s_check_field(const vafm_map_spec *s, const s_mfield *f, vafm_error *
     case S_PATTERN: {
         int v = *(const int *)base;
         if (v < 0 || v >= S_NPATTERNS) {
-            vafm_err_set(err, VAFM_EINVAL, f->name, "pattern = %d is not one of uniform|stripes|disc|dome|domains", v);
+            vafm_err_set(err, VAFM_EINVAL, f->name, "pattern = %d is not one of uniform|stripes|disc|dome|domains|grid", v);
             return VAFM_EINVAL;
         }
         return 0;
@@ -179,6 +179,15 @@ static int s_check_spec(const vafm_map_spec *s, vafm_error *err)
         vafm_err_set(err, VAFM_EINVAL, "nx", "nx x ny = %d x %d = %zu pixels is more than the %d a map may have", s->nx,
                      s->ny, (size_t)s->nx * (size_t)s->ny, VAFM_MAP_MAX_PIXELS);
         return VAFM_EINVAL;
+    }
+    if (s->pattern == VAFM_MAP_GRID) {
+        const vafm_map_grid *g = s->grid;
+        if (!g || g->nx < 2 || g->ny < 2 || !(g->dx_m > 0) || !(g->dy_m > 0) || !isfinite(g->x0_m) ||
+            !isfinite(g->y0_m) || (size_t)g->nx * (size_t)g->ny > ((size_t)1 << 24)) {
+            vafm_err_set(err, VAFM_EINVAL, "grid", "pattern grid needs a measured map: at least 2 x 2 points (at most "
+                         "2^24), positive spacings and a finite origin (vafm_h5_map_grid_load reads one)");
+            return VAFM_EINVAL;
+        }
     }
     if (s->pattern == VAFM_MAP_DOME && s->height_m > s->radius_m) {
         vafm_err_set(err, VAFM_EINVAL, "height_m",
@@ -217,6 +226,19 @@ static double s_noise(uint64_t seed, double x, double y)
     return lo + (hi - lo) * sy;
 }
 
+/* A measured grid's value at (x, y): bilinear between the four points around it, clamped at the edges. */
+static double s_grid_at(const vafm_map_grid *g, const double *v, double x, double y)
+{
+    double u = (x - g->x0_m) / g->dx_m, w = (y - g->y0_m) / g->dy_m;
+    u = fmin(fmax(u, 0.0), (double)(g->nx - 1));
+    w = fmin(fmax(w, 0.0), (double)(g->ny - 1));
+    int i = (int)fmin(floor(u), (double)(g->nx - 2)), j = (int)fmin(floor(w), (double)(g->ny - 2));
+    double tu = u - i, tw = w - j;
+    const double *r0 = v + (size_t)j * (size_t)g->nx, *r1 = r0 + g->nx;
+    double lo = r0[i] + (r0[i + 1] - r0[i]) * tu, hi = r1[i] + (r1[i + 1] - r1[i]) * tu;
+    return lo + (hi - lo) * tw;
+}
+
 /* The material and surface height at (x, y). */
 static void s_sample_at(const vafm_map_spec *s, double x, double y, int *mat, double *h)
 {
@@ -249,6 +271,10 @@ static void s_sample_at(const vafm_map_spec *s, double x, double y, int *mat, do
         *mat = n < s->fraction;
         break;
     }
+    case VAFM_MAP_GRID:
+        if (s->grid && s->grid->height_m)
+            *h = s_grid_at(s->grid, s->grid->height_m, x, y);
+        break;
     default:
         break;
     }
@@ -278,6 +304,12 @@ int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int 
     const vafm_contact_type *ct = m->contact ? m->contact : base->contact;
     double E = isnan(m->E_star_Pa) ? base->E_star_Pa : m->E_star_Pa;
     double g = ct == vafm_contact_jkr ? (isnan(m->gamma_J_per_m2) ? base->gamma_J_per_m2 : m->gamma_J_per_m2) : 0.0;
+    if (s->pattern == VAFM_MAP_GRID && s->grid) { /* the measured map's values where it has them */
+        if (s->grid->E_star_Pa)
+            E = s_grid_at(s->grid, s->grid->E_star_Pa, x, y);
+        if (s->grid->gamma_J_per_m2 && ct == vafm_contact_jkr)
+            g = s_grid_at(s->grid, s->grid->gamma_J_per_m2, x, y);
+    }
     if (out) {
         *out = *base;
         out->contact = ct;
@@ -514,6 +546,29 @@ int vafm_map_to_json(const vafm_map_spec *s, char *buf, size_t len)
             snprintf(val, sizeof val, "null");
         }
         w = snprintf(buf + n, len - n, "%s\"%s\": %s", i ? ", " : "", f->name, val);
+        if (w < 0 || (size_t)w >= len - n)
+            return VAFM_EINVAL;
+        n += (size_t)w;
+    }
+    if (s->pattern == VAFM_MAP_GRID && s->grid) { /* the measured map: its geometry, what it holds, where from */
+        const vafm_map_grid *g = s->grid;
+        char src[300] = "null";
+        if (g->source) { /* a file name: JSON-escape the two characters that need it, drop control characters */
+            size_t k = 0;
+            src[k++] = '"';
+            for (const char *c = g->source; *c && k < sizeof src - 3; c++) {
+                if (*c == '"' || *c == '\\')
+                    src[k++] = '\\';
+                if ((unsigned char)*c >= 0x20)
+                    src[k++] = *c;
+            }
+            src[k++] = '"';
+            src[k] = '\0';
+        }
+        w = snprintf(buf + n, len - n, ", \"grid\": {\"nx\": %d, \"ny\": %d, \"x0_m\": %.17g, \"y0_m\": %.17g, \"dx_m\": %.17g, "
+                     "\"dy_m\": %.17g, \"E_star_Pa\": %s, \"gamma_J_per_m2\": %s, \"height_m\": %s, \"source\": %s}", g->nx,
+                     g->ny, g->x0_m, g->y0_m, g->dx_m, g->dy_m, g->E_star_Pa ? "true" : "false",
+                     g->gamma_J_per_m2 ? "true" : "false", g->height_m ? "true" : "false", src);
         if (w < 0 || (size_t)w >= len - n)
             return VAFM_EINVAL;
         n += (size_t)w;
