@@ -15,28 +15,7 @@ set -u
 VAFM=${1:?usage: test_cli.sh path/to/vafm}
 . "$(dirname "$0")/harness.sh"
 
-# Run vafm; stdout in $TMP/out, stderr in $TMP/err, exit status in $rc.
-run() { "$VAFM" "$@" >"$TMP/out" 2>"$TMP/err"; rc=$?; }
 
-# expect_fail DESC STATUS NEEDLE... -- ARGS...: vafm ARGS exits STATUS and stderr holds every NEEDLE.
-expect_fail() {
-    local desc=$1 want=$2 needles=() n
-    shift 2
-    while [ $# -gt 0 ] && [ "$1" != "--" ]; do needles+=("$1"); shift; done
-    shift
-    run "$@"
-    if [ "$rc" -ne "$want" ]; then
-        bad "$desc" "exit $rc, want $want: $(head -c 300 "$TMP/err")"
-        return
-    fi
-    for n in "${needles[@]}"; do
-        if ! grep -qF -- "$n" "$TMP/err"; then
-            bad "$desc" "message lacks '$n': $(head -c 300 "$TMP/err")"
-            return
-        fi
-    done
-    ok "$desc"
-}
 
 # The unit a field's name promises (the table's naming rule: SI unit as the suffix).
 unit_of() {

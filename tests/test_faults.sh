@@ -26,7 +26,6 @@ PY=/usr/bin/python3
 WRITER=
 harness_cleanup() { [ -n "$WRITER" ] && kill -9 "$WRITER" 2>/dev/null; wait 2>/dev/null; }
 
-run() { "$VAFM" "$@" >"$TMP/out" 2>"$TMP/err"; rc=$?; }
 # expect DESC STATUS NEEDLE -- ARGS...: vafm ARGS exits STATUS and stderr holds NEEDLE (within 60 s)
 expect() {
     local desc=$1 want=$2 needle=$3

@@ -14,26 +14,7 @@ PY=${2:-/usr/bin/python3}
 HERE=$(cd "$(dirname "$0")" && pwd)
 . "$HERE/harness.sh"
 
-run() { "$VAFM" "$@" >"$TMP/out" 2>"$TMP/err"; rc=$?; }
 
-expect_fail() {
-    local desc=$1 want=$2 needles=() n
-    shift 2
-    while [ $# -gt 0 ] && [ "$1" != "--" ]; do needles+=("$1"); shift; done
-    shift
-    run "$@"
-    if [ "$rc" -ne "$want" ]; then
-        bad "$desc" "exit $rc, want $want: $(head -c 300 "$TMP/err")"
-        return
-    fi
-    for n in "${needles[@]}"; do
-        if ! grep -qF -- "$n" "$TMP/err"; then
-            bad "$desc" "message lacks '$n': $(head -c 300 "$TMP/err")"
-            return
-        fi
-    done
-    ok "$desc"
-}
 
 B="$TMP/bad.h5"
 expect_fail "map: nx = 0 names nx and its range" 2 "nx" "[1, 1024]" -- map --nx 0 --out "$B"
