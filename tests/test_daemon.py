@@ -641,6 +641,19 @@ def test_map_equals_cli_map_and_is_logged(tmp_path):
                     assert fl[str(g)].attrs[a] == fr[str(g)].attrs[a], (g, a)
             assert fr["4"].attrs["grid index x"] == 1 and runs[4][0]["campaign"]["map"]["material"] == 1
         vafm_info_ok(log)
+        # the map file replays in scan order, each curve's position and grid indices in run.start
+        rr = d.cmd({"cmd": "replay", "path": str(ref)})
+        assert rr["status"] == "ok", rr
+        start = None
+        while start is None:
+            parts = s.recv_multipart()
+            if parts[0] == b"run.start" and json.loads(parts[1])["run_id"] == rr["run_id"]:
+                start = json.loads(parts[1])
+        cs = start["replay"]["curves"]
+        assert len(cs) == 9 and [(c["attributes"]["grid index x"], c["attributes"]["grid index y"]) for c in cs] == \
+            [(g % 3, g // 3) for g in range(9)]
+        assert cs[4]["attributes"]["position x"] == runs[4][0]["campaign"]["map"]["x_m"]
+        d.cmd({"cmd": "abort"})
     finally:
         assert d.stop() == 0
     # paced at 100x: the 8 lateral moves of 2 um at 1 um/s take 8 x 2 s / 100 = 0.16 s of the wall time
