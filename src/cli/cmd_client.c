@@ -515,6 +515,16 @@ int vafm_cli_status(int argc, char **argv)
                 printf(", last error: %s", s_text(log, "error", ""));
             putchar('\n');
         }
+        json_t *flt = json_object_get(st, "faults");
+        if (json_is_object(flt)) { /* fault injection (protocol/faults.md): the plan and what it did */
+            json_t *last = json_object_get(flt, "last");
+            size_t nl = json_is_array(last) ? json_array_size(last) : 0;
+            printf("faults       %s, %.0f injected", json_is_null(json_object_get(flt, "plan")) ? "no plan" : "a plan",
+                   s_num(flt, "count"));
+            if (nl)
+                printf(", the last: %s", s_text(json_array_get(last, nl - 1), "kind", "?"));
+            putchar('\n');
+        }
         json_t *auth = json_object_get(st, "auth");
         if (json_is_object(auth))
             printf("security     %s, %.0f allowed client keys, %.0f accepted, %.0f refused\n",
