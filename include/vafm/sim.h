@@ -116,6 +116,11 @@ VAFM_API const vafm_params *vafm_sim_params(const vafm_sim *s);
 /** The time step in use, s, and whether out-of-contact steps are exact. */
 VAFM_API double vafm_sim_dt(const vafm_sim *s);
 
+/** Controller fault injection (a trigger that never fires): with enabled = 0 the curves begun afterwards
+ *  ignore their trigger, the approach runs to its travel limit (z_range_m, or the ramp size) and the curve
+ *  is flagged VAFM_CURVE_NO_TRIGGER. Default 1. @return 0 or VAFM_EINVAL. */
+VAFM_API int vafm_sim_set_trigger(vafm_sim *s, int enabled);
+
 /** Start force curve `index` (its random stream). Any running scene is discarded. */
 VAFM_API int vafm_sim_curve_begin(vafm_sim *s, uint64_t index);
 

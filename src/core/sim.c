@@ -73,6 +73,7 @@ struct vafm_sim {
     int base_n;         /* ... and their number (≤ VAFM_BASELINE_SAMPLES) */
     double F_hold;      /* constant-force dwell: the force the feedback holds (reduced) */
     double fb_gain;     /* constant-force dwell: piezo speed per unit force error, 1/(k·τ) (reduced) */
+    int trigger_off;    /* fault injection: the trigger never fires (vafm_sim_set_trigger) */
     int touched, detached_in_retract, flags, retract_samples;
     double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
     double touch_t, touch_uspr;
@@ -391,6 +392,14 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->phase = scene == S_SCENE_CURVE ? S_PH_APPROACH : S_PH_TUNE;
     if (scene == S_SCENE_TUNE)
         s->tune_samples = (uint64_t)llround(s->p.tune_duration_s * s->p.sample_rate_Hz);
+}
+
+int vafm_sim_set_trigger(vafm_sim *s, int enabled)
+{
+    if (!s)
+        return VAFM_EINVAL;
+    s->trigger_off = !enabled;
+    return 0;
 }
 
 int vafm_sim_curve_begin(vafm_sim *s, uint64_t index)
@@ -757,6 +766,7 @@ static void s_phase_logic(vafm_sim *s, double force)
             }
         }
         int trig = s->p.trigger == VAFM_TRIGGER_FORCE ? armed && force - base >= s->F_set : s_ucmd(s) >= s->uspr_trigger;
+        trig = trig && !s->trigger_off;
         s->F_hold = s->p.trigger == VAFM_TRIGGER_FORCE ? s->F_set + base : force;
         if (!trig && s_ucmd(s) >= s->uspr_zlimit) {
             s->flags |= VAFM_CURVE_NO_TRIGGER;

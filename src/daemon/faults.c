@@ -42,7 +42,7 @@ static const s_kind s_kinds[VAFMD_F_N] = {
                            NULL },
     [VAFMD_F_DROPOUT] = { "dropout", VAFMD_FW_STREAM, 1, { { "samples", 0, 1, 1e7, 100, 1, 0, "samples" } },
                           "value" },
-    [VAFMD_F_NO_TRIGGER] = { "no_trigger", VAFMD_FW_STREAM, 0, { { 0 } }, NULL },
+    [VAFMD_F_NO_TRIGGER] = { "no_trigger", VAFMD_FW_STREAM, 1, { { 0 } }, NULL },
     [VAFMD_F_KILL] = { "kill", VAFMD_FW_STREAM, 1, { { "status", 0, 3, 125, 3, 1, 0, "" } }, NULL },
     [VAFMD_F_REPLY_DELAY] = { "reply_delay", VAFMD_FW_COMMAND, 1, { { "delay_s", 0, 0, 30, 1, 0, 1, "s" } }, NULL },
     [VAFMD_F_NO_REPLY] = { "no_reply", VAFMD_FW_COMMAND, 1, { { 0 } }, NULL },

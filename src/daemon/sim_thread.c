@@ -76,7 +76,7 @@ typedef struct s_block {
     double *log_t;                     /* a logged run: its samples' times and segments (the logged */
     uint8_t *log_seg;                  /* height, force and tip are ch[0], ch[2], ch[4]), else NULL */
     int n_frec;                        /* controller faults applied to this block: published after it */
-    vafmd_fault_rec frec[2];
+    vafmd_fault_rec frec[3];
 } s_block;
 
 /* Release lateness of the paced blocks of a run (send time − deadline), for run.end's percentiles: a
@@ -135,6 +135,8 @@ typedef struct s_run {
     uint64_t sat_left, dout_left;  /* controller faults: samples still to alter */
     double sat_level;
     int dout_stuck;
+    int no_trig;                   /* a no_trigger fault struck this curve: its record waits for the turn */
+    vafmd_fault_rec no_trig_rec;
     double last_v[3];              /* vDeflection, deflection, force of the last sample computed */
     int fault_silent;              /* truncate/kill: the run ends without run.end and is not logged */
 } s_run;
@@ -318,6 +320,33 @@ static int s_fault_due(s_ctx *x, int k, uint64_t bi, double *p0, double *p1, int
     return rr->per == VAFMD_FPER_RUN && r->frun_block[k] == (int64_t)bi;
 }
 
+/* A no_trigger fault for the curve starting now: a scripted entry for this run (or any run; its block and time
+ * do not matter), or the per-run random rate. Its record is published with the block where the approach
+ * turns (at its travel limit): after the fault took effect. */
+static int s_no_trigger_due(s_ctx *x)
+{
+    const vafmd_fault_plan *p = x->fp;
+    s_run *r = &x->run;
+    r->no_trig = 0;
+    if (__builtin_expect(p == NULL, 1))
+        return 0;
+    int hit = 0, sc = 0;
+    double p0 = 0, p1 = 0;
+    for (size_t i = 0; i < p->n_script && !hit; i++) {
+        const vafmd_fault_entry *en = &p->script[i];
+        if (en->kind == VAFMD_F_NO_TRIGGER && (!en->run || en->run == r->cmd.run_id))
+            hit = sc = 1;
+    }
+    const vafmd_fault_random *rr = &p->rnd[VAFMD_F_NO_TRIGGER];
+    if (!hit && rr->rate > 0 && rr->per != VAFMD_FPER_COMMAND)
+        hit = vafmd_fault_u01(p->seed, VAFMD_F_NO_TRIGGER, r->cmd.run_id, 0) < rr->rate;
+    if (hit) {
+        r->no_trig = 1;
+        s_fault_rec_init(x, &r->no_trig_rec, VAFMD_F_NO_TRIGGER, 0, p0, p1, sc);
+    }
+    return hit;
+}
+
 /* At run start: where this run's per-run random faults strike (a block drawn over the last run's length). */
 static void s_fault_run_begin(s_ctx *x)
 {
@@ -352,6 +381,12 @@ static void s_fault_compute(s_ctx *x, s_block *b, uint64_t bi)
         r->dout_left = (uint64_t)p0;
         r->dout_stuck = p1 != 0;
         s_fault_rec_init(x, &b->frec[b->n_frec++], VAFMD_F_DROPOUT, bi, p0, p1, sc);
+    }
+    if (r->no_trig && (b->flags & (VAFM_WIRE_FLAG_SEG_CHANGE | VAFM_WIRE_FLAG_LAST))) {
+        r->no_trig_rec.block = (int64_t)bi; /* the approach ended at its limit in this block */
+        r->no_trig_rec.run_time_s = (double)(bi * r->block_n) / s_run_fs(r);
+        b->frec[b->n_frec++] = r->no_trig_rec;
+        r->no_trig = 0;
     }
     double k = vafm_sim_params(r->cmd.sim)->k_N_per_m;
     size_t i = 0;
@@ -932,7 +967,11 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     r->src_rc = 1;
     int rc = s_queue_alloc(x, chmask, p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay));
     if (!rc && !c->replay)
+    {
+        if (!rc && !c->replay && c->kind == VAFMD_RUN_CURVE) /* a trigger that never fires: decided per curve */
+            vafm_sim_set_trigger(c->sim, !s_no_trigger_due(x));
         rc = c->kind == VAFMD_RUN_TUNE ? vafm_sim_tune_begin(c->sim, c->index) : vafm_sim_curve_begin(c->sim, c->index);
+    }
     /* the clock of the run starts when its first sample can be computed: setting up the scene (tables,
      * first contact solve) is not acquisition time */
     r->t_start = s_now();
