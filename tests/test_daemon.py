@@ -69,9 +69,6 @@ def test_get_set_round_trip_and_range_error(fig4):
     error_ok(fig4.cmd({"cmd": "set", "values": {"no_such": 1}}), "unknown_field", "no_such")
     error_ok(fig4.cmd({"cmd": "set", "preset": "no-such"}), "not_found", "preset")
     error_ok(fig4.cmd({"cmd": "set", "values": {"hwm": 3}}), "read_only", "hwm")
-    # the piezo's actual height is the CLI's only for now: a clear "not yet", nothing changed
-    error_ok(fig4.cmd({"cmd": "set", "values": {"piezo_hysteresis": 0.1}}), "not_implemented", "piezo_hysteresis")
-    assert fig4.cmd({"cmd": "get", "names": ["piezo_hysteresis"]})["values"]["piezo_hysteresis"] == 0
     # the instrument's ramp words resolve: a ramp rate sets both speeds
     assert fig4.cmd({"cmd": "set", "values": {"ramp_size_m": 1e-6, "ramp_rate_Hz": 2.0}})["status"] == "ok"
     v = fig4.cmd({"cmd": "get", "names": ["v_approach_m_per_s", "v_retract_m_per_s"]})["values"]
@@ -668,6 +665,48 @@ def test_map_equals_cli_map_and_is_logged(tmp_path):
         wall = time.monotonic() - t0
         curves = sum(e["result"]["duration_s"] for _, _, _, e in runs) / 100
         assert cend["status"] == "ok" and wall >= curves + 0.8 * 0.16, (wall, curves)
+    finally:
+        assert d.stop() == 0
+
+
+def test_measured_height_streamed_and_logged(tmp_path):
+    """With the piezo's hysteresis and creep and a noisy z sensor, a run streams a sixth channel,
+    height_measured_m, after the five: bit for bit the height_measured_m of `vafm samples` (the same actuator
+    model and sensor stream), while height_m stays the command; the log's height (measured) is it."""
+    h5py = pytest.importorskip("h5py")
+    if not VAFM_CLI:
+        pytest.skip("VAFM_CLI not set")
+    extra = {"piezo_hysteresis": 0.1, "piezo_hysteresis_length_m": 1e-7, "piezo_creep": 0.02,
+             "zsensor_noise_m": 1e-10}
+    d = Daemon("--preset", "contact-silica", "--free-run")
+    try:
+        assert d.cmd({"cmd": "set", "values": extra})["status"] == "ok"
+        log = tmp_path / "log.h5"
+        assert d.cmd({"cmd": "log", "path": str(log)})["status"] == "ok"
+        s = d.sub()
+        settle(d, s)
+        r = d.cmd({"cmd": "curve", "index": 2})
+        start, blocks, _, end = collect_run(s, r["run_id"])
+        names = [c["name"] for c in start["channels"]]
+        assert names == CHANNELS + ["height_measured_m"], names
+        assert end["status"] == "ok"
+        d.wait_idle()
+        assert d.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 1
+        hm = np.concatenate([np.frombuffer(fr[5], "<f8") for _, fr in blocks])
+        hc = np.concatenate([np.frombuffer(fr[0], "<f8") for _, fr in blocks])
+        args = [VAFM_CLI, "samples", "--preset", "contact-silica", "--index", "2", "--csv", "-"]
+        args += [f"--{k}={v!r}" for k, v in extra.items()]
+        out = subprocess.run(args, check=True, capture_output=True, text=True, timeout=120).stdout.splitlines()
+        head = out[0].split(",")
+        rows = [line.split(",") for line in out[1:]]
+        ref_m = np.array([float(x[head.index("height_measured_m")]) for x in rows])
+        ref_c = np.array([float(x[head.index("height_m")]) for x in rows])
+        assert np.array_equal(hm, ref_m) and np.array_equal(hc, ref_c)
+        assert np.abs(hm - hc).max() > 1e-9  # the actuator made a difference
+        with h5py.File(log, "r") as f:
+            assert np.array_equal(f["0"]["height (measured)"][:], hm)
+            assert np.array_equal(f["0"]["height (piezo)"][:], hc)
+        vafm_info_ok(log)
     finally:
         assert d.stop() == 0
 

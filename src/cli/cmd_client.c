@@ -564,8 +564,10 @@ static void s_on_signal(int sig)
     s_stop = 1;
 }
 
-enum { S_NCH = 5 };
-static const char *const s_chan_names[S_NCH] = {"height_m", "deflection_m", "force_N", "vDeflection_V", "tip_m"};
+enum { S_NCH = 6 };
+/* the five every live run streams, and the measured height of a scene with a piezo model or a z sensor */
+static const char *const s_chan_names[S_NCH] = {"height_m", "deflection_m", "force_N", "vDeflection_V", "tip_m",
+                                                "height_measured_m"};
 
 typedef struct s_run {
     int64_t run_id;        /* -1: none in progress */
@@ -706,7 +708,8 @@ static int s_write_h5(s_listen *L, const s_run *r, json_t *end)
     vafm_curve_result res;
     s_result_from_json(json_object_get(end, "result"), &res);
     vafm_samples s = {.n = r->n, .first = 0, .time_s = r->time_s, .height_m = r->col[0],
-                      .deflection_m = r->col[1], .force_N = r->col[2], .tip_m = r->col[4], .segment = r->seg};
+                      .deflection_m = r->col[1], .force_N = r->col[2], .tip_m = r->col[4], .segment = r->seg,
+                      .height_measured_m = r->map[5] >= 0 ? r->col[5] : NULL};
     /* with the detector signals on, force is the measured (noisy) one: no tip position = height + force/k
      * column then (hdf5.md L14), as in vafmd's own log (wire.md §3.1.1); the file's provenance is the
      * scene of its first curve, as vafmd's log does */
@@ -810,7 +813,7 @@ static int s_run_start(s_listen *L, s_run *r, const vafm_client_msg *m)
                 r->map[k] = (int)i;
         /* live runs stream all five; a replay streams what its file has (wire.md, replay), at least
          * height and force */
-        if (r->map[k] < 0 && (k == 0 || k == 2 || strcmp(s_run_kind(r), "replay"))) {
+        if (r->map[k] < 0 && k < 5 && (k == 0 || k == 2 || strcmp(s_run_kind(r), "replay"))) {
             s_err(L->x, "run %" PRId64 ": the stream has no channel %s", r->run_id, s_chan_names[k]);
             r->skip = 1;
             return S_RUNTIME;

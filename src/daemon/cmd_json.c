@@ -677,19 +677,6 @@ int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd
         vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "the resulting scene is invalid: %s", verr.message);
         return -1;
     }
-    /* the stream has one height channel (the command) and the log's height (measured) is it: an actuator or
-     * a z sensor that makes them differ is the CLI's only for now */
-    static const char *const not_yet[] = { "piezo_hysteresis", "piezo_creep", "zsensor_noise_m", "zsensor_bandwidth_Hz" };
-    for (size_t i = 0; i < sizeof not_yet / sizeof not_yet[0]; i++) {
-        char val[64];
-        vafm_params_get(&np, not_yet[i], val, sizeof val);
-        if (strtod(val, NULL) != 0.0) {
-            vafmd_err_set(e, VAFMD_E_NOT_IMPLEMENTED, not_yet[i],
-                          "%s: the piezo's actual and the z sensor's height are not streamed by vafmd yet (the CLI's "
-                          "files have them: vafm samples, campaign, map); set it to 0 here", not_yet[i]);
-            return -1;
-        }
-    }
     *p = np;
     *s = ns;
     return 0;

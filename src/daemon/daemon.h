@@ -109,6 +109,8 @@ struct vafmd_log_pool;
 typedef struct vafmd_log_block {
     size_t n;                    /* samples in use */
     double *time_s, *height_m, *force_N, *tip_m; /* point into its pool's sample memory */
+    double *height_measured_m;   /* the measured height (used when has_measured) */
+    int has_measured;            /* the run streams height_measured_m (a piezo model or a z sensor) */
     uint8_t *segment;
     struct vafmd_log_pool *pool; /* the pool it belongs to (and goes back to) */
 } vafmd_log_block;

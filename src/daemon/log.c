@@ -25,7 +25,8 @@ typedef struct s_curve {
     vafmd_log_begin *begin; /* NULL: no curve in progress */
     int broken;
     size_t n, cap;
-    double *time_s, *height_m, *force_N, *tip_m;
+    double *time_s, *height_m, *force_N, *tip_m, *height_measured_m;
+    int has_measured;
     uint8_t *segment;
 } s_curve;
 
@@ -36,6 +37,7 @@ static void s_curve_reset(s_curve *c)
     free(c->begin);
     c->begin = NULL;
     c->broken = 0;
+    c->has_measured = 0;
     c->n = 0;
     if (c->cap > ((size_t)1 << 20)) /* a long curve's buffers go back to the system (an idle daemon holds
                                       at most ~35 MB of them) */
@@ -49,6 +51,7 @@ static void s_curve_free(s_curve *c)
     free(c->height_m);
     free(c->force_N);
     free(c->tip_m);
+    free(c->height_measured_m);
     free(c->segment);
     memset(c, 0, sizeof *c);
 }
@@ -64,8 +67,8 @@ static int s_curve_grow(s_curve *c, size_t need)
         cap *= 2;
     if (cap > VAFMD_LOG_MAX_CURVE_SAMPLES)
         cap = VAFMD_LOG_MAX_CURVE_SAMPLES;
-    double **d[4] = { &c->time_s, &c->height_m, &c->force_N, &c->tip_m };
-    for (int i = 0; i < 4; i++) {
+    double **d[5] = { &c->time_s, &c->height_m, &c->force_N, &c->tip_m, &c->height_measured_m };
+    for (int i = 0; i < 5; i++) {
         double *p = realloc(*d[i], cap * sizeof(double));
         if (!p)
             return -1;
@@ -103,7 +106,8 @@ static void s_notice(vafmd_log *L, uint64_t run_id, uint64_t group, int ok)
 static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
 {
     vafm_samples s = { .n = c->n, .first = 0, .time_s = c->time_s, .height_m = c->height_m,
-                       .deflection_m = NULL, .force_N = c->force_N, .tip_m = c->tip_m, .segment = c->segment };
+                       .deflection_m = NULL, .force_N = c->force_N, .tip_m = c->tip_m, .segment = c->segment,
+                       .height_measured_m = c->has_measured ? c->height_measured_m : NULL };
     /* the group number is the file's curve count; the random stream index and the run are kept in the
      * curve id (the curve-group attribute list is closed). With the detector on the force is a measured
      * (noisy, quantised) one, so "tip position" = height + force/k (hdf5.md L14) is left out. */
@@ -166,6 +170,9 @@ static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
         memcpy(c->height_m + c->n, b->height_m, b->n * sizeof(double));
         memcpy(c->force_N + c->n, b->force_N, b->n * sizeof(double));
         memcpy(c->tip_m + c->n, b->tip_m, b->n * sizeof(double));
+        c->has_measured = b->has_measured;
+        if (b->has_measured)
+            memcpy(c->height_measured_m + c->n, b->height_measured_m, b->n * sizeof(double));
         memcpy(c->segment + c->n, b->segment, b->n);
         c->n += b->n;
         break;

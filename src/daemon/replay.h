@@ -25,6 +25,9 @@
 /* Channel bits of a run (bit i = channel i of the stream's channel table; time_s only in replays). */
 #define VAFMD_CH_TIME 5
 #define VAFMD_CH_LIVE_MASK 0x1fu
+/* A live run whose scene has a piezo actuator model or a z sensor also streams the measured height. */
+#define VAFMD_CH_HEIGHT_MEASURED 6
+#define VAFMD_CH_COUNT 7
 
 typedef struct vafmd_replay vafmd_replay;
 

@@ -64,7 +64,7 @@ typedef struct s_event {
 /* A computed block waiting for its deadline in the run's FIFO. */
 typedef struct s_block {
     size_t n;                          /* samples */
-    double *ch[VAFMD_N_CHANNELS + 1];  /* into the run's preallocated store; NULL: channel not streamed */
+    double *ch[VAFMD_CH_COUNT];  /* into the run's preallocated store; NULL: channel not streamed */
     uint32_t flags;                    /* LAST, SEG_CHANGE, CLIPPED (LATE and FREE_RUN at release) */
     uint8_t first_seg;
     s_event ev[S_MAX_EVENTS];
@@ -90,7 +90,7 @@ typedef struct s_run {
     int active;
     vafmd_sim_cmd cmd;     /* START command: sim, start_json, settings */
     size_t block_n;
-    double *ch[VAFMD_N_CHANNELS + 1]; /* + time_s (replays); a channel not streamed is NULL */
+    double *ch[VAFMD_CH_COUNT]; /* + time_s (replays), height_measured_m; a channel not streamed is NULL */
     double sens;           /* m/V: vDeflection = deflection / sens (a replay: its curve's sensitivity) */
     size_t fill;
     uint8_t first_seg;
@@ -515,6 +515,9 @@ static int s_sink(void *user, const vafm_samples *b)
             r->ch[4][k] = b->tip_m[i];
         if (r->ch[VAFMD_CH_TIME])
             r->ch[VAFMD_CH_TIME][k] = b->time_s[i];
+        if (r->ch[VAFMD_CH_HEIGHT_MEASURED]) /* where the piezo is, as its z sensor reads it */
+            r->ch[VAFMD_CH_HEIGHT_MEASURED][k] =
+                vafm_detector_height(&r->det, b->time_s[i], b->height_measured_m ? b->height_measured_m[i] : b->height_m[i]);
         if (r->lt) { /* the log takes these and ch[0], ch[2], ch[4] at release: the stream's doubles */
             r->lt[k] = b->time_s[i];
             r->lseg[k] = b->segment[i];
@@ -575,7 +578,7 @@ static int s_advance(s_run *r, size_t max)
 
 static size_t s_pool_stride(size_t cap) /* bytes of one block's samples, 64-byte aligned */
 {
-    return ((4 * sizeof(double) + 1) * cap + 63) & ~(size_t)63;
+    return ((5 * sizeof(double) + 1) * cap + 63) & ~(size_t)63;
 }
 
 static size_t s_pool_head(size_t n) /* the pool header, block headers and free stack, 64-byte aligned */
@@ -619,7 +622,8 @@ static vafmd_log_pool *s_pool_new(size_t n, size_t cap)
         b->height_m = d + cap;
         b->force_N = d + 2 * cap;
         b->tip_m = d + 3 * cap;
-        b->segment = (uint8_t *)(d + 4 * cap);
+        b->height_measured_m = d + 4 * cap;
+        b->segment = (uint8_t *)(d + 5 * cap);
         b->pool = p;
         p->free[n - 1 - k] = b;
     }
@@ -716,6 +720,9 @@ static void s_log_block(s_ctx *x, const s_block *b)
         memcpy(lb->height_m, b->ch[0], b->n * sizeof(double));
         memcpy(lb->force_N, b->ch[2], b->n * sizeof(double));
         memcpy(lb->tip_m, b->ch[4], b->n * sizeof(double));
+        lb->has_measured = b->ch[VAFMD_CH_HEIGHT_MEASURED] != NULL;
+        if (lb->has_measured)
+            memcpy(lb->height_measured_m, b->ch[VAFMD_CH_HEIGHT_MEASURED], b->n * sizeof(double));
         memcpy(lb->segment, b->log_seg, b->n);
         lb->n = b->n;
     }
@@ -742,7 +749,7 @@ static void s_run_free(s_run *r, vafmd_shared *sh)
     free(r->cmd.start_json);
     r->cmd.start_json = NULL;
     vafmd_replay_free(&r->cmd.replay);
-    for (int i = 0; i <= VAFMD_CH_TIME; i++)
+    for (int i = 0; i < VAFMD_CH_COUNT; i++)
         r->ch[i] = NULL; /* pointed into qstore */
     r->active = 0;
 }
@@ -963,7 +970,8 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->run_samples, 0, memory_order_relaxed);
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
     s_send_text(x, "run.start", c->start_json);
-    unsigned chmask = c->replay ? vafmd_replay_channels(c->replay) : VAFMD_CH_LIVE_MASK;
+    unsigned chmask = c->replay ? vafmd_replay_channels(c->replay)
+                                : VAFMD_CH_LIVE_MASK | (vafmd_measured_height_on(p) ? 1u << VAFMD_CH_HEIGHT_MEASURED : 0u);
     r->src_rc = 1;
     int rc = s_queue_alloc(x, chmask, p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay));
     if (!rc && !c->replay)
@@ -987,7 +995,7 @@ static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs)
 {
     s_run *r = &x->run;
     size_t nch = 0;
-    for (int i = 0; i <= VAFMD_CH_TIME; i++)
+    for (int i = 0; i < VAFMD_CH_COUNT; i++)
         nch += chmask >> i & 1;
     size_t nlog = r->log ? 1 : 0; /* a logged run stages its samples' times (a double) and segments (a byte) */
     double per = (double)sizeof(s_block) + (double)(nch * r->block_n * sizeof(double)) +
@@ -1006,7 +1014,7 @@ static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs)
         return VAFM_ENOMEM;
     for (size_t k = 0; k < r->qcap; k++) {
         double *p = r->qstore + k * (nch + nlog) * r->block_n;
-        for (int i = 0; i <= VAFMD_CH_TIME; i++)
+        for (int i = 0; i < VAFMD_CH_COUNT; i++)
             if (chmask >> i & 1) {
                 r->q[k].ch[i] = p;
                 p += r->block_n;
@@ -1047,7 +1055,7 @@ static void s_compute(s_ctx *x)
         r->seg_change = 0;
         r->n_ev = 0;
         r->det.clipped = 0;
-        for (int i = 0; i <= VAFMD_CH_TIME; i++)
+        for (int i = 0; i < VAFMD_CH_COUNT; i++)
             r->ch[i] = b->ch[i];
         r->lt = b->log_t;
         r->lseg = b->log_seg;
@@ -1163,9 +1171,9 @@ static void s_release(s_ctx *x, int64_t now)
         .reserved = (uint32_t)atomic_load_explicit(&sh->session, memory_order_relaxed), /* the session */
     };
     unsigned char hb[VAFM_WIRE_HEADER_SIZE];
-    const void *part[3 + VAFMD_N_CHANNELS] = { "data", hb };
-    size_t len[3 + VAFMD_N_CHANNELS] = { 4, sizeof hb };
-    for (int i = 0; i <= VAFMD_CH_TIME; i++)
+    const void *part[2 + VAFMD_CH_COUNT] = { "data", hb };
+    size_t len[2 + VAFMD_CH_COUNT] = { 4, sizeof hb };
+    for (int i = 0; i < VAFMD_CH_COUNT; i++)
         if (b->ch[i]) {
             part[2 + h.n_channels] = b->ch[i];
             len[2 + h.n_channels++] = b->n * sizeof(double);
