@@ -608,7 +608,7 @@ def test_map_equals_cli_map_and_is_logged(tmp_path):
     subprocess.run([VAFM_CLI, "map", "--preset", "cell-liquid", "--nx", "3", "--ny", "3", "--size", "6e-6",
                     "--pattern", "dome", "--pattern-param", pp, "--threads", "1", "--out", str(ref), "--quiet"],
                    check=True, capture_output=True, timeout=120)
-    d = Daemon("--preset", "cell-liquid", "--free-run")
+    d = Daemon("--preset", "cell-liquid", "--free-run", "--hwm", "1000000")  # ~1500 blocks: none dropped
     try:
         error_ok(d.cmd({"cmd": "map", "map": {"nx": 0}}), "out_of_range", "nx")
         error_ok(d.cmd({"cmd": "map", "map": {"nx": 2, "bogus": 1}}), "unknown_field", "bogus")
@@ -616,7 +616,7 @@ def test_map_equals_cli_map_and_is_logged(tmp_path):
         error_ok(d.cmd({"cmd": "map"}), "missing_field", "map")
         log = tmp_path / "daemon.h5"
         assert d.cmd({"cmd": "log", "path": str(log)})["status"] == "ok"
-        s = d.sub()
+        s = d.sub(rcvhwm=1000000)
         settle(d, s)
         r = d.cmd({"cmd": "map", "map": spec, "client_run_id": "map-1"})
         assert r["status"] == "ok" and r["curves"] == 9, r
@@ -656,7 +656,7 @@ def test_map_equals_cli_map_and_is_logged(tmp_path):
     # paced at 100x: the 8 lateral moves of 2 um at 1 um/s take 8 x 2 s / 100 = 0.16 s of the wall time
     d = Daemon("--preset", "cell-liquid", "--speed", "100")
     try:
-        s = d.sub()
+        s = d.sub(rcvhwm=1000000)
         settle(d, s)
         t0 = time.monotonic()
         r = d.cmd({"cmd": "map", "map": {"nx": 3, "ny": 3, "size_x_m": 6e-6, "size_y_m": 6e-6},
@@ -678,12 +678,12 @@ def test_measured_height_streamed_and_logged(tmp_path):
         pytest.skip("VAFM_CLI not set")
     extra = {"piezo_hysteresis": 0.1, "piezo_hysteresis_length_m": 1e-7, "piezo_creep": 0.02,
              "zsensor_noise_m": 1e-10}
-    d = Daemon("--preset", "contact-silica", "--free-run")
+    d = Daemon("--preset", "contact-silica", "--free-run", "--hwm", "1000000")
     try:
         assert d.cmd({"cmd": "set", "values": extra})["status"] == "ok"
         log = tmp_path / "log.h5"
         assert d.cmd({"cmd": "log", "path": str(log)})["status"] == "ok"
-        s = d.sub()
+        s = d.sub(rcvhwm=1000000)
         settle(d, s)
         r = d.cmd({"cmd": "curve", "index": 2})
         start, blocks, _, end = collect_run(s, r["run_id"])
