@@ -645,7 +645,7 @@ static void test_fixed_ramp(void)
 /* A relative setpoint counts from the baseline of the approach's first 64 samples, as instruments do; a
  * setpoint in volts is k·InvOLS·V, less the signal's offset when absolute. The test replays the rule on the
  * curve's own (thermal) samples: the trigger fires at the first sample that meets it. */
-static void t_check_trigger(const vafm_params *p, const t_curve *c, double F_set, int relative)
+static void t_check_trigger(const t_curve *c, double F_set, int relative)
 {
     size_t it = t_turn(c);
     double sum = 0.0;
@@ -660,7 +660,6 @@ static void t_check_trigger(const vafm_params *p, const t_curve *c, double F_set
     }
     ENSURE_MSG(first == it, "trigger at sample %zu, the rule says %zu (setpoint %g N, %s)", it, first, F_set,
                relative ? "relative" : "absolute");
-    (void)p;
 }
 
 static void test_setpoint_modes(void)
@@ -674,7 +673,7 @@ static void test_setpoint_modes(void)
         p.setpoint_mode = rel;
         if (t_run(&p, 3, &c, &r))
             return;
-        t_check_trigger(&p, &c, p.setpoint_N, rel);
+        t_check_trigger(&c, p.setpoint_N, rel);
         t_curve_free(&c);
     }
     p.baseline_offset_V = 0.2;
@@ -686,7 +685,7 @@ static void test_setpoint_modes(void)
         ENSURE_REL(p.setpoint_N, want, 1e-15);
         if (t_run(&p, 3, &c, &r))
             return;
-        t_check_trigger(&p, &c, want, rel);
+        t_check_trigger(&c, want, rel);
         t_curve_free(&c);
     }
 }

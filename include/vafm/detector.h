@@ -55,6 +55,7 @@ typedef struct vafm_detector {
     int clipped;         /**< 1 once a sample saturated the ADC */
     vafm_rng rng;        /**< the noise stream */
     /* artefacts of the signal (params.h): drift, virtual deflection, interference, 1/f noise, mains */
+    int artefacts;       /**< 1: at least one of them is on */
     double drift, walk_sigma, walk, walk_t, vdefl;
     double interf_amp, interf_k, interf_phase;
     double mains_amp, mains_w, mains_phase[3];
@@ -72,6 +73,9 @@ typedef struct vafm_detector {
 /** @return 1 when the scene's detector settings change the signal (noise, ADC, offset or an artefact of the
  *  signal), else 0. */
 VAFM_API int vafm_detector_on(const vafm_params *p);
+/** @return 1 when a curve's measured height differs from its piezo command (height_m): the piezo's hysteresis
+ *  or creep (the simulation's vafm_samples.height_measured_m) or a z sensor (vafm_detector_height). */
+VAFM_API int vafm_detector_height_differs(const vafm_params *p);
 /** Start the measured chain of curve `index` of scene p (its detector and artefact settings, seed, spring
  *  constant and sample rate). */
 VAFM_API void vafm_detector_begin(vafm_detector *d, const vafm_params *p, uint64_t index);

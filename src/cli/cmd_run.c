@@ -101,7 +101,7 @@ int vafm_cli_cmd_samples(const vafm_cli_args *a)
     int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : vafm_sim_curve_begin(sim, index);
     int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
     s_out o = { .f = f };
-    o.hm = sc.p.piezo_hysteresis > 0 || sc.p.piezo_creep > 0 || sc.p.zsensor_noise_m > 0 || sc.p.zsensor_bandwidth_Hz > 0;
+    o.hm = vafm_detector_height_differs(&sc.p);
     fputs(o.hm ? "time_s,height_m,deflection_m,force_N,tip_m,segment,height_measured_m\n"
                : "time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
     vafm_detector_begin(&o.det, &sc.p, index);

@@ -19,10 +19,20 @@ static int s_artefacts_on(const vafm_params *p)
            p->interference_V > 0 || p->flicker_corner_Hz > 0 || p->mains_V > 0;
 }
 
+static int s_zsensor_on(const vafm_params *p)
+{
+    return p->zsensor_noise_m > 0 || p->zsensor_bandwidth_Hz > 0;
+}
+
 int vafm_detector_on(const vafm_params *p)
 {
     return p->noise_V_rms > 0 || p->adc_bits > 0 || p->baseline_offset_V != 0 || s_artefacts_on(p) ||
-           p->zsensor_noise_m > 0 || p->zsensor_bandwidth_Hz > 0;
+           s_zsensor_on(p);
+}
+
+int vafm_detector_height_differs(const vafm_params *p)
+{
+    return p->piezo_hysteresis > 0 || p->piezo_creep > 0 || s_zsensor_on(p);
 }
 
 /* The AR(1) bank of the 1/f noise. A first-order process of rate λ = 2π f_j and variance σ² has the one-sided
@@ -60,6 +70,7 @@ void vafm_detector_begin(vafm_detector *d, const vafm_params *p, uint64_t index)
     }
     if (d->on)
         vafm_rng_init(&d->rng, p->seed ^ VAFM_DETECTOR_KEY, index);
+    d->artefacts = s_artefacts_on(p);
     d->drift = p->drift_V_per_s;
     d->vdefl = p->virtual_deflection_V_per_m;
     d->walk_sigma = p->drift_walk_V_per_sqrt_s;
@@ -81,7 +92,7 @@ void vafm_detector_begin(vafm_detector *d, const vafm_params *p, uint64_t index)
         d->mains_amp = p->mains_V;
         d->mains_w = 2.0 * M_PI * p->mains_Hz;
     }
-    if (p->zsensor_noise_m > 0 || p->zsensor_bandwidth_Hz > 0) {
+    if (s_zsensor_on(p)) {
         d->zs_on = 1;
         d->zs_noise = p->zsensor_noise_m;
         d->zs_bw = p->zsensor_bandwidth_Hz;
@@ -132,7 +143,7 @@ void vafm_detector_apply(vafm_detector *d, double t_s, double height_m, double d
         return;
     }
     v += d->offset;
-    if (d->drift != 0 || d->walk_sigma > 0 || d->vdefl != 0 || d->interf_amp > 0 || d->mains_amp > 0 || d->n_poles)
+    if (d->artefacts)
         v += s_artefacts(d, t_s, height_m);
     if (d->noise > 0)
         v += d->noise * vafm_rng_normal(&d->rng);

@@ -58,22 +58,19 @@ double vafm_piezo_step(vafm_piezo *pz, double e_next, double dt)
     const double e = pz->e, de = e_next - e;
     pz->h = s_hysteresis(pz->h, de, pz->H, pz->Ls);
     double creep = 0.0;
-    if (pz->C > 0 && dt > 0) {
-        /* each lag y' = (e(t) − y)/τ along e(t) = e + v·t, exactly and without cancellation (vτ may be far
-         * larger than y): y(dt) = y + (e − y)·g + v·(dt − τ·g) with g = 1 − e^{−dt/τ} */
-        const double v = de / dt;
-        if (dt != pz->a_dt) { /* one sample interval throughout a curve: computed once */
+    if (pz->C > 0) {
+        if (dt > 0) {
+            /* each lag y' = (e(t) − y)/τ along e(t) = e + v·t, exactly and without cancellation (vτ may be far
+             * larger than y): y(dt) = y + (e − y)·g + v·(dt − τ·g) with g = 1 − e^{−dt/τ} */
+            const double v = de / dt;
+            if (dt != pz->a_dt) { /* one sample interval throughout a curve: computed once */
+                for (int j = 0; j < VAFM_PIEZO_CREEP_LAGS; j++)
+                    pz->a[j] = -expm1(-dt / pz->tau[j]);
+                pz->a_dt = dt;
+            }
             for (int j = 0; j < VAFM_PIEZO_CREEP_LAGS; j++)
-                pz->a[j] = -expm1(-dt / pz->tau[j]);
-            pz->a_dt = dt;
+                pz->y[j] += (e - pz->y[j]) * pz->a[j] + v * (dt - pz->tau[j] * pz->a[j]);
         }
-        for (int j = 0; j < VAFM_PIEZO_CREEP_LAGS; j++) {
-            double g = pz->a[j];
-            pz->y[j] += (e - pz->y[j]) * g + v * (dt - pz->tau[j] * g);
-            creep += s_creep_w[j] * (pz->y[j] - pz->e0);
-        }
-        creep *= pz->C;
-    } else if (pz->C > 0) {
         for (int j = 0; j < VAFM_PIEZO_CREEP_LAGS; j++)
             creep += s_creep_w[j] * (pz->y[j] - pz->e0);
         creep *= pz->C;

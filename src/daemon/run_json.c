@@ -10,11 +10,6 @@ static const char *const s_channels[VAFMD_N_CHANNELS][2] = {
     { "height_m", "m" }, { "deflection_m", "m" }, { "force_N", "N" }, { "vDeflection_V", "V" }, { "tip_m", "m" },
 };
 
-int vafmd_measured_height_on(const vafm_params *p)
-{
-    return p && (p->piezo_hysteresis > 0 || p->piezo_creep > 0 || p->zsensor_noise_m > 0 || p->zsensor_bandwidth_Hz > 0);
-}
-
 json_t *vafmd_channels_json(void)
 {
     json_t *ch = json_array();
@@ -34,7 +29,7 @@ char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int 
         scene_json = json_loads(scene, 0, NULL);
     free(scene);
     json_t *ch = vafmd_channels_json();
-    if (vafmd_measured_height_on(p)) /* streamed after the five: the order of the channel bits */
+    if (vafm_detector_height_differs(p)) /* streamed after the five: the order of the channel bits */
         json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", "height_measured_m", "unit", "m", "dtype", "<f8"));
     json_t *start = json_object();
     json_object_set_new(start, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));

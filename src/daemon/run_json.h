@@ -13,8 +13,6 @@
 
 /** The channels of a data block as a JSON array [{"name", "unit", "dtype"}] (new reference). */
 json_t *vafmd_channels_json(void);
-/* 1 when a live run of scene p also streams height_measured_m (a piezo actuator model or a z sensor). */
-int vafmd_measured_height_on(const vafm_params *p);
 
 /** The "run.start" JSON text of a run (malloc'd; NULL on no memory). camp: the run's "campaign" object
  *  (stolen) or NULL. */

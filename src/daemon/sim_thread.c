@@ -971,7 +971,7 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
     s_send_text(x, "run.start", c->start_json);
     unsigned chmask = c->replay ? vafmd_replay_channels(c->replay)
-                                : VAFMD_CH_LIVE_MASK | (vafmd_measured_height_on(p) ? 1u << VAFMD_CH_HEIGHT_MEASURED : 0u);
+                                : VAFMD_CH_LIVE_MASK | (vafm_detector_height_differs(p) ? 1u << VAFMD_CH_HEIGHT_MEASURED : 0u);
     r->src_rc = 1;
     int rc = s_queue_alloc(x, chmask, p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay));
     if (!rc && !c->replay)
