@@ -40,8 +40,18 @@ typedef struct vafm_campaign_spec {
     void *point_user;           /**< for point_fn */
     const char *map_json;       /**< a force map's spec as a JSON object (vafm_map_to_json), which HDF5 files keep
                                      in their grid ("map") and resume compares; NULL: not a map */
-    uint8_t reserved[8];
+    int kernel;                 /**< VAFM_CAMPAIGN_KERNEL_*: how curves are stepped (0: auto). The curves are the same bit
+                                     for bit whichever runs them. */
+    int batch_width;            /**< the batch kernel's lanes: 0 the widest this CPU runs (8 with AVX-512, 4 with AVX2,
+                                     else 1), or 1, 4, 8 (capped at the CPU's) */
 } vafm_campaign_spec;
+
+/** Kernels of a campaign. */
+enum {
+    VAFM_CAMPAIGN_KERNEL_AUTO = 0,   /**< the batch kernel where the CPU has AVX2 or AVX-512, else the scalar one */
+    VAFM_CAMPAIGN_KERNEL_SCALAR = 1, /**< one curve at a time per thread (the baseline) */
+    VAFM_CAMPAIGN_KERNEL_BATCH = 2,  /**< several curves per thread in SIMD lanes (batch_width) */
+};
 
 /** One finished curve. */
 typedef struct vafm_campaign_curve {
@@ -59,6 +69,17 @@ typedef int (*vafm_campaign_fn)(void *user, const vafm_campaign_curve *c);
 
 /** @return the number of grid points of a spec. */
 VAFM_API size_t vafm_campaign_points(const vafm_campaign_spec *spec);
+
+/** The SIMD lanes a campaign with this spec steps curves in: 1 for the scalar kernel (or a CPU without
+ *  AVX2), else 4 or 8. */
+VAFM_API int vafm_campaign_kernel_width(const vafm_campaign_spec *spec);
+
+/** Set spec's kernel from its name: "auto", "scalar", "batch" (the widest the CPU runs), "batch4", "batch8".
+ *  @return 0, or VAFM_EINVAL for another name (spec unchanged). */
+VAFM_API int vafm_campaign_kernel_parse(const char *name, vafm_campaign_spec *spec);
+
+/** The kernel a campaign with this spec runs on this CPU, in words (e.g. "batch, 8 lanes (AVX-512)"). */
+VAFM_API const char *vafm_campaign_kernel_describe(const vafm_campaign_spec *spec);
 
 /** Fill `out` with the scene of grid point `point` (point_fn's, when the spec has one).
  *  @return 0, VAFM_EINVAL (no such point) or point_fn's error. */
@@ -83,6 +104,12 @@ VAFM_API int vafm_campaign_run(const vafm_params *base, const vafm_campaign_spec
  *  there are no more, or a negative VAFM_E* code to stop the campaign with that error (an index out of
  *  range stops it with VAFM_EINVAL). */
 typedef int (*vafm_campaign_source_fn)(void *user, uint64_t *index);
+
+/** The most indices a campaign with this spec takes ahead of the one it delivers next (its worker threads
+ *  times the curves each keeps in flight, plus slack). A source that waits for delivery before handing
+ *  out more (an MPI dispenser bounding its reorder buffer) must allow at least this many, or the campaign
+ *  may wait on it forever. */
+VAFM_API size_t vafm_campaign_window(const vafm_params *base, const vafm_campaign_spec *spec);
 
 /** vafm_campaign_run over the indices `source` hands out (first_curve is then ignored). The curves
  *  reach fn in the order the source handed out their indices, never concurrently; each is computed

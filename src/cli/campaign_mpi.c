@@ -604,6 +604,11 @@ int vafm_cli_mpi_run(vafm_cli_mpi *m, const vafm_params *base, const vafm_campai
     if (s_allreduce(m, &sp.threads, &total_threads, 1, MPI_INT, MPI_SUM))
         return VAFM_EIO;
     m->threads_total = total_threads;
+    /* the indices every rank's campaign may hold ahead of delivery (the batch kernel keeps several curves
+     * per thread in flight): rank 0 must hand out that many ahead, or a rank waits on it forever */
+    int ahead = (int)vafm_campaign_window(base, &sp), total_ahead = ahead;
+    if (s_allreduce(m, &ahead, &total_ahead, 1, MPI_INT, MPI_SUM))
+        return VAFM_EIO;
 
     s_server sv;
     memset(&sv, 0, sizeof sv);
@@ -616,8 +621,9 @@ int vafm_cli_mpi_run(vafm_cli_mpi *m, const vafm_params *base, const vafm_campai
         sv.N = sp.curves_per_point;
         sv.total = sv.N * (uint64_t)np;
         sv.next = sv.deliver_next = sp.first_curve < sv.total ? sp.first_curve : sv.total;
-        /* Every thread busy, every rank one index ahead, and as much again of slack for uneven curves. */
-        sv.window = 4 * (size_t)total_threads + 2 * (size_t)m->size;
+        /* Every rank's campaign window (every thread busy with its curves in flight, and slack for uneven
+         * curves), every rank one index ahead, and as much again. */
+        sv.window = (size_t)total_ahead + 2 * (size_t)m->size;
         sv.fn = fn;
         sv.user = user;
         pp = calloc(np, sizeof *pp);

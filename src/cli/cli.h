@@ -55,7 +55,7 @@ enum { VAFM_CLI_EXIT_OK = 0, VAFM_CLI_EXIT_RUNTIME = 1, VAFM_CLI_EXIT_USAGE = 2 
 enum vafm_cli_opt {
     O_HELP, O_VERSION, O_QUIET, O_PROGRESS, O_PRESET, O_SCENE, O_INDEX, O_N, O_THREADS, O_FIRST, O_CSV,
     O_T, O_V, O_K, O_JSON, O_TUNE, O_OUT, O_RESUME, O_OVERWRITE, O_FLUSH, O_GZIP, O_CURVE, O_MPI,
-    O_NX, O_NY, O_SIZE, O_PATTERN, O_PPARAM, O_SAMPLE, VAFM_CLI_NOPT
+    O_NX, O_NY, O_SIZE, O_PATTERN, O_PPARAM, O_SAMPLE, O_KERNEL, VAFM_CLI_NOPT
 };
 
 typedef struct vafm_cli_override {
@@ -153,6 +153,8 @@ void vafm_cli_error(const char *fmt, ...) VAFM_CLI_PRINTF(1, 2);
 int vafm_cli_exit_of(int code);
 double vafm_cli_now(void);
 int vafm_cli_parse_u64(const char *opt, const char *text, uint64_t lo, uint64_t hi, uint64_t *out);
+/** --kernel NAME into spec (vafm_campaign_kernel_parse); NULL text: leave spec as it is. @return 0 or a usage exit code. */
+int vafm_cli_parse_kernel(const char *text, vafm_campaign_spec *spec);
 int vafm_cli_parse_list(const char *opt, const char *field, const char *text, double **out, size_t *n);
 int vafm_cli_report(const vafm_error *err, int code);
 int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int validate);

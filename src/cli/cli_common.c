@@ -49,6 +49,17 @@ int vafm_cli_parse_u64(const char *opt, const char *text, uint64_t lo, uint64_t 
     return 0;
 }
 
+int vafm_cli_parse_kernel(const char *text, vafm_campaign_spec *spec)
+{
+    if (!text)
+        return 0;
+    if (vafm_campaign_kernel_parse(text, spec)) {
+        vafm_cli_error("--kernel: '%s' is not a kernel (auto, scalar, batch, batch4, batch8)", text);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    return 0;
+}
+
 /* A comma-separated list of values of one field, each with its unit if typed ("25C,35C", "1um/s,2um/s"). Ranges
  * are the library's business (campaign validation). */
 int vafm_cli_parse_list(const char *opt, const char *field, const char *text, double **out, size_t *n)

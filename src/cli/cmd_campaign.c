@@ -84,6 +84,8 @@ static int s_grid_parse(const vafm_cli_args *a, s_grid *g)
         (a->val[O_V] && (rc = vafm_cli_parse_list("--v", "v_approach_m_per_s", a->val[O_V], &g->v, &g->spec.n_v))) ||
         (a->val[O_K] && (rc = vafm_cli_parse_list("--k", "k_N_per_m", a->val[O_K], &g->k, &g->spec.n_k))))
         return rc;
+    if ((rc = vafm_cli_parse_kernel(a->val[O_KERNEL], &g->spec)))
+        return rc;
     g->spec.T_K = g->T;
     g->spec.v_m_per_s = g->v;
     g->spec.k_N_per_m = g->k;
@@ -107,6 +109,7 @@ static void s_print_campaign_line(FILE *o, const vafm_campaign_spec *spec, uint6
 {
     fprintf(o, "campaign     %zu grid point(s) x %" PRIu64 " curves, %" PRIu64 " run in %.3f s (%.4g curves/s)\n",
             vafm_campaign_points(spec), spec->curves_per_point, done, wall, wall > 0 ? (double)done / wall : 0.0);
+    fprintf(o, "kernel       %s\n", vafm_campaign_kernel_describe(spec));
 }
 
 static void s_print_curves_summary(FILE *o, const vafm_cli_scene *sc, const s_grid *g, const s_curves *cv, double wall)

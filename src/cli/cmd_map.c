@@ -134,6 +134,8 @@ static int s_map_run(const vafm_cli_args *a, vafm_cli_mpi *mpi, const vafm_map_g
     }
     grid.map_json = map_json;
     grid.threads = (int)threads;
+    if (!rc)
+        rc = vafm_cli_parse_kernel(a->val[O_KERNEL], &grid);
     grid.keep_samples = 1;
     if (!rc && root)
         rc = vafm_cli_rec_size_check(a, &co, &sc.p, &grid);

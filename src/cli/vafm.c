@@ -40,7 +40,7 @@ static const s_option s_options[VAFM_CLI_NOPT] = {
     [O_NX] = { "--nx", NULL, 1 },           [O_NY] = { "--ny", NULL, 1 },
     [O_SIZE] = { "--size", NULL, 1 },       [O_PATTERN] = { "--pattern", NULL, 1 },
     [O_PPARAM] = { "--pattern-param", NULL, 1 },
-    [O_SAMPLE] = { "--sample", NULL, 1 },
+    [O_SAMPLE] = { "--sample", NULL, 1 },  [O_KERNEL] = { "--kernel", NULL, 1 },
 };
 
 #define M(o) (1u << (o))
@@ -343,11 +343,14 @@ static const vafm_cli_command s_commands[] = {
       "  -q, --quiet          no progress\n", 0, NULL },
     { "curves", vafm_cli_cmd_curves,
       S_GENERAL | M(O_N) | M(O_THREADS) | M(O_FIRST) | M(O_CSV) | M(O_T) | M(O_V) | M(O_K) | M(O_PROGRESS) |
-          M(O_QUIET),
+          M(O_QUIET) | M(O_KERNEL),
       1, "N curves per grid point on all cores: statistics, optional per-curve CSV",
       "vafm curves -n N [SCENE] [--threads T] [--first I] [--csv FILE|-] [--T LIST] [--v LIST] [--k LIST]\n"
       "  -n N                 curves per grid point (required)\n"
       "  --threads T          worker threads (default 0: all cores); results do not depend on it\n"
+      "  --kernel NAME        how curves are stepped: auto (default: batch where the CPU has AVX2 or AVX-512),\n"
+      "                       scalar (one curve at a time per thread), batch, batch4, batch8 (curves in SIMD\n"
+      "                       lanes); the results are the same bit for bit\n"
       "  --first I            skip global curve indices below I (resume)\n"
       "  --csv FILE|-         one row per curve (SI); '-' writes to stdout and the summary to stderr\n"
       "  --T LIST             temperatures, K, comma-separated (grid: T slowest, then v, then k)\n"
@@ -371,7 +374,7 @@ static const vafm_cli_command s_commands[] = {
     { "help", s_cmd_help, S_GENERAL, 0, "this text, or one command's (vafm help COMMAND)", NULL, 0, NULL },
     { "campaign", vafm_cli_cmd_campaign,
       S_GENERAL | M(O_N) | M(O_OUT) | M(O_THREADS) | M(O_T) | M(O_V) | M(O_K) | M(O_RESUME) | M(O_OVERWRITE) |
-          M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET) | M(O_MPI),
+          M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET) | M(O_MPI) | M(O_KERNEL),
       1, "a grid of N curves per point on all cores into one HDF5 file (afmformats layout), resumable",
       "vafm campaign -n N --out FILE.h5 [SCENE] [--T LIST] [--v LIST] [--k LIST] [--threads T]\n"
       "              [--resume | --overwrite] [--flush-interval S] [--gzip L] [--progress | --quiet] [--mpi]\n"
@@ -380,6 +383,9 @@ static const vafm_cli_command s_commands[] = {
       "                       every curve's ground truth (protocol/hdf5.md; read by afmformats, nanite, PyJibe)\n"
       "  --T, --v, --k LIST   grid lists as for vafm curves (K, m/s, N/m; T slowest, then v, then k)\n"
       "  --threads T          worker threads (default 0: all cores); the file does not depend on it\n"
+      "  --kernel NAME        how curves are stepped: auto (default: batch where the CPU has AVX2 or AVX-512),\n"
+      "                       scalar (one curve at a time per thread), batch, batch4, batch8 (curves in SIMD\n"
+      "                       lanes); the results are the same bit for bit\n"
       "  --resume             continue FILE (same scene and grid, else refused naming the field): keep its\n"
       "                       complete curves and run the rest; the result equals an uninterrupted run\n"
       "  --overwrite          replace an existing FILE (without --resume or --overwrite it is refused)\n"
@@ -394,7 +400,7 @@ static const vafm_cli_command s_commands[] = {
       "                       writes FILE, identical to the single-process file (README: Campaigns on MPI)\n", 0, NULL },
     { "map", vafm_cli_cmd_map,
       S_GENERAL | M(O_NX) | M(O_NY) | M(O_SIZE) | M(O_PATTERN) | M(O_PPARAM) | M(O_SAMPLE) | M(O_OUT) | M(O_THREADS) |
-          M(O_RESUME) | M(O_OVERWRITE) | M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET) | M(O_MPI),
+          M(O_RESUME) | M(O_OVERWRITE) | M(O_FLUSH) | M(O_GZIP) | M(O_PROGRESS) | M(O_QUIET) | M(O_MPI) | M(O_KERNEL),
       1, "a force map: one curve per pixel over a heterogeneous sample into one HDF5 file, resumable",
       "vafm map --out FILE.h5 [--nx NX] [--ny NY] [--size S|SX,SY] [--pattern NAME] [--pattern-param LIST]\n"
       "         [SCENE] [--threads T] [--resume | --overwrite] [--flush-interval S] [--gzip L] [--progress | --quiet]\n"
@@ -417,7 +423,7 @@ static const vafm_cli_command s_commands[] = {
       "                       afmformats' map attributes (grid shape/size/center/index, position) and the\n"
       "                       ground truth (E*, gamma, surface height of each pixel); protocol/hdf5.md\n"
       "  --threads T          worker threads (default 0: all cores); the file does not depend on it\n"
-      "  --resume, --overwrite, --flush-interval S, --gzip L, --progress, -q, --mpi: as for vafm campaign\n"
+      "  --resume, --overwrite, --flush-interval S, --gzip L, --progress, -q, --mpi, --kernel: as for vafm campaign\n"
       "                       (`mpirun -np R vafm map ...`: the pixels split over R ranks, the file the same)\n", 0, NULL },
     { "info", vafm_cli_cmd_info, S_GENERAL | M(O_JSON), 0,
       "summarise an HDF5 force-curve file (vafm's or another program's) and check its conformance",

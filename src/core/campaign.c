@@ -11,6 +11,7 @@
  * source's order. The per-curve random stream is the global index: results are identical for any
  * thread count and any source.
  */
+#include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -18,6 +19,7 @@
 #include <unistd.h>
 
 #include "vafm/campaign.h"
+#include "core/batch.h"
 #include "core/internal.h"
 
 size_t vafm_campaign_points(const vafm_campaign_spec *spec)
@@ -73,6 +75,8 @@ typedef struct s_shared {
     size_t window;
     s_slot *slots;
     int delivering, stop, error, in_source, exhausted;
+    int width;      /* batch kernel lanes (0: the scalar worker) */
+    int flight;     /* curves a batch worker keeps in flight */
     pthread_mutex_t mu;
     pthread_cond_t space;
 } s_shared;
@@ -158,6 +162,86 @@ static void s_deliver(s_shared *sh)
     sh->delivering = 0;
 }
 
+/* Take the next ticket (the next global index, or the source's). Called and returns with the lock held.
+ * may_wait: wait for room in the window (a worker with curves in flight must not: it may hold the one
+ * delivery waits for). @return 1 with *ticket and *idx, 0 no room now, -1 no more tickets. */
+static int s_take(s_shared *sh, int may_wait, uint64_t *ticket, uint64_t *idx)
+{
+    for (;;) {
+        if (sh->stop || sh->exhausted)
+            return -1;
+        uint64_t t = sh->next, i = sh->first + t;
+        if (t >= sh->deliver_next + sh->window || sh->in_source) {
+            if (!may_wait)
+                return 0;
+            pthread_cond_wait(&sh->space, &sh->mu);
+            continue;
+        }
+        if (sh->source) {
+            sh->in_source = 1;
+            pthread_mutex_unlock(&sh->mu);
+            int got = sh->source(sh->source_user, &i);
+            pthread_mutex_lock(&sh->mu);
+            sh->in_source = 0;
+            pthread_cond_broadcast(&sh->space);
+            if (got < 0 && !sh->error)
+                sh->error = got;
+            if (got == 1 && i >= sh->total && !sh->error)
+                sh->error = VAFM_EINVAL;
+            if (got != 1 || sh->error) {
+                sh->exhausted = 1;
+                return -1;
+            }
+        } else if (i >= sh->total) {
+            sh->exhausted = 1;
+            return -1;
+        }
+        sh->next++;
+        *ticket = t;
+        *idx = i;
+        return 1;
+    }
+}
+
+/* A worker's simulation for the scene of grid point `point`: the one it has when the scene is equal (a grid
+ * given point by point repeats scenes), else a new one. Called without the lock. @return 0 or VAFM_E*. */
+static int s_sim_for(const s_shared *sh, size_t point, vafm_sim **sim, size_t *sim_point, vafm_params *sim_params,
+                     vafm_params *p)
+{
+    if (point == *sim_point)
+        return 0;
+    int status = vafm_campaign_point_params(sh->base, sh->spec, point, p); /* validated before the run */
+    if (!status && !(*sim && !memcmp(p, sim_params, sizeof *p))) {
+        vafm_sim_destroy(sim);
+        status = vafm_sim_new(sim, p, NULL);
+        *sim_params = *p;
+    }
+    *sim_point = status ? (size_t)-1 : point;
+    if (status)
+        vafm_sim_destroy(sim);
+    return status;
+}
+
+/* Hand a finished curve to its slot (its samples by swapping *buf with the slot's) and deliver what is
+ * ready. Called and returns with the lock held. */
+static void s_publish(s_shared *sh, uint64_t ticket, uint64_t idx, size_t point, const vafm_params *p, int status,
+                      const vafm_curve_result *res, s_buf *buf)
+{
+    s_slot *sl = &sh->slots[ticket % sh->window];
+    s_buf tmp = sl->buf;
+    sl->buf = *buf;
+    *buf = tmp;
+    sl->res = *res;
+    sl->status = status;
+    sl->point = point;
+    sl->params = *p;
+    sl->index = idx;
+    sl->done = 1;
+    if (status == VAFM_ENOMEM)
+        sh->error = status;
+    s_deliver(sh);
+}
+
 static void *s_worker(void *arg)
 {
     s_shared *sh = arg;
@@ -168,76 +252,229 @@ static void *s_worker(void *arg)
     memset(&p, 0, sizeof p);
     s_buf local;
     memset(&local, 0, sizeof local);
+    uint64_t ticket, idx;
     pthread_mutex_lock(&sh->mu);
-    while (!sh->stop && !sh->exhausted) {
-        uint64_t ticket = sh->next, idx = sh->first + ticket;
-        if (ticket >= sh->deliver_next + sh->window || sh->in_source) {
-            pthread_cond_wait(&sh->space, &sh->mu);
-            continue;
-        }
-        if (sh->source) {
-            sh->in_source = 1;
-            pthread_mutex_unlock(&sh->mu);
-            int got = sh->source(sh->source_user, &idx);
-            pthread_mutex_lock(&sh->mu);
-            sh->in_source = 0;
-            pthread_cond_broadcast(&sh->space);
-            if (got < 0 && !sh->error)
-                sh->error = got;
-            if (got == 1 && idx >= sh->total && !sh->error)
-                sh->error = VAFM_EINVAL;
-            if (got != 1 || sh->error) {
-                sh->exhausted = 1;
-                break;
-            }
-        } else if (idx >= sh->total) {
-            sh->exhausted = 1;
-            break;
-        }
-        sh->next++;
+    while (s_take(sh, 1, &ticket, &idx) == 1) {
         pthread_mutex_unlock(&sh->mu);
-
         size_t point = (size_t)(idx / sh->N);
-        int status = 0;
         vafm_curve_result res;
         memset(&res, 0, sizeof res);
-        if (point != sim_point) {
-            /* a point's scene (validated before the run); a grid given point by point (a map) repeats
-             * scenes: the simulation of an equal one is kept */
-            status = vafm_campaign_point_params(sh->base, sh->spec, point, &p);
-            if (!status && !(sim && !memcmp(&p, &sim_params, sizeof p))) {
-                vafm_sim_destroy(&sim);
-                status = vafm_sim_new(&sim, &p, NULL);
-                sim_params = p;
-            }
-            sim_point = status ? (size_t)-1 : point;
-            if (status)
-                vafm_sim_destroy(&sim);
-        }
+        int status = s_sim_for(sh, point, &sim, &sim_point, &sim_params, &p);
         local.n = 0;
         if (!status)
             status = vafm_sim_curve(sim, idx, sh->spec->keep_samples ? s_collect : NULL, &local, &res);
-
         pthread_mutex_lock(&sh->mu);
-        s_slot *sl = &sh->slots[ticket % sh->window];
-        s_buf tmp = sl->buf;
-        sl->buf = local;
-        local = tmp;
-        sl->res = res;
-        sl->status = status;
-        sl->point = point;
-        sl->params = p;
-        sl->index = idx;
-        sl->done = 1;
-        if (status == VAFM_ENOMEM)
-            sh->error = status;
-        s_deliver(sh);
+        s_publish(sh, ticket, idx, point, &p, status, &res, &local);
     }
     pthread_cond_broadcast(&sh->space);
     pthread_mutex_unlock(&sh->mu);
     vafm_sim_destroy(&sim);
     s_buf_free(&local);
     return NULL;
+}
+
+/* ---- the batch kernel's worker ---------------------------------------------------------------------
+ *
+ * A worker keeps S_FLIGHT_PER_LANE curves per lane in flight. Each round it advances every curve in the
+ * scalar path until the curve either ends or waits for the batch kernel (vafm_sim_advance_batch), then
+ * runs all waiting curves' in-contact runs in batches of W lanes. Curves in other phases (approach, free
+ * flight, the exact well step, dwell) go on in the scalar path while others wait; having more curves than
+ * lanes keeps the lanes full. Each curve is computed exactly as the scalar worker computes it. */
+
+#define S_FLIGHT_PER_LANE 2
+/* the samples a batch worker may hold for its curves in flight (keep_samples: whole curves) */
+#define S_FLIGHT_BYTES (128.0 * 1024 * 1024)
+
+typedef struct s_flight {
+    int busy, waiting;
+    uint64_t ticket, idx;
+    size_t point, sim_point;
+    vafm_params p, sim_params;
+    vafm_sim *sim;
+    s_buf buf;
+} s_flight;
+
+static void s_flight_end(s_shared *sh, s_flight *f, int status)
+{
+    vafm_curve_result res;
+    memset(&res, 0, sizeof res);
+    if (f->sim && f->sim_point == f->point)
+        vafm_sim_result(f->sim, &res);
+    pthread_mutex_lock(&sh->mu);
+    s_publish(sh, f->ticket, f->idx, f->point, &f->p, status, &res, &f->buf);
+    pthread_mutex_unlock(&sh->mu);
+    f->busy = f->waiting = 0;
+}
+
+static void *s_worker_batch(void *arg)
+{
+    s_shared *sh = arg;
+    const int W = sh->width, P = sh->flight;
+    s_flight *fl = calloc((size_t)P, sizeof *fl);
+    struct vafm_kernel **K = calloc((size_t)P, sizeof *K);
+    long *want = calloc((size_t)P, sizeof *want), *done = calloc((size_t)P, sizeof *done);
+    int *who = calloc((size_t)P, sizeof *who);
+    if (!fl || !K || !want || !done || !who) { /* no room for the batch: the scalar worker */
+        free(fl);
+        free(K);
+        free(want);
+        free(done);
+        free(who);
+        return s_worker(arg);
+    }
+    for (int i = 0; i < P; i++)
+        fl[i].sim_point = (size_t)-1;
+    int more = 1;
+    for (;;) {
+        /* start curves in the free places */
+        int busy = 0;
+        for (int i = 0; i < P; i++)
+            busy += fl[i].busy;
+        pthread_mutex_lock(&sh->mu);
+        for (int i = 0; i < P && more && !sh->stop; i++) {
+            s_flight *f = &fl[i];
+            if (f->busy)
+                continue;
+            int r = s_take(sh, busy == 0, &f->ticket, &f->idx);
+            if (r < 0)
+                more = 0;
+            if (r != 1)
+                break;
+            pthread_mutex_unlock(&sh->mu);
+            f->point = (size_t)(f->idx / sh->N);
+            f->buf.n = 0;
+            f->busy = 1;
+            busy++;
+            int status = s_sim_for(sh, f->point, &f->sim, &f->sim_point, &f->sim_params, &f->p);
+            if (!status)
+                status = vafm_sim_curve_begin(f->sim, f->idx);
+            if (status) {
+                s_flight_end(sh, f, status);
+                busy--;
+            }
+            pthread_mutex_lock(&sh->mu);
+        }
+        const int stop = sh->stop;
+        pthread_mutex_unlock(&sh->mu);
+        if (stop || (busy == 0 && !more))
+            break;
+        /* the scalar path: each curve until it ends or waits for the batch */
+        int n = 0;
+        for (int i = 0; i < P; i++) {
+            s_flight *f = &fl[i];
+            if (!f->busy)
+                continue;
+            int r;
+            do
+                r = vafm_sim_advance_batch(f->sim, 1u << 20, sh->spec->keep_samples ? s_collect : NULL, &f->buf);
+            while (r == 1);
+            if (r == VAFM_SIM_BATCH_WAIT) {
+                K[n] = vafm_sim_batch_kernel(f->sim, &want[n]);
+                who[n++] = i;
+            } else {
+                s_flight_end(sh, f, r);
+            }
+        }
+        /* the batch: the waiting curves' in-contact runs, W lanes at a time */
+        vafm_batch_steps(K, want, done, n, W);
+        for (int j = 0; j < n; j++)
+            vafm_sim_batch_done(fl[who[j]].sim, done[j]);
+    }
+    pthread_mutex_lock(&sh->mu);
+    pthread_cond_broadcast(&sh->space);
+    pthread_mutex_unlock(&sh->mu);
+    for (int i = 0; i < P; i++) {
+        vafm_sim_destroy(&fl[i].sim);
+        s_buf_free(&fl[i].buf);
+    }
+    free(fl);
+    free(K);
+    free(want);
+    free(done);
+    free(who);
+    return NULL;
+}
+
+int vafm_campaign_kernel_parse(const char *name, vafm_campaign_spec *spec)
+{
+    static const struct {
+        const char *name;
+        int kernel, width;
+    } k[] = { { "auto", VAFM_CAMPAIGN_KERNEL_AUTO, 0 },  { "scalar", VAFM_CAMPAIGN_KERNEL_SCALAR, 0 },
+              { "batch", VAFM_CAMPAIGN_KERNEL_BATCH, 0 }, { "batch4", VAFM_CAMPAIGN_KERNEL_BATCH, 4 },
+              { "batch8", VAFM_CAMPAIGN_KERNEL_BATCH, 8 } };
+    for (size_t i = 0; name && spec && i < sizeof k / sizeof k[0]; i++)
+        if (!strcmp(name, k[i].name)) {
+            spec->kernel = k[i].kernel;
+            spec->batch_width = k[i].width;
+            return 0;
+        }
+    return VAFM_EINVAL;
+}
+
+const char *vafm_campaign_kernel_describe(const vafm_campaign_spec *spec)
+{
+    switch (vafm_campaign_kernel_width(spec)) {
+    case 8: return "batch, 8 lanes (AVX-512)";
+    case 4: return "batch, 4 lanes (AVX2)";
+    default: return spec && spec->kernel == VAFM_CAMPAIGN_KERNEL_BATCH ? "batch, 1 lane (no AVX2 on this CPU)" : "scalar";
+    }
+}
+
+int vafm_campaign_kernel_width(const vafm_campaign_spec *spec)
+{
+    if (!spec || spec->kernel == VAFM_CAMPAIGN_KERNEL_SCALAR)
+        return 1;
+    return vafm_batch_width(spec->batch_width);
+}
+
+/* How a campaign runs: worker threads, batch width (0: the scalar worker), curves a batch worker keeps in
+ * flight, and the window of tickets ahead of delivery. */
+static size_t s_plan(const vafm_params *base, const vafm_campaign_spec *spec, int *threads_out, int *width_out,
+                     int *flight_out)
+{
+    const size_t np = vafm_campaign_points(spec);
+    int threads = spec->threads > 0 ? spec->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
+    if (threads < 1)
+        threads = 1;
+    if (threads > 256)
+        threads = 256;
+    int width = vafm_campaign_kernel_width(spec);
+    if (width == 1 && spec->kernel != VAFM_CAMPAIGN_KERNEL_BATCH)
+        width = 0; /* the scalar kernel: one curve at a time per worker */
+    int flight = 0;
+    if (width) {
+        /* enough curves in flight to keep the lanes busy while some are in scalar phases; with whole curves
+         * kept, as many as the sample budget holds (a long curve at a high rate is tens of MB) */
+        const int lanes = vafm_batch_lanes_per_call(width);
+        double f = (double)(S_FLIGHT_PER_LANE * lanes);
+        if (spec->keep_samples) {
+            double samples = 0;
+            for (size_t i = 0; i < np && i < 64; i++) { /* a long grid given point by point: its first points */
+                vafm_params pp;
+                vafm_sim_estimate est;
+                if (!vafm_campaign_point_params(base, spec, i, &pp) && !vafm_sim_estimate_cost(&pp, &est, NULL) &&
+                    est.samples > samples)
+                    samples = est.samples;
+            }
+            const double bytes = samples * (5.0 * sizeof(double) + 1.0);
+            if (bytes * f > S_FLIGHT_BYTES)
+                f = fmax(1.0, floor(S_FLIGHT_BYTES / bytes));
+        }
+        flight = (int)f;
+    }
+    *threads_out = threads;
+    *width_out = width;
+    *flight_out = flight;
+    return (size_t)threads * (width ? (size_t)flight + 4 : 4);
+}
+
+size_t vafm_campaign_window(const vafm_params *base, const vafm_campaign_spec *spec)
+{
+    if (!base || !spec)
+        return 0;
+    int t, w, f;
+    return s_plan(base, spec, &t, &w, &f);
 }
 
 int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *spec, size_t *bad_point,
@@ -318,12 +555,8 @@ int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *
     int vr = vafm_campaign_validate(base, spec, &bad, err);
     if (vr)
         return vr;
-    int threads = spec->threads > 0 ? spec->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
-    if (threads < 1)
-        threads = 1;
-    if (threads > 256)
-        threads = 256;
-    sh.window = (size_t)threads * 4;
+    int threads;
+    sh.window = s_plan(base, spec, &threads, &sh.width, &sh.flight);
     sh.slots = calloc(sh.window, sizeof *sh.slots);
     pthread_t *tid = calloc((size_t)threads, sizeof *tid);
     if (!sh.slots || !tid) {
@@ -335,12 +568,12 @@ int vafm_campaign_run_source(const vafm_params *base, const vafm_campaign_spec *
     pthread_cond_init(&sh.space, NULL);
     int started = 0;
     for (int i = 0; i < threads; i++) {
-        if (pthread_create(&tid[i], NULL, s_worker, &sh) != 0)
+        if (pthread_create(&tid[i], NULL, sh.width ? s_worker_batch : s_worker, &sh) != 0)
             break;
         started++;
     }
     if (started == 0)
-        s_worker(&sh);
+        (sh.width ? s_worker_batch : s_worker)(&sh);
     for (int i = 0; i < started; i++)
         pthread_join(tid[i], NULL);
     pthread_mutex_destroy(&sh.mu);

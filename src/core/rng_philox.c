@@ -433,6 +433,50 @@ __attribute__((target("avx2"))) static void s_blocks8_avx2(const uint32_t ctr[4]
     _mm256_storeu_si256((__m256i *)(void *)(out + 16), _mm256_permute2x128_si256(la, ha, 0x31)); /* 4, 5 */
     _mm256_storeu_si256((__m256i *)(void *)(out + 24), _mm256_permute2x128_si256(lb, hb, 0x31)); /* 6, 7 */
 }
+
+/* Sixteen blocks, eight per vector, on CPUs with AVX-512F (chosen at run time; the same words). Each
+ * 64-bit lane holds one block's 32-bit word in its low half, as in s_blocks4. */
+__attribute__((target("avx512f"))) static void s_blocks16_avx512(const uint32_t ctr[4], const uint32_t key[2],
+                                                                  uint32_t *out)
+{
+    const uint64_t base = (uint64_t)ctr[0] | (uint64_t)ctr[1] << 32;
+    const __m512i ba = _mm512_add_epi64(_mm512_set1_epi64((long long)base), _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0));
+    const __m512i bb = _mm512_add_epi64(ba, _mm512_set1_epi64(8));
+    const __m512i lo32 = _mm512_set1_epi64(0xffffffffLL);
+    __m512i c0a = ba, c0b = bb; /* the high halves are never read */
+    __m512i c1a = _mm512_srli_epi64(ba, 32), c1b = _mm512_srli_epi64(bb, 32);
+    __m512i c2a = _mm512_set1_epi64(ctr[2]), c2b = c2a;
+    __m512i c3a = _mm512_set1_epi64(ctr[3]), c3b = c3a;
+    const __m512i m0 = _mm512_set1_epi64(VAFM_PHILOX_M0), m1 = _mm512_set1_epi64(VAFM_PHILOX_M1);
+    uint32_t k0 = key[0], k1 = key[1];
+    for (int round = 0; round < 10; round++) {
+        const __m512i kk0 = _mm512_set1_epi64(k0), kk1 = _mm512_set1_epi64(k1);
+        const __m512i p0a = _mm512_mul_epu32(m0, c0a), p0b = _mm512_mul_epu32(m0, c0b);
+        const __m512i p1a = _mm512_mul_epu32(m1, c2a), p1b = _mm512_mul_epu32(m1, c2b);
+        c0a = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p1a, 32), c1a), kk0);
+        c0b = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p1b, 32), c1b), kk0);
+        c2a = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p0a, 32), c3a), kk1);
+        c2b = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p0b, 32), c3b), kk1);
+        c1a = p1a;
+        c1b = p1b;
+        c3a = p0a;
+        c3b = p0b;
+        k0 += VAFM_PHILOX_W0;
+        k1 += VAFM_PHILOX_W1;
+    }
+    /* words 0|1 and 2|3 of each block in one 64-bit lane, then the blocks' 128 bits in order */
+    const __m512i x01a = _mm512_or_si512(_mm512_and_si512(c0a, lo32), _mm512_slli_epi64(c1a, 32));
+    const __m512i x23a = _mm512_or_si512(_mm512_and_si512(c2a, lo32), _mm512_slli_epi64(c3a, 32));
+    const __m512i x01b = _mm512_or_si512(_mm512_and_si512(c0b, lo32), _mm512_slli_epi64(c1b, 32));
+    const __m512i x23b = _mm512_or_si512(_mm512_and_si512(c2b, lo32), _mm512_slli_epi64(c3b, 32));
+    const __m512i ea = _mm512_unpacklo_epi64(x01a, x23a), oa = _mm512_unpackhi_epi64(x01a, x23a); /* 0 2 4 6 | 1 3 5 7 */
+    const __m512i eb = _mm512_unpacklo_epi64(x01b, x23b), ob = _mm512_unpackhi_epi64(x01b, x23b);
+    const __m512i i0 = _mm512_set_epi64(11, 10, 3, 2, 9, 8, 1, 0), i1 = _mm512_set_epi64(15, 14, 7, 6, 13, 12, 5, 4);
+    _mm512_storeu_si512((void *)(out + 0), _mm512_permutex2var_epi64(ea, i0, oa));
+    _mm512_storeu_si512((void *)(out + 16), _mm512_permutex2var_epi64(ea, i1, oa));
+    _mm512_storeu_si512((void *)(out + 32), _mm512_permutex2var_epi64(eb, i0, ob));
+    _mm512_storeu_si512((void *)(out + 48), _mm512_permutex2var_epi64(eb, i1, ob));
+}
 #endif
 #else
 static void s_blocks4(const uint32_t ctr[4], const uint32_t key[2], uint32_t *out)
@@ -451,6 +495,14 @@ VAFM_RNG_HIDDEN void vafm_philox4x32_10_blocks(const uint32_t ctr[4], const uint
     uint32_t c[4] = { ctr[0], ctr[1], ctr[2], ctr[3] };
     unsigned j = 0;
 #ifdef S_HAVE_AVX2_BLOCKS
+    if (__builtin_cpu_supports("avx512f")) {
+        for (; j + 16 <= nb; j += 16) {
+            s_blocks16_avx512(c, key, out + 4 * j);
+            const uint64_t b = ((uint64_t)c[0] | (uint64_t)c[1] << 32) + 16;
+            c[0] = (uint32_t)b;
+            c[1] = (uint32_t)(b >> 32);
+        }
+    }
     if (__builtin_cpu_supports("avx2")) {
         for (; j + 8 <= nb; j += 8) {
             s_blocks8_avx2(c, key, out + 4 * j);
@@ -466,6 +518,23 @@ VAFM_RNG_HIDDEN void vafm_philox4x32_10_blocks(const uint32_t ctr[4], const uint
         c[0] = (uint32_t)b;
         c[1] = (uint32_t)(b >> 32);
     }
+}
+
+VAFM_RNG_HIDDEN void vafm_rngq_top_up(vafm_rngq *q, vafm_rng *r)
+{
+    if (q->len - q->pos >= 16)
+        return;
+    unsigned k = 0;
+    while (q->pos < q->len)
+        q->w[k++] = q->w[q->pos++];
+    while (r->pos < 4)
+        q->w[k++] = r->buf[r->pos++];
+    vafm_philox4x32_10_blocks(r->ctr, r->key, VAFM_RNGQ_BLOCKS, q->w + k);
+    const uint64_t b = ((uint64_t)r->ctr[0] | (uint64_t)r->ctr[1] << 32) + VAFM_RNGQ_BLOCKS;
+    r->ctr[0] = (uint32_t)b;
+    r->ctr[1] = (uint32_t)(b >> 32);
+    q->pos = 0;
+    q->len = k + 4 * VAFM_RNGQ_BLOCKS;
 }
 
 VAFM_RNG_HIDDEN uint64_t vafm_rngq_u64_slow(vafm_rngq *q, vafm_rng *r)

@@ -147,11 +147,12 @@ static inline double vafm_rng_normal_inline(vafm_rng *r)
  * same words in the same order as r alone would give, only computed earlier. Whoever reads r through a
  * queue must read it only through that queue; an all-zero queue is empty (reads start at r as it is),
  * and re-initialising r requires emptying the queue (vafm_rngq_reset). */
-#define VAFM_RNGQ_BLOCKS 8
+#define VAFM_RNGQ_BLOCKS 16
 
 typedef struct vafm_rngq {
-    unsigned pos, len;                    /* next unread word, words held */
-    uint32_t w[4 * VAFM_RNGQ_BLOCKS + 4]; /* room for the leftover words of a partly read block */
+    unsigned pos, len;                     /* next unread word, words held */
+    uint32_t w[4 * VAFM_RNGQ_BLOCKS + 20]; /* room for up to 15 unread words kept in front (vafm_rngq_top_up) and
+                                              the leftover words of a partly read block */
 } vafm_rngq;
 
 static inline void vafm_rngq_reset(vafm_rngq *q)
@@ -161,6 +162,9 @@ static inline void vafm_rngq_reset(vafm_rngq *q)
 
 /** Refill q from r (keeps q's unread words in front) and return the next 64-bit draw. */
 VAFM_RNG_HIDDEN uint64_t vafm_rngq_u64_slow(vafm_rngq *q, vafm_rng *r);
+/** Refill q when it holds fewer than 16 unread words: those stay in front, VAFM_RNGQ_BLOCKS blocks follow
+ *  (the stream is unchanged; a reader of 8 draws at a time then finds 16 words in a row). */
+VAFM_RNG_HIDDEN void vafm_rngq_top_up(vafm_rngq *q, vafm_rng *r);
 /** The rest of the ziggurat through a queue (as vafm_rng_normal_slow). */
 VAFM_RNG_HIDDEN VAFM_RNG_COLD double vafm_rngq_normal_slow(vafm_rngq *q, vafm_rng *r, uint64_t u);
 /** nb (a multiple of 4) consecutive blocks from counter ctr (the 64-bit block counter carries), key: out[4·nb]. */

@@ -21,6 +21,7 @@
 #include "vafm/integrator.h"
 #include "vafm/sim.h"
 #include "vafm/theory.h"
+#include "core/batch.h"
 #include "core/internal.h"
 #include "core/kernel.h"
 #include "core/piezo.h"
@@ -64,6 +65,9 @@ struct vafm_sim {
     long sub_left;      /* integrator steps left in the current sample interval (> 0 only while one runs, or
                          * when a step budget paused it: the next call goes on from there) */
     int need_prepare;   /* the integrator's cached force is stale */
+    int batch_yield;    /* an advance for the batch kernel (batch.h): hand plain in-contact gjf runs out */
+    long batch_want;    /* the steps of the run handed out */
+    int batch_back;     /* the batch kernel ran them: the interval goes on (or ends) where it stopped */
     /* scene */
     int scene, phase;
     uint64_t index, sample_index, tune_samples;
@@ -313,6 +317,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->mode_well = 0;
     s->weq.ok = 0; /* a curve never starts from another curve's warm start: (seed, index) alone decides it */
     s->sub_left = 0;
+    s->batch_back = 0;
     s->need_prepare = 1;
 
     const double L = s->nm.sc.length_m;
@@ -633,6 +638,9 @@ static int s_integrate(vafm_sim *s, uint64_t *budget)
                 return 1;
             if ((uint64_t)want > *budget)
                 want = (long)*budget;
+        } else if (s->batch_yield && s->it == vafm_integrator_gjf && (!K->in_contact || K->jtab)) {
+            s->batch_want = want;
+            return 3; /* the batch kernel runs these steps (vafm_sim_batch_done) */
         }
         long d = s->it->run(K, want);
         s->sub_left -= d;
@@ -645,11 +653,12 @@ static int s_integrate(vafm_sim *s, uint64_t *budget)
 }
 
 /* One sample interval; *budget (integrator steps, NULL: none) may pause it inside its integrator run,
- * and the next call then goes on from there. @return 0 done, 2 paused, or a negative VAFM_E* code. */
+ * and the next call then goes on from there. @return 0 done, 2 paused, 3 handed to the batch kernel,
+ * or a negative VAFM_E* code. */
 static int s_step_interval(vafm_sim *s, uint64_t *budget)
 {
     vafm_kernel *K = &s->K;
-    if (s->sub_left == 0) {
+    if (s->sub_left == 0 && !s->batch_back) {
         K->acc_u = K->acc_uspr = 0.0;
         K->acc_n = 0;
         /* far from the instability: in contact, not yet near u_spr* on the retract */
@@ -689,8 +698,10 @@ static int s_step_interval(vafm_sim *s, uint64_t *budget)
             s->sub_left = big ? s->nm.n_sub_far : s->nm.n_sub;
         }
     }
-    if (s_integrate(s, budget))
-        return 2;
+    s->batch_back = 0;
+    int ir = s_integrate(s, budget);
+    if (ir)
+        return ir == 3 ? 3 : 2;
     if (!isfinite(K->u) || !isfinite(K->w)) {
         vafm_err_set(&s->err, VAFM_EUNSTABLE, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
                      "curve %llu: the state became non-finite at t = %.6g s: the step %.6g s is unstable for the "
@@ -855,6 +866,8 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
                   : s->phase == S_PH_TUNE   ? VAFM_SEG_TUNE
                                             : VAFM_SEG_RETRACT;
         int r = s_step_interval(s, budget);
+        if (r == 3)
+            return VAFM_SIM_BATCH_WAIT; /* the samples stay in the block: the batch kernel runs this interval on */
         if (r == 2) { /* the step budget ran out inside this sample: hand over the complete ones */
             s_flush(s, fn, user, &stop);
             if (stop) {
@@ -983,4 +996,31 @@ int vafm_sim_tune(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user)
     if (r)
         return r;
     return s_run_all(s, fn, user);
+}
+
+/* ---- the batch kernel's side (batch.h) ------------------------------------------------------------- */
+
+int vafm_sim_advance_batch(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user)
+{
+    if (!s)
+        return VAFM_EINVAL;
+    s->batch_yield = 1;
+    int r = s_advance(s, max_samples, NULL, fn, user);
+    s->batch_yield = 0;
+    return r;
+}
+
+vafm_kernel *vafm_sim_batch_kernel(vafm_sim *s, long *want)
+{
+    *want = s->batch_want;
+    return &s->K;
+}
+
+void vafm_sim_batch_done(vafm_sim *s, long steps)
+{
+    s->sub_left -= steps;
+    s->batch_want = 0;
+    s->batch_back = 1;
+    if (s->K.event)
+        s_event(s);
 }

@@ -1,0 +1,279 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The batch kernel (src/core/batch.h) against the scalar kernel, bit for bit.
+ *
+ * 1. Lanes: kernels taken from running curves where they wait for the batch (in contact on the table, and
+ *    out of contact), plus made-up hard lanes (a point beyond the contact table, a touch, a detachment,
+ *    no temperature, uniform noise, a stiffer spring), run for step counts that cross the kernel's
+ *    64-step chunks, side by side in batches of 1, 4 and 8 lanes: every lane must end in exactly the
+ *    state (and with exactly the random stream) that the scalar gjf loop leaves for the same steps.
+ * 2. Campaigns: a T × v grid of paper-fig4 curves (ṽ = 1e-2, short curves) with every sample kept, run by
+ *    the scalar kernel and by the batch kernel at 1, 4 and 8 lanes (those the CPU has) and 1 and 2
+ *    threads: every sample and every ground-truth row must be the same bytes.
+ * 3. Kernel names and widths.
+ */
+#include "harness.h"
+
+#include "trace.h"
+#include "vafm/campaign.h"
+#include "vafm/integrator.h"
+#include "vafm/params.h"
+#include "vafm/sim.h"
+#include "vafm/units.h"
+#include "core/batch.h"
+#include "core/kernel.h"
+
+static void t_scene(vafm_params *p, double v_red)
+{
+    vafm_preset_apply(p, "paper-fig4", NULL);
+    vafm_reduced r;
+    vafm_units_reduce(p, &r);
+    r.v_approach = r.v_retract = v_red;
+    vafm_units_from_reduced(p, &r);
+}
+
+/* ---- 1. lanes ---------------------------------------------------------------------------------- */
+
+#define T_MAXL 40
+
+/* Kernels of one curve at n of its waits for the batch, spread evenly over the curve (it runs on in between):
+ * *n_in of them in contact. */
+static int t_harvest(vafm_sim *s, uint64_t index, vafm_kernel *out, int n, int *n_in)
+{
+    long waits = 0, got = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        const long stride = pass ? waits / n + 1 : 0;
+        long seen = 0;
+        ENSURE(vafm_sim_curve_begin(s, index) == 0);
+        for (;;) {
+            int r = vafm_sim_advance_batch(s, 1u << 20, NULL, NULL);
+            if (r != VAFM_SIM_BATCH_WAIT)
+                break;
+            long want, done;
+            vafm_kernel *K = vafm_sim_batch_kernel(s, &want);
+            if (pass && seen % stride == stride / 2 && got < n) {
+                out[got++] = *K;
+                *n_in += K->in_contact;
+            }
+            seen++;
+            vafm_batch_steps(&K, &want, &done, 1, 1);
+            vafm_sim_batch_done(s, done);
+        }
+        waits = seen;
+    }
+    return (int)got;
+}
+
+/* The lanes' end states equal, and their streams too (the next 24 normals of each, from copies). */
+static int t_same_kernel(const vafm_kernel *a, const vafm_kernel *b)
+{
+#define T_EQ(f) (memcmp(&a->f, &b->f, sizeof a->f) == 0)
+    int same = T_EQ(u) && T_EQ(w) && T_EQ(s) && T_EQ(Fc) && T_EQ(f) && T_EQ(u_spr) && T_EQ(t) && T_EQ(n) && T_EQ(acc_u) &&
+               T_EQ(acc_uspr) && T_EQ(acc_n) && T_EQ(fs_min) && T_EQ(in_contact) && T_EQ(event) && T_EQ(steps) &&
+               T_EQ(steps_contact);
+#undef T_EQ
+    vafm_kernel ca = *a, cb = *b;
+    for (int i = 0; same && i < 24; i++) {
+        double x = s_kernel_normal(&ca), y = s_kernel_normal(&cb);
+        same = memcmp(&x, &y, sizeof x) == 0;
+    }
+    return same;
+}
+
+static void test_lanes(void)
+{
+    vafm_params p;
+    vafm_kernel base[T_MAXL];
+    int n = 0, n_in = 0;
+    vafm_sim *sims[4] = { NULL, NULL, NULL, NULL };
+    /* paper-fig4 at two speeds, a stiffer spring (other table and constants), and uniform noise */
+    for (int k = 0; k < 4; k++) {
+        t_scene(&p, k == 1 ? 1e-3 : 1e-2);
+        if (k == 2)
+            p.k_N_per_m *= 2.0;
+        if (k == 3)
+            p.noise = VAFM_NOISE_UNIFORM;
+        ENSURE(vafm_sim_new(&sims[k], &p, NULL) == 0);
+        n += t_harvest(sims[k], 3 + (uint64_t)k, base + n, 8, &n_in);
+    }
+    ENSURE(n == 32);
+    ENSURE(n_in >= 8 && n - n_in >= 4); /* lanes in and out of contact */
+    /* hard lanes, made from harvested ones */
+    int far = -1, touch = -1, detach = -1, cold = -1;
+    for (int i = 0; i < n; i++) {
+        if (base[i].in_contact && far < 0)
+            far = i;
+        else if (base[i].in_contact && detach < 0)
+            detach = i;
+        else if (!base[i].in_contact && touch < 0)
+            touch = i;
+        else if (base[i].in_contact && cold < 0)
+            cold = i;
+    }
+    ENSURE(far >= 0 && touch >= 0 && detach >= 0 && cold >= 0);
+    if (far < 0 || touch < 0 || detach < 0 || cold < 0)
+        goto out;
+    {
+        vafm_kernel *K = &base[far]; /* beyond the table's end: the exact solver for that lane */
+        const double h = 1.0 / K->jtab->inv_h, x = (double)(K->jtab->n - 1) * h;
+        K->u = K->contact.u_detach + 1.05 * x * x;
+        K = &base[touch]; /* just outside, moving in fast */
+        K->u = K->contact.u_touch - 1e-3;
+        K->w = 50.0;
+        K = &base[detach]; /* just inside, moving out fast */
+        K->u = K->contact.u_detach + 1e-4;
+        K->w = -50.0;
+        base[cold].thermal = 0; /* no random numbers */
+    }
+    const long wants[] = { 1, 5, 63, 64, 65, 130, 200, 17 };
+    long want[T_MAXL], d_ref[T_MAXL], d[T_MAXL];
+    vafm_kernel ref[T_MAXL], lane[T_MAXL];
+    vafm_kernel *lp[T_MAXL];
+    for (int i = 0; i < n; i++) {
+        want[i] = wants[i % 8];
+        ref[i] = base[i];
+        long left = want[i], done = 0;
+        while (left > 0) { /* the scalar loop as a scene runs it: a run ends at a contact change */
+            long r = vafm_integrator_gjf->run(&ref[i], left);
+            done += r;
+            left -= r;
+            if (ref[i].event)
+                break;
+        }
+        d_ref[i] = done;
+    }
+    int events = 0, touched = 0, far_ok = 0;
+    for (int i = 0; i < n; i++) {
+        events += ref[i].event != 0;
+        touched += ref[i].event > 0;
+    }
+    { /* the far lane's first step ends beyond the table (so its force came from the exact solver) */
+        vafm_kernel one = base[far];
+        vafm_integrator_gjf->run(&one, 1);
+        far_ok = sqrt(one.u - one.contact.u_detach) * one.jtab->inv_h >= (double)(one.jtab->n - 1);
+    }
+    ENSURE_MSG(events >= 2 && touched >= 1 && far_ok, "events %d touched %d far %d", events, touched,
+               far_ok); /* the hard paths ran (detach, touch, beyond the table) */
+    const int widths[] = { 1, 4, 8 };
+    for (int wi = 0; wi < 3; wi++) {
+        const int W = vafm_batch_width(widths[wi]);
+        if (W != widths[wi])
+            continue; /* not on this CPU */
+        for (int i = 0; i < n; i++) {
+            lane[i] = base[i];
+            lp[i] = &lane[i];
+        }
+        vafm_batch_steps(lp, want, d, n, W);
+        for (int i = 0; i < n; i++) {
+            ENSURE_MSG(d[i] == d_ref[i], "W %d lane %d: %ld steps, scalar %ld", W, i, d[i], d_ref[i]);
+            ENSURE_MSG(t_same_kernel(&lane[i], &ref[i]), "W %d lane %d (in contact %d, want %ld): state differs", W, i,
+                       base[i].in_contact, want[i]);
+        }
+    }
+out:
+    for (int k = 0; k < 4; k++)
+        vafm_sim_destroy(&sims[k]);
+}
+
+/* ---- 2. campaigns ------------------------------------------------------------------------------ */
+
+typedef struct t_camp {
+    size_t n;
+    t_trace tr[16];
+    vafm_curve_result res[16];
+    int status[16];
+} t_camp;
+
+static int t_camp_fn(void *user, const vafm_campaign_curve *c)
+{
+    t_camp *cp = user;
+    if (cp->n >= 16)
+        return 1;
+    t_trace *t = &cp->tr[cp->n];
+    memset(t, 0, sizeof *t);
+    t->order_ok = 1;
+    t_collect(t, &c->samples);
+    cp->res[cp->n] = c->result;
+    cp->status[cp->n] = c->status;
+    cp->n++;
+    return 0;
+}
+
+static void t_camp_free(t_camp *c)
+{
+    for (size_t i = 0; i < c->n; i++)
+        t_trace_free(&c->tr[i]);
+    c->n = 0;
+}
+
+static void test_campaigns(void)
+{
+    vafm_params p;
+    t_scene(&p, 1e-2);
+    const double T[2] = { p.T_K, 2.0 * p.T_K };
+    const double v[2] = { p.v_retract_m_per_s, 0.5 * p.v_retract_m_per_s };
+    vafm_campaign_spec sp;
+    memset(&sp, 0, sizeof sp);
+    sp.T_K = T;
+    sp.n_T = 2;
+    sp.v_m_per_s = v;
+    sp.n_v = 2;
+    sp.curves_per_point = 4;
+    sp.keep_samples = 1;
+    sp.threads = 1;
+    sp.kernel = VAFM_CAMPAIGN_KERNEL_SCALAR;
+    static t_camp ref, got;
+    ENSURE(vafm_campaign_run(&p, &sp, t_camp_fn, &ref, NULL) == 0);
+    ENSURE(ref.n == 16);
+    const int widths[] = { 1, 4, 8 };
+    for (int wi = 0; wi < 3; wi++) {
+        if (vafm_batch_width(widths[wi]) != widths[wi])
+            continue;
+        for (int threads = 1; threads <= 2; threads++) {
+            sp.kernel = VAFM_CAMPAIGN_KERNEL_BATCH;
+            sp.batch_width = widths[wi];
+            sp.threads = threads;
+            ENSURE(vafm_campaign_kernel_width(&sp) == widths[wi]);
+            ENSURE(vafm_campaign_run(&p, &sp, t_camp_fn, &got, NULL) == 0);
+            ENSURE(got.n == ref.n);
+            for (size_t i = 0; i < got.n && i < ref.n; i++) {
+                ENSURE_MSG(t_trace_same(&got.tr[i], &ref.tr[i]) && got.tr[i].n > 100,
+                           "W %d, %d thread(s): curve %zu's samples differ", widths[wi], threads, i);
+                ENSURE_MSG(t_result_same(&got.res[i], &ref.res[i]) && got.status[i] == ref.status[i],
+                           "W %d, %d thread(s): curve %zu's result differs", widths[wi], threads, i);
+            }
+            t_camp_free(&got);
+        }
+    }
+    /* the check has content: contact, detachment, a pull-off */
+    ENSURE(ref.res[0].steps_contact > 1000 && isfinite(ref.res[0].detach_force_N) && ref.res[0].pulloff_spring_N > 0);
+    t_camp_free(&ref);
+}
+
+/* ---- 3. names ---------------------------------------------------------------------------------- */
+
+static void test_names(void)
+{
+    vafm_campaign_spec sp;
+    memset(&sp, 0, sizeof sp);
+    const int max = vafm_batch_width_max();
+    ENSURE(max == 1 || max == 4 || max == 8);
+    ENSURE(vafm_campaign_kernel_width(&sp) == max); /* auto: the widest */
+    ENSURE(vafm_campaign_kernel_parse("scalar", &sp) == 0 && vafm_campaign_kernel_width(&sp) == 1);
+    ENSURE(!strcmp(vafm_campaign_kernel_describe(&sp), "scalar"));
+    ENSURE(vafm_campaign_kernel_parse("batch8", &sp) == 0 && sp.kernel == VAFM_CAMPAIGN_KERNEL_BATCH);
+    ENSURE(vafm_campaign_kernel_width(&sp) == (max >= 8 ? 8 : max)); /* capped at the CPU's */
+    ENSURE(vafm_campaign_kernel_parse("batch4", &sp) == 0 && vafm_campaign_kernel_width(&sp) == (max >= 4 ? 4 : 1));
+    ENSURE(vafm_campaign_kernel_parse("fast", &sp) == VAFM_EINVAL && sp.batch_width == 4); /* unchanged */
+    ENSURE(vafm_campaign_kernel_parse(NULL, &sp) == VAFM_EINVAL);
+    ENSURE(vafm_batch_width(3) == (max >= 4 ? 1 : 1) && vafm_batch_width(0) == max);
+    printf("batch kernel on this CPU: up to %d lanes\n", max);
+}
+
+int main(void)
+{
+    RUN_TEST(test_names);
+    RUN_TEST(test_lanes);
+    RUN_TEST(test_campaigns);
+    return harness_done();
+}
