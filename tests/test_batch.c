@@ -266,7 +266,18 @@ static void test_names(void)
     ENSURE(vafm_campaign_kernel_parse("batch4", &sp) == 0 && vafm_campaign_kernel_width(&sp) == (max >= 4 ? 4 : 1));
     ENSURE(vafm_campaign_kernel_parse("fast", &sp) == VAFM_EINVAL && sp.batch_width == 4); /* unchanged */
     ENSURE(vafm_campaign_kernel_parse(NULL, &sp) == VAFM_EINVAL);
-    ENSURE(vafm_batch_width(3) == (max >= 4 ? 1 : 1) && vafm_batch_width(0) == max);
+    ENSURE(vafm_batch_width(3) == 1 && vafm_batch_width(0) == max);
+    /* a spec with another kernel or width is refused by name before anything runs */
+    vafm_params p;
+    t_scene(&p, 1e-2);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    sp.curves_per_point = 1;
+    sp.kernel = 3;
+    ENSURE(vafm_campaign_run(&p, &sp, NULL, NULL, &err) == VAFM_EINVAL && !strcmp(err.field, "kernel"));
+    sp.kernel = VAFM_CAMPAIGN_KERNEL_BATCH;
+    sp.batch_width = 2;
+    ENSURE(vafm_campaign_run(&p, &sp, NULL, NULL, &err) == VAFM_EINVAL && !strcmp(err.field, "batch_width"));
     printf("batch kernel on this CPU: up to %d lanes\n", max);
 }
 

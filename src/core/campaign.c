@@ -489,6 +489,15 @@ int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *sp
                      "a grid given point by point takes no T, v or k lists and at least one point");
         return VAFM_EINVAL;
     }
+    if (spec->kernel < VAFM_CAMPAIGN_KERNEL_AUTO || spec->kernel > VAFM_CAMPAIGN_KERNEL_BATCH) {
+        vafm_err_set(err, VAFM_EINVAL, "kernel", "kernel = %d is not a kernel (0 auto, 1 scalar, 2 batch)", spec->kernel);
+        return VAFM_EINVAL;
+    }
+    if (spec->batch_width != 0 && spec->batch_width != 1 && spec->batch_width != 4 && spec->batch_width != 8) {
+        vafm_err_set(err, VAFM_EINVAL, "batch_width", "batch_width = %d is not a width (0: the widest, 1, 4 or 8)",
+                     spec->batch_width);
+        return VAFM_EINVAL;
+    }
     size_t np = vafm_campaign_points(spec);
     for (size_t i = 0; i < np; i++) {
         vafm_params p;
