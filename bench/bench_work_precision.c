@@ -838,10 +838,13 @@ static int s_plan(s_row *rows, uint64_t N, uint64_t N_bd, const char *groups)
                                .N = g ? 1 : cs->N < N ? cs->N : N };
             if (n + 1 + S_NDT > S_MAX_ROWS)
                 break;
+            const int i_ref = n;
             rows[n] = pr;
             rows[n].omega_dt = g ? S_REF_OMEGA_DT : cs->ref_omega_dt;
             rows[n++].is_ref = 1;
             for (int d = 0; d < S_NDT; d++) {
+                if (s_omega_dts[d] == rows[i_ref].omega_dt)
+                    continue; /* the reference is this step (a costly case): the same curves, not a new row */
                 rows[n] = pr;
                 rows[n++].omega_dt = s_omega_dts[d];
             }
