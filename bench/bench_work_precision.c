@@ -29,9 +29,20 @@
  * from the instability, against plain gjf and its own dt₀/4 reference, from a start at u_spr = −1
  * (y = 10.1) that leaves them room.
  *
- * Usage: bench_work_precision [outdir [N [N_bd [groups]]]]   (defaults ".", 2000, N,
- * "underdamped,overdamped,options"; N_bd = 0 skips the overdamped group). Writes work_precision.csv
- * and work_precision.md, prints the markdown to stdout and progress to stderr.
+ * Group "presets" (issue #13, the default step chosen by evidence): each case of s_cases is a scene as a
+ * user runs it (a preset, maybe with one change: a stiffer lever, a start near the instability, the
+ * coldest or hottest temperature of the studies), the core's default shortcuts on, only omega_dt changed;
+ * rows at the case's reference step (dt0/4; dt0/2 or dt0 where a curve is costly) and the candidate steps
+ * above. Besides bias/se_c each row reports its bias in units of a 2000-curve campaign's standard error
+ * (sd/sqrt 2000), the figure the default is held to. Group "athermal": the same cases at T = 0, one curve
+ * per row (exact bias, no noise). "caseI," in groups keeps only the cases named (e.g.
+ * "presets,case0,case5,"). Written to default_step.{csv,md} and default_step_athermal.{csv,md};
+ * bench/run_default_step.sh runs every case in its own process and bench/default_step_fit.py analyses them.
+ *
+ * Usage: bench_work_precision [outdir [N [N_bd [groups [threads]]]]]   (defaults ".", 2000, N,
+ * "underdamped,overdamped,options", 0 = all cores; N_bd = 0 skips the overdamped group; N caps a preset
+ * case's curves per row). Writes work_precision.csv and work_precision.md, prints the markdown to stdout
+ * and progress to stderr.
  */
 #include <math.h>
 #include <stdint.h>
@@ -56,14 +67,30 @@
 
 static const double s_omega_dts[] = { S_PAPER_OMEGA_DT, 0.3, 0.6, 1.0, 1.5 };
 #define S_NDT ((int)(sizeof s_omega_dts / sizeof s_omega_dts[0]))
+#define S_N_CAMPAIGN 2000 /* the campaign whose standard error the default step's bias is held against */
+
+static int s_threads; /* worker threads of every campaign (0: all cores) */
 
 /* ---- clocks ------------------------------------------------------------------------------------ */
 
 /* ---- rows -------------------------------------------------------------------------------------- */
 
+/* group "presets": a scene as a user runs it (the table is below, s_cases) */
+typedef struct s_case s_case;
+struct s_case {
+    const char *name;
+    const char *preset;
+    void (*tweak)(vafm_params *p); /* NULL: the preset as it is */
+    double ref_omega_dt;           /* the reference row's step (dt0/4 unless the case is too costly) */
+    uint64_t N;                    /* curves per row (capped by the run's N) */
+    const char *what;
+};
+
+
 typedef struct s_row {
     /* configuration */
     const char *group;
+    const s_case *cs;    /* group "presets": the case (a scene as a user runs it), else NULL */
     const vafm_integrator_type *it;
     int noise;
     double omega_dt;
@@ -79,7 +106,7 @@ typedef struct s_row {
     uint64_t n_ok, n_failed, n_flagged, steps;
     double cpu_s, wall_s;
     double *obs[S_NOBS]; /* per curve, F_JKR units, NaN where excluded */
-    double mean[S_NOBS], se[S_NOBS], bias[S_NOBS], se_c[S_NOBS], z[S_NOBS], ks[S_NOBS], ks_crit[S_NOBS];
+    double sd[S_NOBS], mean[S_NOBS], se[S_NOBS], bias[S_NOBS], se_c[S_NOBS], z[S_NOBS], ks[S_NOBS], ks_crit[S_NOBS];
 } s_row;
 
 static void s_row_free(s_row *r)
@@ -117,6 +144,16 @@ static void s_label(const s_row *r, char *buf, size_t len)
 
 static void s_scene(vafm_params *p, const s_row *r)
 {
+    if (r->cs) {
+        vafm_preset_apply(p, r->cs->preset, NULL);
+        if (r->cs->tweak)
+            r->cs->tweak(p);
+        p->omega_dt = r->omega_dt;
+        if (!strcmp(r->group, "athermal"))
+            p->T_K = 0.0; /* deterministic: one curve gives the step's bias exactly */
+        vafm_params_resolve(p, NULL);
+        return;
+    }
     vafm_preset_apply(p, "paper-fig4", NULL);
     const double R = p->R_m;
     p->start_in_contact = 1;
@@ -130,9 +167,87 @@ static void s_scene(vafm_params *p, const s_row *r)
     p->well_exact = r->well_exact;
 }
 
+/* ---- group "presets": the default step chosen by evidence (issue #13) ---------------------------
+ * Each case is a scene as a user runs it: a preset with the core's default shortcuts (exact free steps,
+ * the JKR table, the exact well step), only omega_dt changed, one thread. */
+
+static void s_tweak_k10(vafm_params *p)
+{
+    p->k_N_per_m *= 10.0; /* f0 and Q kept: the mass and friction follow the stiffer lever */
+}
+
+static void s_tweak_near(vafm_params *p)
+{
+    /* the underdamped group's scene: paper-fig4 started in contact 4.6 R before the instability */
+    const double R = p->R_m;
+    p->start_in_contact = 1;
+    p->start_height_m = -S_USPR_START * R;
+    p->trigger = VAFM_TRIGGER_HEIGHT;
+    p->trigger_height_m = p->start_height_m - 0.01 * R;
+}
+
+static void s_tweak_near_bd(vafm_params *p)
+{
+    /* the overdamped group's scene: the same start, brownian at zeta = m eta = 0.01 (not capped by the
+     * brownian step's dt <= 1/(20 eta), which makes every omega_dt >= 0.13 of paper-fig4-bd one step) */
+    s_tweak_near(p);
+    p->integrator = vafm_integrator_brownian;
+}
+
+static void s_tweak_kT(vafm_params *p, double kT)
+{
+    vafm_reduced r;
+    vafm_units_reduce(p, &r);
+    r.kT = kT;
+    vafm_units_from_reduced(p, &r);
+}
+
+static void s_tweak_kT_cold(vafm_params *p)
+{
+    s_tweak_kT(p, 0.003); /* the velocity-thermal study's coldest */
+}
+
+static void s_tweak_kT_hot(vafm_params *p)
+{
+    s_tweak_kT(p, 0.03); /* its hottest */
+}
+
+static void s_tweak_T70(vafm_params *p)
+{
+    p->T_K = 70.0; /* the distribution study's coldest */
+}
+
+static void s_tweak_T1121(vafm_params *p)
+{
+    p->T_K = 1121.0; /* its hottest (4 x 280.4 K) */
+}
+
+static const s_case s_cases[] = {
+    { "contact-silica", "contact-silica", NULL, S_REF_OMEGA_DT, 2000, "the tools' default scene" },
+    { "cell-liquid", "cell-liquid", NULL, S_REF_OMEGA_DT, 2000, "Hertz, no adhesion: forces in sqrt(k kT)" },
+    { "colloid-pdms", "colloid-pdms", NULL, S_REF_OMEGA_DT, 2000, "" },
+    { "stiff-polymer", "stiff-polymer", NULL, S_REF_OMEGA_DT, 2000, "40 N/m, Q 400" },
+    { "contact-silica k x10", "contact-silica", s_tweak_k10, S_REF_OMEGA_DT, 2000, "stiff spring: 1 N/m" },
+    { "paper-fig4 (Langevin)", "paper-fig4", NULL, S_REF_OMEGA_DT, 2000, "kT~ 0.01" },
+    { "paper-fig4 kT~ 0.003", "paper-fig4", s_tweak_kT_cold, S_REF_OMEGA_DT, 2000, "coldest of velocity-thermal" },
+    { "paper-fig4 kT~ 0.03", "paper-fig4", s_tweak_kT_hot, S_REF_OMEGA_DT, 2000, "hottest of velocity-thermal" },
+    { "near instability", "paper-fig4", s_tweak_near, S_REF_OMEGA_DT, 2000,
+      "the underdamped group's start, u_spr = -6.5" },
+    { "paper-fig4-bd (Brownian)", "paper-fig4-bd", NULL, S_REF_OMEGA_DT, 1000,
+      "brownian, zeta = 1: dt <= 1/(20 eta) caps every omega_dt >= 0.13 to one step" },
+    { "near instability, brownian", "paper-fig4", s_tweak_near_bd, S_PAPER_OMEGA_DT / 2.0, 400,
+      "the overdamped group's scene: brownian at zeta = 0.01" },
+    { "paper-fig1 70 K", "paper-fig1", s_tweak_T70, S_PAPER_OMEGA_DT, 400, "coldest of distribution" },
+    { "paper-fig1 1121 K", "paper-fig1", s_tweak_T1121, S_PAPER_OMEGA_DT, 100, "hottest of distribution" },
+};
+#define S_NCASES ((int)(sizeof s_cases / sizeof s_cases[0]))
+
+/* The force unit of a case: F_JKR = 3 pi gamma R / 2, or sqrt(k kT) (the thermal force) without adhesion. */
 static double s_F_jkr_N(const vafm_params *p)
 {
-    return 1.5 * M_PI * p->gamma_J_per_m2 * p->R_m;
+    if (p->gamma_J_per_m2 > 0 || p->T_K == 0)
+        return 1.5 * M_PI * p->gamma_J_per_m2 * p->R_m;
+    return sqrt(p->k_N_per_m * VAFM_KB_J_PER_K * p->T_K);
 }
 
 /* ---- running a row ----------------------------------------------------------------------------- */
@@ -140,6 +255,7 @@ static double s_F_jkr_N(const vafm_params *p)
 typedef struct s_collect {
     s_row *row;
     double F_jkr_N;
+    int adhesive;
     uint64_t done, next_report;
     double t0;
 } s_collect;
@@ -149,8 +265,9 @@ static int s_on_curve(void *user, const vafm_campaign_curve *c)
     s_collect *col = user;
     s_row *r = col->row;
     const vafm_curve_result *res = &c->result;
-    const int bad_flags =
-        VAFM_CURVE_NO_CONTACT | VAFM_CURVE_EARLY_DETACH | VAFM_CURVE_NO_DETACH | VAFM_CURVE_NO_TRIGGER;
+    /* without adhesion (cell-liquid) thermal touch-and-go before the retract is the scene's nature: kept */
+    const int bad_flags = VAFM_CURVE_NO_CONTACT | VAFM_CURVE_NO_TRIGGER |
+                          (col->adhesive ? VAFM_CURVE_EARLY_DETACH | VAFM_CURVE_NO_DETACH : 0);
     double o[S_NOBS] = { res->pulloff_spring_N / col->F_jkr_N, res->detach_force_N / col->F_jkr_N };
     int ok = c->status == 0 && !(res->flags & bad_flags) && isfinite(o[0]) && isfinite(o[1]);
     if (c->status)
@@ -184,7 +301,8 @@ static void s_stats(s_row *r)
             if (isfinite(r->obs[j][i]))
                 ss += (r->obs[j][i] - mean) * (r->obs[j][i] - mean);
         r->mean[j] = mean;
-        r->se[j] = n > 1 ? sqrt(ss / (double)(n - 1) / (double)n) : NAN;
+        r->sd[j] = n > 1 ? sqrt(ss / (double)(n - 1)) : NAN;
+        r->se[j] = n > 1 ? r->sd[j] / sqrt((double)n) : NAN;
     }
 }
 
@@ -209,13 +327,15 @@ static int s_run_row(s_row *r)
     }
     char lab[48];
     s_label(r, lab, sizeof lab);
+    if (r->cs)
+        fprintf(stderr, "  [%s]", r->cs->name);
     fprintf(stderr, "  %s %s (%s noise) omega_dt %s, dt %.4g, %llu curves\n", r->group, r->it->name,
             s_noise_name(r->noise), lab, r->dt, (unsigned long long)r->N);
     vafm_campaign_spec spec;
     memset(&spec, 0, sizeof spec);
     spec.curves_per_point = r->N;
-    spec.threads = 0;
-    s_collect col = { r, s_F_jkr_N(&p), 0, r->N / 10 ? r->N / 10 : 1, bench_clock_s(CLOCK_MONOTONIC) };
+    spec.threads = s_threads;
+    s_collect col = { r, s_F_jkr_N(&p), p.gamma_J_per_m2 > 0 || !r->cs, 0, r->N / 10 ? r->N / 10 : 1, bench_clock_s(CLOCK_MONOTONIC) };
     double c0 = bench_clock_s(CLOCK_PROCESS_CPUTIME_ID), w0 = col.t0;
     int rc = vafm_campaign_run(&p, &spec, s_on_curve, &col, &err);
     r->cpu_s = bench_clock_s(CLOCK_PROCESS_CPUTIME_ID) - c0;
@@ -531,9 +651,114 @@ static int s_emit(const char *dir, const s_row *rows, int n, uint64_t N, uint64_
     return 0;
 }
 
+/* ---- output of group "presets" ----------------------------------------------------------------- */
+
+/* The standard error of a campaign of S_N_CAMPAIGN curves of this row's scene (the row's sd / sqrt 2000). */
+static double s_se_campaign(const s_row *r, int j)
+{
+    return r->sd[j] / sqrt((double)S_N_CAMPAIGN);
+}
+
+static double s_case_unit_N(const s_row *r)
+{
+    vafm_params p;
+    s_scene(&p, r);
+    return s_F_jkr_N(&p);
+}
+
+static void s_write_case_csv(FILE *f, const s_row *rows, int n)
+{
+    fprintf(f, "case,preset,integrator,omega_dt,is_ref,dt_reduced,omega_max_dt,steps_per_curve,n,n_ok,n_failed,"
+               "n_flagged,threads,cpu_s,wall_s,F_unit_N");
+    for (int j = 0; j < S_NOBS; j++) {
+        const char *o = j ? "obs3" : "obs2";
+        fprintf(f, ",%s_mean,%s_sd,%s_se,%s_bias,%s_se_combined,%s_bias_over_se,%s_bias_over_se%d,%s_ks,%s_ks_crit",
+                o, o, o, o, o, o, o, S_N_CAMPAIGN, o, o);
+    }
+    fputc('\n', f);
+    for (int i = 0; i < n; i++) {
+        const s_row *r = &rows[i];
+        fprintf(f, "\"%s\",%s,%s,%.6g,%d,%.6g,%.6g,%.6g,%llu,%llu,%llu,%llu,%d,%.4f,%.4f,%.6g", r->cs->name,
+                r->cs->preset, r->it->name, r->omega_dt, r->is_ref, r->dt, r->stab, s_steps_per_curve(r),
+                (unsigned long long)r->N, (unsigned long long)r->n_ok, (unsigned long long)r->n_failed,
+                (unsigned long long)r->n_flagged, s_threads, r->cpu_s, r->wall_s, s_case_unit_N(r));
+        for (int j = 0; j < S_NOBS; j++)
+            fprintf(f, ",%.9g,%.9g,%.9g,%.9g,%.9g,%.4f,%.4f,%.6f,%.6f", r->mean[j], r->sd[j], r->se[j], r->bias[j],
+                    r->se_c[j], r->z[j], r->bias[j] / s_se_campaign(r, j), r->ks[j], r->ks_crit[j]);
+        fputc('\n', f);
+    }
+}
+
+static void s_write_case_md(FILE *f, const s_row *rows, int n, double load0, double load1)
+{
+    fprintf(f, "## The default step: work against precision per scene (bench_work_precision, group presets)\n\n"
+               "Each case is a scene as a user runs it (the preset with the core's default shortcuts: exact free "
+               "steps, the JKR table, the exact well step), gjf (brownian for paper-fig4-bd), only omega_dt "
+               "changed; %d thread(s), load average %.2f before and %.2f after. Curves 0..N-1 (same seeds) per row. "
+               "Forces in F_JKR = 3 pi gamma R / 2 (cell-liquid: sqrt(k kT), it has no adhesion). F2 = "
+               "pulloff_spring_N, F3 = detach_force_N. bias against the case's reference row (dt0/4 unless said); "
+               "/se_c: combined standard error; /se%d: the standard error of a %d-curve campaign of that scene "
+               "(sd/sqrt(%d)); KS: two-sample distance to the reference (** above its 5%% critical value).\n\n",
+            s_threads, load0, load1, S_N_CAMPAIGN, S_N_CAMPAIGN, S_N_CAMPAIGN);
+    if (n && !strcmp(rows[0].group, "athermal"))
+        fprintf(f, "These rows are athermal (T = 0, one curve each, reference dt0/4): every curve is the same, so "
+                   "the bias is exact and there is no standard error; set it against the thermal case's se%d "
+                   "(bench/default_step_fit.py).\n\n", S_N_CAMPAIGN);
+    const s_case *cur = NULL;
+    for (int i = 0; i < n; i++) {
+        const s_row *r = &rows[i];
+        if (r->cs != cur) {
+            cur = r->cs;
+            fprintf(f, "%s**%s** (preset %s%s%s; N = %llu per row)\n\n"
+                       "| omega_dt | steps/curve | CPU s | F2/F ± se | bias2/se_c | bias2/se%d | KS2 | "
+                       "F3/F ± se | bias3/se_c | bias3/se%d | KS3 |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+                    i ? "\n" : "", cur->name, cur->preset, *cur->what ? "; " : "", cur->what, (unsigned long long)r->N,
+                    S_N_CAMPAIGN, S_N_CAMPAIGN);
+        }
+        fprintf(f, "| %.4g%s | %.3g | %.2f |", r->omega_dt, r->is_ref ? " (ref)" : "", s_steps_per_curve(r), r->cpu_s);
+        for (int j = 0; j < S_NOBS; j++) {
+            fprintf(f, " %.5f ± %.5f |", r->mean[j], r->se[j]);
+            if (r->is_ref)
+                fprintf(f, " – | – | – |");
+            else
+                fprintf(f, " %+.1f | %+.2f | %.3f%s |", r->z[j], r->bias[j] / s_se_campaign(r, j), r->ks[j],
+                        r->ks[j] > r->ks_crit[j] ? " **" : "");
+        }
+        fputc('\n', f);
+    }
+    uint64_t excluded = 0, flagged = 0;
+    double cpu = 0;
+    for (int i = 0; i < n; i++) {
+        excluded += rows[i].N - rows[i].n_ok;
+        flagged += rows[i].n_flagged;
+        cpu += rows[i].cpu_s;
+    }
+    fprintf(f, "\nCurves left out (failed, no contact, early or no detachment): %llu; flagged (kept if only a "
+               "recontact): %llu. CPU in all: %.0f s.\n",
+            (unsigned long long)excluded, (unsigned long long)flagged, cpu);
+}
+
+static int s_emit_cases(const char *dir, const char *stem, const s_row *rows, int n, double load0, double load1)
+{
+    char name[64];
+    snprintf(name, sizeof name, "%s.csv", stem);
+    FILE *f = s_open(dir, name);
+    if (!f)
+        return -1;
+    s_write_case_csv(f, rows, n);
+    fclose(f);
+    snprintf(name, sizeof name, "%s.md", stem);
+    if (!(f = s_open(dir, name)))
+        return -1;
+    s_write_case_md(f, rows, n, load0, load1);
+    fclose(f);
+    s_write_case_md(stdout, rows, n, load0, load1);
+    return 0;
+}
+
 /* ---- the plan ---------------------------------------------------------------------------------- */
 
-#define S_MAX_ROWS 32
+#define S_MAX_ROWS 128
 
 static int s_plan(s_row *rows, uint64_t N, uint64_t N_bd, const char *groups)
 {
@@ -590,6 +815,41 @@ static int s_plan(s_row *rows, uint64_t N, uint64_t N_bd, const char *groups)
             rows[n++].is_ref = opt[k].is_ref;
         }
     }
+    for (int g = 0; g < 2; g++) {
+        /* "presets": every case at its reference step and the candidate steps, the core's defaults on;
+         * "athermal": the same at T = 0, one curve per row (dt0/4 reference; not cell-liquid: no adhesion) */
+        const char *gname = g ? "athermal" : "presets";
+        if (!strstr(groups, gname))
+            continue;
+        for (int c = 0; c < S_NCASES; c++) {
+            const s_case *cs = &s_cases[c];
+            char key[64];
+            snprintf(key, sizeof key, "case%d,", c);
+            if (strstr(groups, "case") && !strstr(groups, key))
+                continue; /* "presets,case3,case5,": only those cases */
+            vafm_params p;
+            vafm_preset_apply(&p, cs->preset, NULL);
+            if (cs->tweak)
+                cs->tweak(&p);
+            if (g && p.gamma_J_per_m2 == 0)
+                continue;
+            const s_row pr = { .group = gname, .cs = cs, .it = p.integrator, .noise = p.noise,
+                               .omega_dt_far = p.omega_dt_far, .well_exact = p.well_exact,
+                               .N = g ? 1 : cs->N < N ? cs->N : N };
+            if (n + 1 + S_NDT > S_MAX_ROWS)
+                break;
+            const int i_ref = n;
+            rows[n] = pr;
+            rows[n].omega_dt = g ? S_REF_OMEGA_DT : cs->ref_omega_dt;
+            rows[n++].is_ref = 1;
+            for (int d = 0; d < S_NDT; d++) {
+                if (s_omega_dts[d] == rows[i_ref].omega_dt)
+                    continue; /* the reference is this step (a costly case): the same curves, not a new row */
+                rows[n] = pr;
+                rows[n++].omega_dt = s_omega_dts[d];
+            }
+        }
+    }
     return n;
 }
 
@@ -610,6 +870,7 @@ int main(int argc, char **argv)
     if (N_bd == 1)
         N_bd = 2;
     const char *groups = argc > 4 ? argv[4] : "underdamped,overdamped,options";
+    s_threads = argc > 5 ? (int)s_parse_count(argv[5], 0) : 0;
     static s_row rows[S_MAX_ROWS];
     int n = s_plan(rows, N, N_bd, groups), rc = 0;
     fprintf(stderr, "work-precision: %d rows, N = %llu (overdamped N = %llu)\n", n, (unsigned long long)N,
@@ -622,8 +883,19 @@ int main(int argc, char **argv)
         rc = s_run_row(&rows[i]) || s_compare(&rows[i], ref);
     }
     fprintf(stderr, "work-precision: %.0f s wall in all\n", bench_clock_s(CLOCK_MONOTONIC) - t0);
-    if (!rc)
-        rc = s_emit(dir, rows, n, N, N_bd, load0, bench_loadavg());
+    int n_classic = 0; /* the presets group's rows come last */
+    while (n_classic < n && !rows[n_classic].cs)
+        n_classic++;
+    double load1 = bench_loadavg();
+    if (!rc && n_classic)
+        rc = s_emit(dir, rows, n_classic, N, N_bd, load0, load1);
+    int n_presets = n_classic; /* then "presets", then "athermal" */
+    while (n_presets < n && !strcmp(rows[n_presets].group, "presets"))
+        n_presets++;
+    if (!rc && n_presets > n_classic)
+        rc = s_emit_cases(dir, "default_step", rows + n_classic, n_presets - n_classic, load0, load1);
+    if (!rc && n > n_presets)
+        rc = s_emit_cases(dir, "default_step_athermal", rows + n_presets, n - n_presets, load0, load1);
     for (int i = 0; i < n; i++)
         s_row_free(&rows[i]);
     return rc ? 1 : 0;

@@ -113,6 +113,13 @@ run params --json --preset contact-silica --ramp-size 1um --ramp-rate 1Hz --segm
 if [ "$rc" -eq 0 ] && grep -qF '"v_approach_m_per_s": 2e-06' "$TMP/out" && grep -qF '"sample_rate_Hz": 2000' "$TMP/out"; then
     ok "ramp rate and samples per segment derive speed and sample rate"
 else bad "ramp rate" "exit $rc: $(head -c 300 "$TMP/out")"; fi
+# the paper's step by name (the default of every preset; docs/speed-and-accuracy.md, "The default step")
+run params --json --preset contact-silica --omega_dt paper
+paper=$(grep -o '"omega_dt": [^,]*' "$TMP/out")
+run params --json --preset contact-silica
+if [ "$rc" -eq 0 ] && [ -n "$paper" ] && grep -qF -- "$paper," "$TMP/out"; then
+    ok "--omega_dt paper is the default step ($paper)"
+else bad "--omega_dt paper" "exit $rc, '$paper' vs $(grep -o '"omega_dt": [^,]*' "$TMP/out")"; fi
 expect_fail "a value in the wrong unit names field and unit" 2 setpoint_N "'2nm'" "in N" -- params --setpoint 2nm
 expect_fail "a ramp rate needs a ramp size" 2 ramp_rate_Hz ramp_size_m -- params --ramp-size 0 --ramp-rate 1Hz
 expect_fail "a list element in the wrong unit" 2 "--T" "element 2" -- curves -n 1 --preset paper-fig4 --T 300K,5nN

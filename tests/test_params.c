@@ -122,6 +122,19 @@ static void test_presets(void)
     ENSURE(memcmp(&d, &f1, sizeof d) == 0); /* the default is paper-fig1 */
     ENSURE(vafm_params_validate(&d, NULL) == 0);
 
+    /* the default step of every preset is the paper's, named "paper" (docs/speed-and-accuracy.md, "The
+     * default step"); --omega_dt 0.157 is the same step to three digits */
+    for (int i = 0; i < np; i++) {
+        vafm_params p;
+        vafm_preset_apply(&p, vafm_preset_name(i), NULL);
+        ENSURE_MSG(p.omega_dt == VAFM_OMEGA_DT_PAPER, "preset %s: omega_dt %g", vafm_preset_name(i), p.omega_dt);
+    }
+    ENSURE(vafm_params_set(&d, "omega_dt", "0.6", NULL) == 0 && d.omega_dt == 0.6);
+    ENSURE(vafm_params_set(&d, "omega_dt", "paper", NULL) == 0 && d.omega_dt == 2.0 * M_PI / 40.0);
+    ENSURE(vafm_params_set(&d, "omega_dt", "0.157", NULL) == 0 && fabs(d.omega_dt - VAFM_OMEGA_DT_PAPER) < 1e-3);
+    ENSURE(vafm_params_set(&d, "omega_dt_far", "paper", NULL) == VAFM_EINVAL); /* the name is omega_dt's only */
+    vafm_params_default(&d);
+
     vafm_error err = {0};
     ENSURE(vafm_preset_apply(&d, "no-such-preset", &err) == VAFM_ENOTFOUND);
     ENSURE(err.code == VAFM_ENOTFOUND);

@@ -158,6 +158,11 @@ typedef struct vafm_params {
     uint8_t reserved[24];
 } vafm_params;
 
+/** The paper's automatic step, ω_max·dt = 2π/40 (its Eq. 8; 0.157): the default omega_dt of every preset,
+ *  chosen by evidence (docs/speed-and-accuracy.md, "The default step"). The text value "paper" of
+ *  omega_dt (vafm_params_set, `--omega_dt paper`) names it. */
+#define VAFM_OMEGA_DT_PAPER (2.0 * 3.14159265358979323846 / 40.0)
+
 /** The scene the tools (vafm, vafmd, make demo) start from: an instrument at room temperature. */
 #define VAFM_TOOLS_DEFAULT_PRESET "contact-silica"
 

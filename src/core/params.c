@@ -102,8 +102,8 @@ static const s_field s_fields[] = {
          "time step (0: automatic from omega_dt, as the paper's Eq. 8); rounded down to a whole fraction of the "
          "sample interval"),
     REAL(omega_dt, "", 1e-6, 1.99,
-         "automatic time step: omega_max*dt at the stiffest contact reached (paper 2*pi/40 = 0.157); "
-         "brownian: K_max*dt/zeta"),
+         "automatic time step: omega_max*dt at the stiffest contact reached (default: the paper's 2*pi/40 = "
+         "0.157, also named 'paper'); brownian: K_max*dt/zeta"),
     REAL(omega_dt_far, "", 0, 1.99,
          "adaptive step: omega_max*dt while in contact and far from the pull-off instability "
          "(0: no adaptation, omega_dt everywhere)"),
@@ -175,7 +175,7 @@ static void s_common(vafm_params *p)
     p->trigger = VAFM_TRIGGER_FORCE;
     p->noise = VAFM_NOISE_GAUSSIAN;
     p->antialias = VAFM_ANTIALIAS_MEAN;
-    p->omega_dt = 2.0 * M_PI / 40.0;
+    p->omega_dt = VAFM_OMEGA_DT_PAPER; /* chosen by evidence: docs/speed-and-accuracy.md, "The default step" */
     p->omega_dt_far = 0.0;
     /* far-zone escapes are then negligible: their probability is at most (ω/2π)·T·e^{−30} ≈ 1e-13·ωT,
      * 1e-7 for the paper-fig1 curve (ω ≈ 60 /η, T ≈ 1e5 /η) */
@@ -487,7 +487,11 @@ int vafm_params_set(vafm_params *p, const char *name, const char *value, vafm_er
     case VAFM_PARAM_REAL: {
         double v = 0.0;
         vafm_error perr;
-        int r = vafm_units_parse(f->info.name, value, f->info.unit, &v, &perr); /* "1e-9", "1nN", "25C" */
+        int r = 0;
+        if (f->offset == offsetof(vafm_params, omega_dt) && !strcmp(value, "paper"))
+            v = VAFM_OMEGA_DT_PAPER; /* the paper's step by name */
+        else
+            r = vafm_units_parse(f->info.name, value, f->info.unit, &v, &perr); /* "1e-9", "1nN", "25C" */
         if (r) {
             vafm_err_set(err, r, f->info.name, "%s (allowed range [%.6g, %.6g] %s)", perr.message, f->info.min,
                          f->info.max, f->info.unit);
