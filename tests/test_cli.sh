@@ -310,7 +310,7 @@ if [ "$rc" -eq 0 ] && grep -q ": 8 curves (0 kept from before, 8 new)" "$TMP/out
 run campaign -n 50 "${GRID[@]}" --out "$TMP/ref.h5" -q
 full=$(stat -c %s "$TMP/ref.h5" 2>/dev/null || echo 0)
 # (the scalar kernel: it finishes curves one by one, so the file grows as they become durable; the batch
-# kernel appends ~32 at once and the size would say little about what the flusher made durable)
+# kernel appends ~16 at once and the size would say little about what the flusher made durable)
 "$VAFM" campaign -n 50 "${GRID[@]}" --out "$TMP/k.h5" -q --threads 1 --flush-interval 0.05 --kernel scalar >/dev/null 2>&1 &
 pid=$!
 size=0

@@ -45,7 +45,7 @@ FAST=(--preset paper-fig4 --v 6.4e-4 --threads 1 -q)
 
 # ---- 1: a file another process writes ------------------------------------------------------------
 # A long campaign (thousands of curves, flushed every 0.2 s) is the other writer; it is killed at the end.
-# The scalar kernel: its curves come one by one (the batch kernel's first burst of ~32 would take ~15 s).
+# The scalar kernel: its curves come one by one (the batch kernel's first burst of ~16 would take several seconds).
 "$VAFM" campaign -n 100000 --preset paper-fig4 --threads 1 --flush-interval 0.2 --kernel scalar --out busy.h5 -q \
     >/dev/null 2>"$TMP/writer.err" &
 WRITER=$!

@@ -181,7 +181,7 @@ fi
 LONGN=48
 # plain integrator steps in contact (no exact well step): ~5x the cost per curve, so that the kill lands
 # mid-run rather than after the last curve; the scalar kernel, which finishes curves one by one (the batch
-# kernel keeps ~32 curves per thread in flight and would finish these 48 all at once, near the end)
+# kernel keeps ~16 curves per thread in flight and finishes them together, in a few bursts)
 KSCENE=("${SCENE[@]}" --well_exact=false --kernel scalar)
 timeout 120 "$VAFM" campaign "${KSCENE[@]}" -n $LONGN -o "$TMP/long.h5" -q >/dev/null 2>&1 ||
     bad "plain campaign -n $LONGN"

@@ -391,7 +391,7 @@ static const vafm_cli_command s_commands[] = {
       "  --overwrite          replace an existing FILE (without --resume or --overwrite it is refused)\n"
       "  --flush-interval S   make the curves durable every S seconds (default 1; 0: as soon as a curve\n"
       "                       waits); a kill -9 loses at most the curves of the last S seconds (and those in\n"
-      "                       flight: with the batch kernel up to 32 per thread)\n"
+      "                       flight: with the batch kernel up to 16 per thread)\n"
       "  --gzip L             compress the channels: shuffle + deflate at level L (1-9; default 0: off)\n"
       "  --progress           report progress on stderr even when it is not a terminal\n"
       "  -q, --quiet          no progress\n"

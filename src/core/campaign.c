@@ -275,13 +275,14 @@ static void *s_worker(void *arg)
 
 /* ---- the batch kernel's worker ---------------------------------------------------------------------
  *
- * A worker keeps S_FLIGHT_PER_LANE curves per lane in flight. Each round it advances every curve in the
+ * A worker keeps S_FLIGHT_PER_LANE curves per lane in flight (one: two per lane gave no more throughput
+ * on contact-silica and paper-fig4 and doubled the memory and the wait for the first curve). Each round it advances every curve in the
  * scalar path until the curve either ends or waits for the batch kernel (vafm_sim_advance_batch), then
  * runs all waiting curves' in-contact runs in batches of W lanes. Curves in other phases (approach, free
  * flight, the exact well step, dwell) go on in the scalar path while others wait; having more curves than
  * lanes keeps the lanes full. Each curve is computed exactly as the scalar worker computes it. */
 
-#define S_FLIGHT_PER_LANE 2
+#define S_FLIGHT_PER_LANE 1
 /* the samples a batch worker may hold for its curves in flight (keep_samples: whole curves) */
 #define S_FLIGHT_BYTES (128.0 * 1024 * 1024)
 
