@@ -181,6 +181,19 @@ run curves -n 4 --preset paper-fig4 --csv - --threads 2
 cp "$TMP/out" "$TMP/c2.csv"
 if [ "$(wc -l <"$TMP/c2.csv")" -eq 5 ] && cmp -s "$TMP/c0.csv" "$TMP/c1.csv" && cmp -s "$TMP/c1.csv" "$TMP/c2.csv"; then ok "curves: --threads 1 and 2 byte-identical"; else bad "curves thread independence"; fi
 
+# The kernels: every batch width gives the scalar kernel's CSV byte for byte (20 curves fill the lanes);
+# the summary names the kernel; an unknown kernel is a usage error naming the option.
+run curves -n 20 --preset paper-fig4 --csv - --threads 1 --kernel scalar
+cp "$TMP/out" "$TMP/k_scalar.csv"
+kern_ok=1
+for k in batch batch4 batch8 auto; do
+    run curves -n 20 --preset paper-fig4 --csv - --threads 2 --kernel $k
+    cmp -s "$TMP/out" "$TMP/k_scalar.csv" && grep -q "^kernel       " "$TMP/err" || kern_ok=0
+done
+if [ "$kern_ok" -eq 1 ] && [ "$(wc -l <"$TMP/k_scalar.csv")" -eq 21 ]; then ok "curves --kernel scalar|batch|batch4|batch8|auto: the same CSV"
+else bad "curves --kernel: the same CSV" "$(head -c 300 "$TMP/err")"; fi
+expect_fail "curves --kernel fast" 2 -- --kernel fast -- curves -n 1 --preset paper-fig4 --kernel fast
+
 # Grid: T slowest; the point column and the T column follow the list.
 run curves -n 2 --preset paper-fig4 --T 0,1e6 --csv "$TMP/grid.csv" --quiet
 if [ "$rc" -eq 0 ] && [ "$(tail -n +2 "$TMP/grid.csv" 2>/dev/null | cut -d, -f2,3 | tr '\n' ' ')" = "0,0 0,0 1,1000000 1,1000000 " ] &&

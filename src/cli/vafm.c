@@ -474,6 +474,9 @@ static int s_dispatch(const vafm_cli_args *a)
     if (a->on[O_VERSION]) {
         printf("vafm %s (built against API %d.%d.%d)\n", vafm_version(), VAFM_API_VERSION_MAJOR,
                VAFM_API_VERSION_MINOR, VAFM_API_VERSION_PATCH);
+        vafm_campaign_spec sp;
+        memset(&sp, 0, sizeof sp);
+        printf("campaign kernel on this CPU: %s\n", vafm_campaign_kernel_describe(&sp));
         return VAFM_CLI_EXIT_OK;
     }
     if (a->on[O_HELP]) {
