@@ -126,6 +126,13 @@ expect_fail "a list element in the wrong unit" 2 "--T" "element 2" -- curves -n 
 printf '{"setpoint_N": "1nN"}\n' >"$TMP/unitjson.json"
 expect_fail "JSON scene files keep plain SI numbers" 2 "$TMP/unitjson.json" setpoint_N -- params --scene "$TMP/unitjson.json"
 
+printf '{"omega_dt": "paper"}\n' >"$TMP/paperjson.json"
+run params --json --scene "$TMP/paperjson.json"
+if [ "$rc" -eq 0 ] && [ -n "$paper" ] && grep -qF -- "$paper," "$TMP/out"; then ok "a JSON scene takes omega_dt \"paper\" ($paper)"
+else bad "JSON omega_dt paper" "exit $rc $(head -c 200 "$TMP/err")"; fi
+printf '{"omega_dt": "fast"}\n' >"$TMP/fastjson.json"
+expect_fail "JSON omega_dt takes no other name" 2 "$TMP/fastjson.json" omega_dt -- params --scene "$TMP/fastjson.json"
+
 printf '{"k_N_per_m": 0.1,\n' >"$TMP/trunc.json"
 expect_fail "malformed JSON: file, line, column" 2 "$TMP/trunc.json" "line 2" column -- params --scene "$TMP/trunc.json"
 printf '{"k_N_per_m": "abc"}\n' >"$TMP/type1.json"

@@ -68,6 +68,11 @@ const char *vafm_scene_value_text(const vafm_param_info *info, const json_t *v, 
 {
     switch (info->kind) {
     case VAFM_PARAM_REAL:
+        /* plain SI numbers; the one named value, omega_dt "paper" (the paper's step), as the CLI takes it */
+        if (json_is_string(v) && !strcmp(info->name, "omega_dt") && !strcmp(json_string_value(v), "paper")) {
+            snprintf(buf, len, "paper");
+            return buf;
+        }
         if (!json_is_number(v))
             return NULL;
         snprintf(buf, len, "%.17g", json_number_value(v));
