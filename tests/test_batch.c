@@ -250,6 +250,64 @@ static void test_campaigns(void)
     t_camp_free(&ref);
 }
 
+/* A scene with a piezo actuator model: the campaign hands each curve's actual piezo height over (the
+ * files' "height (measured)"), the same as a single curve's, with either kernel. Before 0.6 it handed
+ * none, and `vafm campaign` refused such a scene's first curve (its tip position did not match). */
+typedef struct t_hm {
+    int n, ok;
+    double *ref;
+    size_t nref;
+} t_hm;
+
+static int t_hm_fn(void *user, const vafm_campaign_curve *c)
+{
+    t_hm *h = user;
+    if (c->index == 1)
+        h->ok = c->samples.height_measured_m && c->samples.n == h->nref &&
+                !memcmp(c->samples.height_measured_m, h->ref, h->nref * sizeof(double));
+    h->n++;
+    return 0;
+}
+
+static int t_hm_collect(void *user, const vafm_samples *b)
+{
+    t_hm *h = user;
+    if (!b->height_measured_m)
+        return 1;
+    double *p = realloc(h->ref, (h->nref + b->n) * sizeof(double));
+    if (!p)
+        return 1;
+    h->ref = p;
+    memcpy(h->ref + h->nref, b->height_measured_m, b->n * sizeof(double));
+    h->nref += b->n;
+    return 0;
+}
+
+static void test_campaign_measured_height(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.piezo_hysteresis = 0.05;
+    t_hm h;
+    memset(&h, 0, sizeof h);
+    vafm_sim *s = NULL;
+    ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+    ENSURE(vafm_sim_curve(s, 1, t_hm_collect, &h, NULL) == 0 && h.nref > 100);
+    vafm_sim_destroy(&s);
+    for (int k = VAFM_CAMPAIGN_KERNEL_SCALAR; k <= VAFM_CAMPAIGN_KERNEL_BATCH; k++) {
+        vafm_campaign_spec sp;
+        memset(&sp, 0, sizeof sp);
+        sp.curves_per_point = 3;
+        sp.keep_samples = 1;
+        sp.threads = 1;
+        sp.kernel = k;
+        h.n = h.ok = 0;
+        ENSURE(vafm_campaign_run(&p, &sp, t_hm_fn, &h, NULL) == 0);
+        ENSURE_MSG(h.n == 3 && h.ok, "kernel %d: curve 1's measured height differs from the single curve's", k);
+    }
+    free(h.ref);
+}
+
 /* ---- 3. names ---------------------------------------------------------------------------------- */
 
 static void test_names(void)
@@ -286,5 +344,6 @@ int main(void)
     RUN_TEST(test_names);
     RUN_TEST(test_lanes);
     RUN_TEST(test_campaigns);
+    RUN_TEST(test_campaign_measured_height);
     return harness_done();
 }

@@ -52,6 +52,9 @@ int vafm_campaign_point_params(const vafm_params *base, const vafm_campaign_spec
 typedef struct s_buf {
     size_t n, cap;
     double *t, *h, *d, *f, *tip;
+    double *hm;    /* the actual piezo height (a scene with a piezo actuator model; NULL: none) */
+    size_t hm_cap; /* its room (it grows only for curves that carry it) */
+    int has_hm;    /* the curve's samples carry it */
     uint8_t *seg;
 } s_buf;
 
@@ -88,6 +91,7 @@ static void s_buf_free(s_buf *b)
     free(b->d);
     free(b->f);
     free(b->tip);
+    free(b->hm);
     free(b->seg);
     memset(b, 0, sizeof *b);
 }
@@ -97,6 +101,22 @@ static int s_collect(void *user, const vafm_samples *blk)
     s_buf *b = user;
     double **chan[5] = { &b->t, &b->h, &b->d, &b->f, &b->tip };
     const double *src[5] = { blk->time_s, blk->height_m, blk->deflection_m, blk->force_N, blk->tip_m };
+    if (b->n == 0)
+        b->has_hm = blk->height_measured_m != NULL; /* a scene's samples all carry it, or none */
+    if (b->has_hm != (blk->height_measured_m != NULL))
+        return 1; /* cannot happen: a piezo model is a property of the scene */
+    if (b->has_hm && b->n + blk->n > b->hm_cap) {
+        size_t cap = b->hm_cap ? b->hm_cap : 4096;
+        while (cap < b->n + blk->n)
+            cap *= 2;
+        double *p = realloc(b->hm, cap * sizeof(double));
+        if (!p)
+            return 1;
+        b->hm = p;
+        b->hm_cap = cap;
+    }
+    if (b->has_hm)
+        memcpy(b->hm + b->n, blk->height_measured_m, blk->n * sizeof(double));
     if (b->n + blk->n > b->cap) {
         size_t cap = b->cap ? b->cap : 4096;
         while (cap < b->n + blk->n)
@@ -146,6 +166,7 @@ static void s_deliver(s_shared *sh)
             c.samples.force_N = sl->buf.f;
             c.samples.tip_m = sl->buf.tip;
             c.samples.segment = sl->buf.seg;
+            c.samples.height_measured_m = sl->buf.has_hm ? sl->buf.hm : NULL;
         }
         int stop = 0;
         if (!sh->stop) {
