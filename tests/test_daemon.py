@@ -593,6 +593,62 @@ def test_campaign_equals_cli_campaign_and_is_logged(fig4, tmp_path):
     vafm_info_ok(log)
 
 
+def test_campaign_batch_kernel_equals_scalar(tmp_path):
+    """The `kernel` setting (issue #13): in free run, "batch" computes a campaign's curves ahead, several at once
+    in SIMD lanes (src/daemon/camp_feed.h); every streamed sample and every run.end result equals the scalar
+    kernel's bit for bit, on a 2-point grid of a scene with piezo hysteresis (the measured-height channel
+    too), logged alike. Bad values name the setting; an abort mid-campaign ends it and the daemon goes on."""
+    h5py = pytest.importorskip("h5py")
+    d = Daemon("--preset", "contact-silica", "--free-run", "--hwm", "1000000")
+    try:
+        g = d.cmd({"cmd": "get", "names": ["kernel"], "info": True})
+        assert g["values"]["kernel"] == "scalar" and g["info"]["kernel"]["choices"] == "scalar|batch", g
+        error_ok(d.cmd({"cmd": "set", "values": {"kernel": "fast"}}), "out_of_range", "kernel")
+        error_ok(d.cmd({"cmd": "set", "values": {"kernel": 1}}), "wrong_type", "kernel")
+        assert d.cmd({"cmd": "set", "values": {"piezo_hysteresis": 0.05}})["status"] == "ok"
+        s = d.sub(rcvhwm=1000000)
+        settle(d, s)
+        got = {}
+        for kern in ("scalar", "batch"):
+            assert d.cmd({"cmd": "set", "values": {"kernel": kern}})["status"] == "ok"
+            log = tmp_path / f"{kern}.h5"
+            assert d.cmd({"cmd": "log", "path": str(log)})["status"] == "ok"
+            r = d.cmd({"cmd": "campaign", "n": 10, "T_K": [298.15, 310.0]})
+            assert r["status"] == "ok" and r["curves"] == 20, r
+            runs, cend = collect_campaign(s, r["campaign_id"])
+            assert cend["status"] == "ok" and cend["curves_done"] == 20, cend
+            assert d.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 20
+            got[kern] = (runs, log)
+        (ra, la), (rb, lb) = got["scalar"], got["batch"]
+        assert len(ra) == len(rb) == 20
+        for (sa, ba, _, ea), (sb, bb, _, eb) in zip(ra, rb):
+            assert sa["index"] == sb["index"] and ea["result"] == eb["result"], (sa["index"], ea, eb)
+            assert [c["name"] for c in sb["channels"]] == CHANNELS + ["height_measured_m"]
+            for k in (0, 2, 4, 5):  # height, force, tip, measured height
+                ca = np.concatenate([np.frombuffer(fr[k], "<f8") for _, fr in ba]).view(np.uint64)
+                cb = np.concatenate([np.frombuffer(fr[k], "<f8") for _, fr in bb]).view(np.uint64)
+                assert np.array_equal(ca, cb), (sa["index"], k)
+        with h5py.File(la, "r") as fa, h5py.File(lb, "r") as fb:
+            for k in range(20):
+                for ds in ("force", "height (measured)", "tip position"):
+                    assert np.array_equal(fa[str(k)][ds][:].view(np.uint64), fb[str(k)][ds][:].view(np.uint64)), (k, ds)
+        # an abort while the feeder computes ahead: campaign.end aborted, the daemon takes the next job
+        r = d.cmd({"cmd": "campaign", "n": 400})
+        assert r["status"] == "ok", r
+        time.sleep(0.3)
+        assert d.cmd({"cmd": "abort"})["status"] == "ok"
+        while True:
+            parts = s.recv_multipart() if s.poll(TIMEOUT_MS) else None
+            assert parts is not None, "no campaign.end"
+            if parts[0] == b"campaign.end":
+                cend = json.loads(parts[1])
+                break
+        assert cend["status"] == "aborted" and cend["curves_done"] < 400, cend
+        assert d.cmd({"cmd": "tune", "duration_s": 0.01})["status"] == "ok"
+    finally:
+        assert d.stop() == 0
+
+
 def test_map_equals_cli_map_and_is_logged(tmp_path):
     """`map` (issue #15): a 3 x 3 dome streams one run per pixel in scan order (curve = iy*nx + ix), each
     run.start names its pixel (indices, position, true E* and height), its force and height samples equal the

@@ -20,6 +20,7 @@ void vafmd_settings_default(vafmd_settings *s)
     s->block_s = 5e-3;
     s->hwm = 1000;
     s->lookahead_s = 1.0;
+    s->kernel = VAFMD_KERNEL_SCALAR;
 }
 
 void vafmd_err_set(vafmd_err *e, const char *code, const char *field, const char *fmt, ...)
@@ -34,7 +35,7 @@ void vafmd_err_set(vafmd_err *e, const char *code, const char *field, const char
 
 /* ---- daemon settings: a small field table of their own, next to the core's ---------------------- */
 
-enum { S_SET_REAL, S_SET_BOOL, S_SET_INT };
+enum { S_SET_REAL, S_SET_BOOL, S_SET_INT, S_SET_CHOICE };
 typedef struct s_setting {
     const char *name;
     int kind;
@@ -49,6 +50,9 @@ static const s_setting s_settings[] = {
     { "free_run", S_SET_BOOL, "", 0, 1, 0, "true: no pacing, blocks are released as fast as computed" },
     { "block_s", S_SET_REAL, "s", 1e-3, 1e-2, 0, "duration of the samples of one data block" },
     { "hwm", S_SET_INT, "messages", 1, 1e7, 1, "stream send high-water mark per subscriber (--hwm; read-only)" },
+    { "kernel", S_SET_CHOICE, "", 0, 0, 0,
+      "scalar|batch: how a campaign's curves are computed; batch (free run, not a map): ahead, several at once in "
+      "SIMD lanes, the same curves bit for bit" },
     { "lookahead_s", S_SET_REAL, "s", 0, 10, 0,
       "compute ahead: seconds of samples computed before their release (0: none); at most 256 MiB per run" },
 };
@@ -72,6 +76,8 @@ static json_t *s_setting_value(const vafmd_settings *s, const s_setting *f)
         return json_real(s->block_s);
     if (!strcmp(f->name, "lookahead_s"))
         return json_real(s->lookahead_s);
+    if (!strcmp(f->name, "kernel"))
+        return json_string(s->kernel == VAFMD_KERNEL_BATCH ? "batch" : "scalar");
     return json_integer(s->hwm);
 }
 
@@ -80,6 +86,16 @@ static int s_setting_apply(vafmd_settings *s, const s_setting *f, json_t *v, vaf
     if (f->read_only) {
         vafmd_err_set(e, VAFMD_E_READ_ONLY, f->name, "'%s' is fixed at start-up (command-line option)", f->name);
         return -1;
+    }
+    if (f->kind == S_SET_CHOICE) { /* kernel */
+        const char *t = json_is_string(v) ? json_string_value(v) : NULL;
+        if (!t || (strcmp(t, "scalar") && strcmp(t, "batch"))) {
+            vafmd_err_set(e, t ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, f->name,
+                          "'%s' must be \"scalar\" or \"batch\"", f->name);
+            return -1;
+        }
+        s->kernel = strcmp(t, "batch") ? VAFMD_KERNEL_SCALAR : VAFMD_KERNEL_BATCH;
+        return 0;
     }
     if (f->kind == S_SET_BOOL) {
         if (!json_is_boolean(v)) {
@@ -701,10 +717,14 @@ static json_t *s_info_param(const vafm_param_info *f)
 static json_t *s_info_setting(const s_setting *f)
 {
     json_t *o = json_object();
-    json_object_set_new(o, "kind", json_string(f->kind == S_SET_BOOL ? "bool" : f->kind == S_SET_INT ? "integer"
-                                                                                                         : "real"));
+    json_object_set_new(o, "kind", json_string(f->kind == S_SET_BOOL     ? "bool"
+                                               : f->kind == S_SET_INT    ? "integer"
+                                               : f->kind == S_SET_CHOICE ? "choice"
+                                                                         : "real"));
     json_object_set_new(o, "unit", json_string(f->unit));
-    if (f->kind != S_SET_BOOL) {
+    if (f->kind == S_SET_CHOICE)
+        json_object_set_new(o, "choices", json_string("scalar|batch"));
+    else if (f->kind != S_SET_BOOL) {
         json_object_set_new(o, "min", json_real(f->min));
         json_object_set_new(o, "max", json_real(f->max));
     }

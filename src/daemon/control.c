@@ -17,6 +17,7 @@
 #include <zmq.h>
 #include "vafm/h5.h"
 #include "vafm/record.h"
+#include "daemon/camp_feed.h"
 #include "daemon/cmd_json.h"
 #include "daemon/daemon.h"
 #include "daemon/replay.h"
@@ -668,6 +669,16 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     cp->first_run_id = d->next_run_id;
     cp->set = d->set;
     cp->log = atomic_load_explicit(&d->log.state, memory_order_acquire) == VAFMD_LOG_ON;
+    /* the batch kernel: a free-run campaign's curves computed ahead, several at once (camp_feed.h); paced runs and
+     * maps are computed by the simulation thread, curve by curve */
+    if (cp->set.kernel == VAFMD_KERNEL_BATCH && cp->set.free_run && !cp->is_map &&
+        (rc = vafmd_feed_start(&cp->feed, &cp->base, &cp->spec)) != 0) {
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "kernel", "cannot start the batch kernel's feeder: %s", vafm_strerror(rc));
+        vafm_sim_destroy(&cp->sim);
+        free(cp->lists);
+        free(cp);
+        return NULL;
+    }
     snprintf(cp->client_run_id, sizeof cp->client_run_id, "%s", c->client_run_id);
     vafmd_sim_cmd sc;
     memset(&sc, 0, sizeof sc);
@@ -675,6 +686,7 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     sc.kind = VAFMD_RUN_CURVE;
     sc.camp = cp;
     if (!vafmd_ring_push(&d->ring, &sc)) {
+        vafmd_feed_release(&cp->feed);
         vafm_sim_destroy(&cp->sim);
         free(cp->lists);
         free(cp);

@@ -35,6 +35,8 @@ typedef struct vafmd_settings {
     int free_run;               /* 1: no pacing, as fast as possible */
     double block_s;             /* samples per data block, as a duration, [1e-3, 1e-2] s */
     int hwm;                    /* PUB send high-water mark, messages per subscriber (set at start only) */
+    int kernel;                 /* VAFMD_KERNEL_*: a campaign's curves by the simulation thread, or ahead by the
+                                   batch kernel (free run, not a map: camp_feed.h) */
     double lookahead_s;         /* compute ahead: samples computed before their release, as a duration of
                                    samples, [0, 10] s (0: each block is computed just before its deadline);
                                    memory at most VAFMD_LOOKAHEAD_MAX_BYTES per run (fewer blocks then) */
@@ -42,7 +44,8 @@ typedef struct vafmd_settings {
      * vafm/detector.h), so the CLI and the files have it too. */
 } vafmd_settings;
 
-/* 1 if any detector signal is on (else the samples are the simulation's, bit for bit). */
+enum { VAFMD_KERNEL_SCALAR = 0, VAFMD_KERNEL_BATCH = 1 };
+
 void vafmd_settings_default(vafmd_settings *s);
 
 enum vafmd_run_kind { VAFMD_RUN_CURVE = 0, VAFMD_RUN_TUNE = 1, VAFMD_RUN_REPLAY = 2 };
@@ -72,6 +75,7 @@ typedef struct vafmd_campaign {
     char client_run_id[65];
     /* a force map (the `map` command): a campaign over its pixels, one curve each (curve = iy·nx + ix) */
     int is_map;
+    struct vafmd_feed *feed;       /* the batch kernel's feeder (camp_feed.h), NULL: the simulation thread computes */
     vafm_map_spec map;             /* spec.point_user points here */
     double lateral_speed_m_per_s;  /* the lateral move between pixels takes distance / this (paced runs) */
     int64_t move_until_ns;         /* the move to the next pixel ends then (0: none under way) */
@@ -92,6 +96,7 @@ typedef struct vafmd_sim_cmd {
     vafmd_campaign *camp; /* START of a campaign (sim, start_json NULL): ownership passes */
     vafmd_fault_plan *plan; /* FAULTS: ownership passes (NULL: clear) */
     vafmd_fault_rec fault;  /* FAULT_NOTE */
+    struct vafmd_feed_curve *feed; /* START of a fed campaign curve: its samples (ownership passes; sim: metadata) */
 } vafmd_sim_cmd;
 
 /* ---- HDF5 logging (log.c) ------------------------------------------------------------------------

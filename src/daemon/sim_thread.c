@@ -36,6 +36,7 @@
 #endif
 #include <jansson.h>
 #include <zmq.h>
+#include "daemon/camp_feed.h"
 #include "daemon/daemon.h"
 #include "daemon/replay.h"
 #include "daemon/run_json.h"
@@ -136,6 +137,7 @@ typedef struct s_run {
     double sat_level;
     int dout_stuck;
     int no_trig;                   /* a no_trigger fault struck this curve: its record waits for the turn */
+    size_t feed_pos;               /* a fed curve (cmd.feed): its samples handed over so far */
     vafmd_fault_rec no_trig_rec;
     double last_v[3];              /* vDeflection, deflection, force of the last sample computed */
     int fault_silent;              /* truncate/kill: the run ends without run.end and is not logged */
@@ -537,6 +539,35 @@ static int s_sink(void *user, const vafm_samples *b)
     return 0;
 }
 
+/* A fed curve's next samples, up to max: as vafm_sim_advance hands a computed curve's over, ending with its
+ * status together with its last sample. */
+static int s_feed_advance(s_run *r, size_t max)
+{
+    const vafmd_feed_curve *c = r->cmd.feed;
+    size_t m = c->n - r->feed_pos < max ? c->n - r->feed_pos : max;
+    if (m > 0) {
+        const size_t i = r->feed_pos;
+        vafm_samples b = { m, i, c->time_s + i, c->height_m + i, c->deflection_m + i, c->force_N + i, c->tip_m + i,
+                           c->segment + i, c->height_measured_m ? c->height_measured_m + i : NULL };
+        if (s_sink(r, &b))
+            return VAFM_EABORT;
+        r->feed_pos += m;
+    }
+    if (r->feed_pos < c->n)
+        return 1;
+    return c->status;
+}
+
+/* The curve result of a run: its simulation's, or the fed curve's. */
+static int s_run_result(const s_run *r, vafm_curve_result *res)
+{
+    if (r->cmd.feed) {
+        *res = r->cmd.feed->result;
+        return 0;
+    }
+    return vafm_sim_result(r->cmd.sim, res);
+}
+
 /* The sample source of a run: advance it by at most max samples, handing them to s_sink (which fills
  * the block buffers from r->fill on). Contract for every source: @return 1 while the run goes on, 0 when
  * it ended -- together with its last sample, never on a later call, so that the block holding that
@@ -546,6 +577,8 @@ static int s_advance(s_run *r, size_t max)
     /* replay: a VAFMD_RUN_REPLAY run takes its samples from the replay source here (src/daemon/replay.c) */
     if (r->cmd.replay)
         return vafmd_replay_advance(r->cmd.replay, max, s_sink, r, &r->sens);
+    if (r->cmd.feed) /* a curve the batch kernel computed ahead (camp_feed.h): its samples as they are */
+        return s_feed_advance(r, max);
     /* at most S_PIECE_STEPS integrator steps a call, inside a sample if need be: a near-zone sample of the
      * default scene at 2 kS/s spans 25 000 steps (~0.9 ms), which would otherwise be the smallest piece */
     return vafm_sim_advance_steps(r->cmd.sim, max, S_PIECE_STEPS, s_sink, r);
@@ -749,6 +782,7 @@ static void s_run_free(s_run *r, vafmd_shared *sh)
     free(r->cmd.start_json);
     r->cmd.start_json = NULL;
     vafmd_replay_free(&r->cmd.replay);
+    vafmd_feed_curve_free(&r->cmd.feed); /* between curves, as the campaign's simulations are built */
     for (int i = 0; i < VAFMD_CH_COUNT; i++)
         r->ch[i] = NULL; /* pointed into qstore */
     r->active = 0;
@@ -813,7 +847,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
                                                      (json_int_t)cp->total));
     if (r->cmd.kind == VAFMD_RUN_CURVE) {
         vafm_curve_result res;
-        if (vafm_sim_result(r->cmd.sim, &res) == 0) {
+        if (s_run_result(r, &res) == 0) {
             json_t *o = json_object();
             json_object_set_new(o, "index", json_integer((json_int_t)res.index));
             json_object_set_new(o, "flags", json_integer(res.flags));
@@ -850,7 +884,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
         if (le) {
             le->ok = !strcmp(status, "ok") && !err_code && !silent;
             le->broken = r->log_broken;
-            if (vafm_sim_result(r->cmd.sim, &le->result))
+            if (s_run_result(r, &le->result))
                 le->ok = 0;
             log_pending = le->ok;
         }
@@ -921,6 +955,7 @@ static void s_camp_end(s_ctx *x, const char *status, const char *message, int ma
     json_object_set_new(j, "curves", json_integer((json_int_t)cp->total));
     json_object_set_new(j, "first_index", json_integer((json_int_t)cp->spec.first_curve));
     s_send_json(x, "campaign.end", j);
+    vafmd_feed_release(&cp->feed);
     vafm_sim_destroy(&cp->sim);
     free(cp->lists);
     free(cp);
@@ -1276,6 +1311,23 @@ static void s_camp_next(s_ctx *x)
             return; /* the loop looks again within a millisecond */
         cp->move_until_ns = 0;
     }
+    vafmd_feed_curve *fed = NULL;
+    if (cp->feed && x->fp) /* a fault plan acts on the simulation (no_trigger): the rest curve by curve here */
+        vafmd_feed_release(&cp->feed);
+    if (cp->feed) { /* the batch kernel's curve g, when it is ready (the loop looks again within a millisecond) */
+        int ended, frc;
+        fed = vafmd_feed_take(cp->feed, &ended, &frc);
+        if (!fed && !ended)
+            return;
+        if (!fed || fed->index != g) {
+            char msg[160];
+            snprintf(msg, sizeof msg, "the batch kernel's feeder ended before curve %" PRIu64 ": %s", g,
+                     vafm_strerror(frc ? frc : VAFM_EINVAL));
+            vafmd_feed_curve_free(&fed);
+            s_camp_end(x, "error", msg, 1);
+            return;
+        }
+    }
     vafm_params pp;
     int rc = vafm_campaign_point_params(&cp->base, &cp->spec, point, &pp);
     if (!rc && point != cp->sim_point) {
@@ -1288,6 +1340,7 @@ static void s_camp_next(s_ctx *x)
     if (rc) {
         char msg[160];
         snprintf(msg, sizeof msg, "cannot build the simulation of grid point %zu: %s", point, vafm_strerror(rc));
+        vafmd_feed_curve_free(&fed);
         s_camp_end(x, "error", msg, 1);
         return;
     }
@@ -1317,6 +1370,7 @@ static void s_camp_next(s_ctx *x)
     c.run_id = cp->first_run_id + (g - first);
     c.index = g;
     c.sim = cp->sim;
+    c.feed = fed;
     c.set = cp->set;
     c.log = cp->log;
     c.camp = cp;
@@ -1324,6 +1378,7 @@ static void s_camp_next(s_ctx *x)
     c.start_json = vafmd_run_start_json(&pp, &cp->set, VAFMD_RUN_CURVE, c.run_id, g, cp->client_run_id,
                                         vafm_sim_dt(cp->sim), cj);
     if (!c.start_json) {
+        vafmd_feed_curve_free(&c.feed);
         s_camp_end(x, "error", "out of memory", 1);
         return;
     }
@@ -1427,6 +1482,7 @@ void *vafmd_sim_main(void *arg)
             }
             if (x->dead && c.type == VAFMD_SIM_START) { /* killed: runs are no longer started */
                 if (c.camp) {
+                    vafmd_feed_release(&c.camp->feed);
                     vafm_sim_destroy(&c.camp->sim);
                     free(c.camp->lists);
                     free(c.camp);
