@@ -803,6 +803,28 @@ def test_campaign_abort_first_index_and_progress():
     assert d.stop() == 0
 
 
+def test_campaign_failed_curve_batch_kernel():
+    """The failing grid of the test below with the batch kernel: the failed curve's run.end carries its
+    error's detail (the simulation thread computes that curve again, the same bit for bit), and its
+    campaign ends with status error after the curves before it."""
+    d = Daemon("--preset", "paper-fig4", "--free-run")
+    try:
+        dt = 3.1e-7
+        assert d.cmd({"cmd": "set", "values": {"dt_s": dt, "sample_rate_Hz": 1 / (16 * dt), "kernel": "batch"}})["status"] == "ok"
+        s = d.sub()
+        settle(d, s)
+        r = d.cmd({"cmd": "campaign", "n": 2, "T_K": [300.0, 1e8]})
+        assert r["status"] == "ok" and r["curves"] == 4, r
+        runs, cend = collect_campaign(s, r["campaign_id"])
+        *ok_runs, (fstart, fblocks, _, fend) = runs
+        assert [e["status"] for _, _, _, e in ok_runs] == ["ok"] * len(ok_runs) and len(ok_runs) >= 2
+        assert fend["status"] == "error" and fend["error"]["field"] == "dt_s", fend
+        assert cend["status"] == "error" and cend["curves_done"] == len(ok_runs), cend
+        assert d.cmd({"cmd": "tune", "duration_s": 0.01})["status"] == "ok"
+    finally:
+        assert d.stop() == 0
+
+
 def test_campaign_failed_curve_ends_campaign_with_error(tmp_path):
     """A curve that fails at run time, after the control thread validated every grid point: the step dt_s
     = 3.1e-7 s (16 steps a sample) is just inside the GJF stability limit at the stiffest contact the scene

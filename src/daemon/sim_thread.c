@@ -1319,7 +1319,12 @@ static void s_camp_next(s_ctx *x)
         fed = vafmd_feed_take(cp->feed, &ended, &frc);
         if (!fed && !ended)
             return;
-        if (!fed || fed->index != g) {
+        if (fed && fed->index == g && fed->status) {
+            /* a curve that failed: computed again here, the same bit for bit, for its error's detail (field,
+             * message); a failed curve ends its campaign, so the feeder is done too */
+            vafmd_feed_curve_free(&fed);
+            vafmd_feed_release(&cp->feed);
+        } else if (!fed || fed->index != g) {
             char msg[160];
             snprintf(msg, sizeof msg, "the batch kernel's feeder ended before curve %" PRIu64 ": %s", g,
                      vafm_strerror(frc ? frc : VAFM_EINVAL));
