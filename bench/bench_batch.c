@@ -38,18 +38,6 @@
 #define S_LANES 16
 #define S_STEPS 200
 
-static int s_cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double s_median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, s_cmp);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 static void s_scene(vafm_params *p, const char *preset, double v_red)
 {
     vafm_preset_apply(p, preset, NULL);
@@ -108,7 +96,7 @@ static double s_lane_ns(const vafm_kernel *K0, int W)
         if (r >= 0)
             ns[r] = 1e9 * (t1 - t0) / (double)steps;
     }
-    return s_median(ns, S_REPS);
+    return bench_median(ns, S_REPS);
 }
 
 /* ---- 2. campaigns -------------------------------------------------------------------------------- */
@@ -160,8 +148,8 @@ static int s_campaign(const vafm_params *p, unsigned n, int kernel, double *cps,
         v[r] = n / t;
         w[r] = 1e9 * t / (double)acc->steps;
     }
-    *cps = s_median(v, S_CREPS);
-    *ns = s_median(w, S_CREPS);
+    *cps = bench_median(v, S_CREPS);
+    *ns = bench_median(w, S_CREPS);
     return 0;
 }
 
@@ -203,7 +191,7 @@ static double s_vector_ns(int *lanes)
         }
         (void)sink;
         *lanes = 8;
-        return s_median(ns, S_REPS);
+        return bench_median(ns, S_REPS);
     }
 #endif
     return NAN;

@@ -30,6 +30,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "bench_util.h"
 #include "vafm/h5.h"
 #include "vafm/params.h"
 
@@ -54,18 +55,6 @@ typedef struct s_row {
     s_run nofile; /* vafm curves: the same curves without a file (wall_s, curves_per_s only) */
     int ok;       /* every repetition ran and wrote a conforming file of n curves */
 } s_row;
-
-static int s_cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double s_median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, s_cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 /* Run argv, its stdout into buf. @return the exit status, or -1. */
 static int s_spawn(char *const argv[], char *buf, size_t len)
@@ -170,11 +159,11 @@ static int s_measure(const char *vafm, const char *h5, s_row *row, int nofile)
         pct[r] = m.writer_pct;
     }
     s_run *dst = nofile ? &row->nofile : &row->med;
-    dst->wall_s = s_median(wall, S_REPS);
-    dst->curves_per_s = s_median(cps, S_REPS);
-    dst->mb = s_median(mb, S_REPS);
-    dst->mb_per_s = s_median(mbs, S_REPS);
-    dst->writer_pct = s_median(pct, S_REPS);
+    dst->wall_s = bench_median(wall, S_REPS);
+    dst->curves_per_s = bench_median(cps, S_REPS);
+    dst->mb = bench_median(mb, S_REPS);
+    dst->mb_per_s = bench_median(mbs, S_REPS);
+    dst->writer_pct = bench_median(pct, S_REPS);
     return 0;
 }
 

@@ -50,12 +50,6 @@ static s_clock s_now(void)
     return c;
 }
 
-static int s_cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 /* ---- measurement ------------------------------------------------------------------------------- */
 
 /* A workload does some steps and returns how many. */
@@ -80,8 +74,8 @@ static s_meas s_measure(s_work_fn work, void *ctx)
         ns[r] = 1e9 * (t1.wall - t0.wall) / (double)steps;
         ns_cpu[r] = 1e9 * (t1.cpu - t0.cpu) / (double)steps;
     }
-    qsort(ns, S_REPS, sizeof ns[0], s_cmp_double);
-    qsort(ns_cpu, S_REPS, sizeof ns_cpu[0], s_cmp_double);
+    qsort(ns, S_REPS, sizeof ns[0], bench_cmp_double);
+    qsort(ns_cpu, S_REPS, sizeof ns_cpu[0], bench_cmp_double);
     s_meas m = { ns[S_REPS / 2], ns[0], ns[S_REPS - 1], ns_cpu[S_REPS / 2] };
     return m;
 }

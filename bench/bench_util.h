@@ -7,6 +7,7 @@
 #define VAFM_BENCH_UTIL_H
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <time.h>
 
 /* A clock's reading in seconds (CLOCK_MONOTONIC: wall, CLOCK_PROCESS_CPUTIME_ID: CPU of all threads). */
@@ -15,6 +16,20 @@ static inline double bench_clock_s(clockid_t id)
     struct timespec ts;
     clock_gettime(id, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* qsort's order of doubles (NaN-free input). */
+static inline int bench_cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* The median of v[0..n) (n ≥ 1; sorts v). */
+static inline double bench_median(double *v, int n)
+{
+    qsort(v, (size_t)n, sizeof *v, bench_cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 /* The 1-minute load average, NaN where /proc/loadavg cannot be read. */

@@ -362,12 +362,6 @@ static size_t s_sorted_finite(const double *x, uint64_t n, double *out)
     return m;
 }
 
-static int s_cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 /* Two-sample Kolmogorov–Smirnov distance sup|F_a − F_b| of sorted samples (ties stepped together). */
 static double s_ks_sorted(const double *a, size_t na, const double *b, size_t nb)
 {
@@ -396,8 +390,8 @@ static int s_compare(s_row *r, const s_row *ref)
     }
     for (int j = 0; j < S_NOBS; j++) {
         size_t na = s_sorted_finite(r->obs[j], r->N, a), nb = s_sorted_finite(ref->obs[j], ref->N, b);
-        qsort(a, na, sizeof *a, s_cmp_double);
-        qsort(b, nb, sizeof *b, s_cmp_double);
+        qsort(a, na, sizeof *a, bench_cmp_double);
+        qsort(b, nb, sizeof *b, bench_cmp_double);
         r->bias[j] = r->mean[j] - ref->mean[j];
         r->se_c[j] = r->is_ref ? r->se[j] : sqrt(r->se[j] * r->se[j] + ref->se[j] * ref->se[j]);
         r->z[j] = r->is_ref ? 0.0 : r->bias[j] / r->se_c[j];
