@@ -337,19 +337,23 @@ static void test_normal_cdf(void)
  * as the generator alone: from a fresh stream, after single words read directly (a block partly read,
  * an odd word straddling into the queue), across the 32-bit carry of the block counter, for u64 draws,
  * normals (slow path included: 1e5 draws take it ~1500 times) and uniforms; and the blocks side by side
- * (SSE2, AVX2 where the CPU has it) equal the bijection block by block. */
+ * (SSE2, and AVX2 and AVX-512 where the CPU has them) equal the bijection block by block. */
 static void test_queue_stream(void)
 {
     const uint32_t key[2] = { 0x01234567u, 0x89abcdefu };
     uint32_t ctr[4] = { 0xfffffffau, 0x7u, 0x55u, 0xaau };
-    uint32_t blk[4 * 16];
-    vafm_philox4x32_10_blocks(ctr, key, 16, blk);
-    for (unsigned j = 0; j < 16; j++) {
-        const uint64_t b = ((uint64_t)ctr[1] << 32 | ctr[0]) + j;
-        const uint32_t c[4] = { (uint32_t)b, (uint32_t)(b >> 32), ctr[2], ctr[3] };
-        uint32_t o[4];
-        vafm_philox4x32_10(c, key, o);
-        ENSURE_MSG(memcmp(o, blk + 4 * j, sizeof o) == 0, "block %u", j);
+    /* 28 = 16 + 8 + 4 blocks: the AVX-512, AVX2 and SSE2 generators in turn (those the CPU has) */
+    const unsigned nbs[4] = { 4, 8, 16, 28 };
+    for (int t = 0; t < 4; t++) {
+        uint32_t blk[4 * 28];
+        vafm_philox4x32_10_blocks(ctr, key, nbs[t], blk);
+        for (unsigned j = 0; j < nbs[t]; j++) {
+            const uint64_t b = ((uint64_t)ctr[1] << 32 | ctr[0]) + j;
+            const uint32_t c[4] = { (uint32_t)b, (uint32_t)(b >> 32), ctr[2], ctr[3] };
+            uint32_t o[4];
+            vafm_philox4x32_10(c, key, o);
+            ENSURE_MSG(memcmp(o, blk + 4 * j, sizeof o) == 0, "%u blocks: block %u", nbs[t], j);
+        }
     }
     for (int skip = 0; skip < 4; skip++) {
         vafm_rng a, b;

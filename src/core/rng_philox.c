@@ -340,6 +340,29 @@ VAFM_RNG_HIDDEN VAFM_RNG_COLD double vafm_rngq_normal_slow(vafm_rngq *q, vafm_rn
 
 /* ---- blocks ahead ---------------------------------------------------------------------------- */
 
+/* The ten rounds on two vectors of blocks per word (a, b), each 64-bit lane one block's word in its low half
+ * (the multiplies read only the low halves; the high halves carry junk that no later step reads). V is the
+ * vector type, the others the instruction set's set1, 32x32->64 multiply, right shift and XOR. The same
+ * rounds as s_philox4x32_10. */
+#define S_PHILOX_ROUNDS(V, set1, mul, srl, xor_)                                                      \
+    do {                                                                                              \
+        for (int round = 0; round < 10; round++) {                                                    \
+            const V kk0 = set1(k0), kk1 = set1(k1);                                                   \
+            const V p0a = mul(m0, c0a), p0b = mul(m0, c0b);                                           \
+            const V p1a = mul(m1, c2a), p1b = mul(m1, c2b);                                           \
+            c0a = xor_(xor_(srl(p1a, 32), c1a), kk0);                                                 \
+            c0b = xor_(xor_(srl(p1b, 32), c1b), kk0);                                                 \
+            c2a = xor_(xor_(srl(p0a, 32), c3a), kk1);                                                 \
+            c2b = xor_(xor_(srl(p0b, 32), c3b), kk1);                                                 \
+            c1a = p1a;                                                                                \
+            c1b = p1b;                                                                                \
+            c3a = p0a;                                                                                \
+            c3b = p0b;                                                                                \
+            k0 += VAFM_PHILOX_W0;                                                                     \
+            k1 += VAFM_PHILOX_W1;                                                                     \
+        }                                                                                             \
+    } while (0)
+
 #if defined(__SSE2__)
 #include <emmintrin.h>
 
@@ -357,21 +380,7 @@ static void s_blocks4(const uint32_t ctr[4], const uint32_t key[2], uint32_t *ou
     __m128i c3a = _mm_set1_epi64x(ctr[3]), c3b = c3a;
     const __m128i m0 = _mm_set1_epi64x(VAFM_PHILOX_M0), m1 = _mm_set1_epi64x(VAFM_PHILOX_M1);
     uint32_t k0 = key[0], k1 = key[1];
-    for (int round = 0; round < 10; round++) {
-        const __m128i kk0 = _mm_set1_epi64x(k0), kk1 = _mm_set1_epi64x(k1);
-        const __m128i p0a = _mm_mul_epu32(m0, c0a), p0b = _mm_mul_epu32(m0, c0b);
-        const __m128i p1a = _mm_mul_epu32(m1, c2a), p1b = _mm_mul_epu32(m1, c2b);
-        c0a = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p1a, 32), c1a), kk0);
-        c0b = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p1b, 32), c1b), kk0);
-        c2a = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p0a, 32), c3a), kk1);
-        c2b = _mm_xor_si128(_mm_xor_si128(_mm_srli_epi64(p0b, 32), c3b), kk1);
-        c1a = p1a;
-        c1b = p1b;
-        c3a = p0a;
-        c3b = p0b;
-        k0 += VAFM_PHILOX_W0;
-        k1 += VAFM_PHILOX_W1;
-    }
+    S_PHILOX_ROUNDS(__m128i, _mm_set1_epi64x, _mm_mul_epu32, _mm_srli_epi64, _mm_xor_si128);
     /* low halves to words: x01 = c0, c1 of both blocks, x23 = c2, c3; then block by block */
     const __m128i x01a = _mm_unpacklo_epi32(_mm_shuffle_epi32(c0a, 0x08), _mm_shuffle_epi32(c1a, 0x08));
     const __m128i x23a = _mm_unpacklo_epi32(_mm_shuffle_epi32(c2a, 0x08), _mm_shuffle_epi32(c3a, 0x08));
@@ -406,21 +415,7 @@ __attribute__((target("avx2"))) static void s_blocks8_avx2(const uint32_t ctr[4]
     __m256i c3a = _mm256_set1_epi64x(ctr[3]), c3b = c3a;
     const __m256i m0 = _mm256_set1_epi64x(VAFM_PHILOX_M0), m1 = _mm256_set1_epi64x(VAFM_PHILOX_M1);
     uint32_t k0 = key[0], k1 = key[1];
-    for (int round = 0; round < 10; round++) {
-        const __m256i kk0 = _mm256_set1_epi64x(k0), kk1 = _mm256_set1_epi64x(k1);
-        const __m256i p0a = _mm256_mul_epu32(m0, c0a), p0b = _mm256_mul_epu32(m0, c0b);
-        const __m256i p1a = _mm256_mul_epu32(m1, c2a), p1b = _mm256_mul_epu32(m1, c2b);
-        c0a = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1a, 32), c1a), kk0);
-        c0b = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p1b, 32), c1b), kk0);
-        c2a = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0a, 32), c3a), kk1);
-        c2b = _mm256_xor_si256(_mm256_xor_si256(_mm256_srli_epi64(p0b, 32), c3b), kk1);
-        c1a = p1a;
-        c1b = p1b;
-        c3a = p0a;
-        c3b = p0b;
-        k0 += VAFM_PHILOX_W0;
-        k1 += VAFM_PHILOX_W1;
-    }
+    S_PHILOX_ROUNDS(__m256i, _mm256_set1_epi64x, _mm256_mul_epu32, _mm256_srli_epi64, _mm256_xor_si256);
     /* per 128-bit half as in s_blocks4: lo64 = the half's first block, hi64 = its second */
     const __m256i x01a = _mm256_unpacklo_epi32(_mm256_shuffle_epi32(c0a, 0x08), _mm256_shuffle_epi32(c1a, 0x08));
     const __m256i x23a = _mm256_unpacklo_epi32(_mm256_shuffle_epi32(c2a, 0x08), _mm256_shuffle_epi32(c3a, 0x08));
@@ -449,21 +444,7 @@ __attribute__((target("avx512f"))) static void s_blocks16_avx512(const uint32_t 
     __m512i c3a = _mm512_set1_epi64(ctr[3]), c3b = c3a;
     const __m512i m0 = _mm512_set1_epi64(VAFM_PHILOX_M0), m1 = _mm512_set1_epi64(VAFM_PHILOX_M1);
     uint32_t k0 = key[0], k1 = key[1];
-    for (int round = 0; round < 10; round++) {
-        const __m512i kk0 = _mm512_set1_epi64(k0), kk1 = _mm512_set1_epi64(k1);
-        const __m512i p0a = _mm512_mul_epu32(m0, c0a), p0b = _mm512_mul_epu32(m0, c0b);
-        const __m512i p1a = _mm512_mul_epu32(m1, c2a), p1b = _mm512_mul_epu32(m1, c2b);
-        c0a = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p1a, 32), c1a), kk0);
-        c0b = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p1b, 32), c1b), kk0);
-        c2a = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p0a, 32), c3a), kk1);
-        c2b = _mm512_xor_si512(_mm512_xor_si512(_mm512_srli_epi64(p0b, 32), c3b), kk1);
-        c1a = p1a;
-        c1b = p1b;
-        c3a = p0a;
-        c3b = p0b;
-        k0 += VAFM_PHILOX_W0;
-        k1 += VAFM_PHILOX_W1;
-    }
+    S_PHILOX_ROUNDS(__m512i, _mm512_set1_epi64, _mm512_mul_epu32, _mm512_srli_epi64, _mm512_xor_si512);
     /* words 0|1 and 2|3 of each block in one 64-bit lane, then the blocks' 128 bits in order */
     const __m512i x01a = _mm512_or_si512(_mm512_and_si512(c0a, lo32), _mm512_slli_epi64(c1a, 32));
     const __m512i x23a = _mm512_or_si512(_mm512_and_si512(c2a, lo32), _mm512_slli_epi64(c3a, 32));
