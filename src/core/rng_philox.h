@@ -126,16 +126,26 @@ static inline double vafm_rng_uniform_inline(vafm_rng *r)
     return (double)(vafm_rng_u64_inline(r) >> 11) * 0x1.0p-53;
 }
 
+/** The ziggurat's fast path on one 64-bit draw u (98.5 % of draws): 1 with *x the normal, 0 when u needs the
+ *  rest (vafm_rng_normal_slow). Integer tests and one multiply: exact. */
+static inline int vafm_zig_fast(uint64_t u, double *x)
+{
+    const unsigned i = (unsigned)(u & 0xffu);
+    const uint64_t j = u >> 11;
+    if (!(j < vafm_zig_k[i]))
+        return 0;
+    const int64_t s = -(int64_t)((u >> 8) & 1u);   /* 0 or -1 */
+    const int64_t sj = ((int64_t)j ^ s) - s;       /* +-j, exact */
+    *x = (double)sj * vafm_zig_w[i];
+    return 1;
+}
+
 static inline double vafm_rng_normal_inline(vafm_rng *r)
 {
     const uint64_t u = vafm_rng_u64_inline(r);
-    const unsigned i = (unsigned)(u & 0xffu);
-    const uint64_t j = u >> 11;
-    if (VAFM_RNG_LIKELY(j < vafm_zig_k[i])) {
-        const int64_t s = -(int64_t)((u >> 8) & 1u);   /* 0 or -1 */
-        const int64_t sj = ((int64_t)j ^ s) - s;       /* +-j, exact */
-        return (double)sj * vafm_zig_w[i];
-    }
+    double x;
+    if (VAFM_RNG_LIKELY(vafm_zig_fast(u, &x)))
+        return x;
     return vafm_rng_normal_slow(r, u);
 }
 
@@ -189,13 +199,9 @@ static inline double vafm_rngq_uniform(vafm_rngq *q, vafm_rng *r)
 static inline double vafm_rngq_normal(vafm_rngq *q, vafm_rng *r)
 {
     const uint64_t u = vafm_rngq_u64(q, r);
-    const unsigned i = (unsigned)(u & 0xffu);
-    const uint64_t j = u >> 11;
-    if (VAFM_RNG_LIKELY(j < vafm_zig_k[i])) {
-        const int64_t s = -(int64_t)((u >> 8) & 1u);   /* 0 or -1 */
-        const int64_t sj = ((int64_t)j ^ s) - s;       /* +-j, exact */
-        return (double)sj * vafm_zig_w[i];
-    }
+    double x;
+    if (VAFM_RNG_LIKELY(vafm_zig_fast(u, &x)))
+        return x;
     return vafm_rngq_normal_slow(q, r, u);
 }
 
