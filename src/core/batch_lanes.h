@@ -36,7 +36,7 @@ typedef struct BGRP {
 /* Load lanes Kp[0..n) (n ≤ BW; the rest idle). */
 static BATTR void BLOAD(BGRP *g, vafm_kernel *const *Kp, int n)
 {
-    double c[20][BW];
+    double c[17][BW];
     long long c_node[BW], c_ic[BW];
     memset(c, 0, sizeof c);
     for (int l = 0; l < BW; l++) {
@@ -48,10 +48,10 @@ static BATTR void BLOAD(BGRP *g, vafm_kernel *const *Kp, int n)
         const double dt = K->dt, half_dt_m = 0.5 * dt / K->m, inv_m = 1.0 / K->m;
         vafm_kinv v;
         s_kinv_load(K, &v);
-        const double row[20] = { dt, half_dt_m, half_dt_m * dt, K->m * K->v_spr, K->thermal ? co.gjf_sig : 0.0,
+        const double row[17] = { dt, half_dt_m, half_dt_m * dt, K->m * K->v_spr, K->thermal ? co.gjf_sig : 0.0,
                                  co.gjf_a, co.gjf_b, co.gjf_b * inv_m, v.uspr0, v.v_spr, v.k, v.u_detach, v.u_touch,
-                                 v.inv_h, v.x_end, v.s_m, v.c2, 0, 0, 0 };
-        for (int r = 0; r < 20; r++)
+                                 v.inv_h, v.x_end, v.s_m, v.c2 };
+        for (int r = 0; r < 17; r++)
             c[r][l] = row[r];
         c_node[l] = (long long)(uintptr_t)v.node;
         c_ic[l] = K->in_contact ? -1 : 0;
@@ -100,8 +100,9 @@ static inline __attribute__((always_inline)) BATTR void BSTEP(BGRP *g, long j, B
     const BVD x = xi * g->invh;
     const BVL inside = (BVL)(x < g->xend);
     const BVL ok = act & g->icm & ~det & inside;
-    const BVL ix = BI2L(BTRUNC(x));
-    const BVD fr = x - BI2D(BTRUNC(x));
+    const __typeof__(BTRUNC(x)) xi32 = BTRUNC(x); /* the table interval, as (int)x */
+    const BVL ix = BI2L(xi32);
+    const BVD fr = x - BI2D(xi32);
     const BVD gg = 1.0 - fr;
     const BVL dummy = (BVL)(zero * 0.0) + (long long)(uintptr_t)s_table_dummy;
     const BVL addr = S_SEL(ok, g->node + ix * 16, dummy); /* lanes not on the table read a dummy */
