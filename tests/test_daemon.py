@@ -805,8 +805,8 @@ def test_campaign_abort_first_index_and_progress():
 
 def test_campaign_failed_curve_batch_kernel():
     """The failing grid of the test below with the batch kernel: the failed curve's run.end carries its
-    error's detail (the simulation thread computes that curve again, the same bit for bit), and its
-    campaign ends with status error after the curves before it."""
+    error's detail (the campaign hands it over with the curve), and its campaign ends with status error after
+    the curves before it."""
     d = Daemon("--preset", "paper-fig4", "--free-run")
     try:
         dt = 3.1e-7

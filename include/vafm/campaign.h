@@ -61,6 +61,7 @@ typedef struct vafm_campaign_curve {
     int status;                /**< 0, or the VAFM_E* code the curve ended with (e.g. VAFM_EUNSTABLE) */
     vafm_curve_result result;  /**< observables */
     vafm_samples samples;      /**< all samples of the curve when keep_samples, else n = 0 */
+    vafm_error error;          /**< status ≠ 0: its detail (field, message) as vafm_sim_error gives it; else empty */
 } vafm_campaign_curve;
 
 /** Called for each curve in global index order, never concurrently. @return 0 to go on, non-zero to

@@ -64,6 +64,7 @@ typedef struct s_slot {
     size_t point;
     vafm_params params; /* the scene of its point */
     vafm_curve_result res;
+    vafm_error err;     /* the curve's error detail (status ≠ 0) */
     s_buf buf;
 } s_slot;
 
@@ -157,6 +158,7 @@ static void s_deliver(s_shared *sh)
         c.params = &sl->params;
         c.status = sl->status;
         c.result = sl->res;
+        c.error = sl->err;
         if (sh->spec->keep_samples) {
             c.samples.n = sl->buf.n;
             c.samples.first = 0;
@@ -246,9 +248,14 @@ static int s_sim_for(const s_shared *sh, size_t point, vafm_sim **sim, size_t *s
 /* Hand a finished curve to its slot (its samples by swapping *buf with the slot's) and deliver what is
  * ready. Called and returns with the lock held. */
 static void s_publish(s_shared *sh, uint64_t ticket, uint64_t idx, size_t point, const vafm_params *p, int status,
-                      const vafm_curve_result *res, s_buf *buf)
+                      const vafm_curve_result *res, const vafm_sim *sim, s_buf *buf)
 {
     s_slot *sl = &sh->slots[ticket % sh->window];
+    const vafm_error *e = status && sim ? vafm_sim_error(sim) : NULL;
+    if (e)
+        sl->err = *e;
+    else
+        memset(&sl->err, 0, sizeof sl->err);
     s_buf tmp = sl->buf;
     sl->buf = *buf;
     *buf = tmp;
@@ -285,7 +292,7 @@ static void *s_worker(void *arg)
         if (!status)
             status = vafm_sim_curve(sim, idx, sh->spec->keep_samples ? s_collect : NULL, &local, &res);
         pthread_mutex_lock(&sh->mu);
-        s_publish(sh, ticket, idx, point, &p, status, &res, &local);
+        s_publish(sh, ticket, idx, point, &p, status, &res, sim, &local);
     }
     pthread_cond_broadcast(&sh->space);
     pthread_mutex_unlock(&sh->mu);
@@ -320,10 +327,11 @@ static void s_flight_end(s_shared *sh, s_flight *f, int status)
 {
     vafm_curve_result res;
     memset(&res, 0, sizeof res);
-    if (f->sim && f->sim_point == f->point)
-        vafm_sim_result(f->sim, &res);
+    const vafm_sim *sim = f->sim && f->sim_point == f->point ? f->sim : NULL;
+    if (sim)
+        vafm_sim_result(sim, &res);
     pthread_mutex_lock(&sh->mu);
-    s_publish(sh, f->ticket, f->idx, f->point, &f->p, status, &res, &f->buf);
+    s_publish(sh, f->ticket, f->idx, f->point, &f->p, status, &res, sim, &f->buf);
     pthread_mutex_unlock(&sh->mu);
     f->busy = f->waiting = 0;
 }

@@ -57,6 +57,7 @@ static int s_on_curve(void *user, const vafm_campaign_curve *c)
     memset(fc, 0, sizeof *fc);
     fc->index = c->index;
     fc->status = c->status;
+    fc->error = c->error;
     fc->result = c->result;
     fc->n = n;
     fc->bytes = bytes;

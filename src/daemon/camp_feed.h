@@ -31,6 +31,7 @@
 typedef struct vafmd_feed_curve {
     uint64_t index;
     int status;                 /* 0, or the VAFM_E* code the curve ended with */
+    vafm_error error;           /* status ≠ 0: its detail (field, message) */
     vafm_curve_result result;
     size_t n;                   /* samples */
     double *time_s, *height_m, *deflection_m, *force_N, *tip_m;

@@ -821,7 +821,8 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     json_object_set_new(j, "status", json_string(status));
     const char *err_msg = NULL;
     if (err_code) {
-        const vafm_error *e = vafm_sim_error(r->cmd.sim);
+        const vafm_error *e = r->cmd.feed ? (r->cmd.feed->error.code ? &r->cmd.feed->error : NULL)
+                                          : vafm_sim_error(r->cmd.sim);
         err_msg = e && e->message[0] ? e->message : vafm_strerror(err_code);
         json_object_set_new(j, "error", json_pack("{s:s,s:s}", "message", err_msg, "field", e ? e->field : ""));
     } else
@@ -1319,12 +1320,7 @@ static void s_camp_next(s_ctx *x)
         fed = vafmd_feed_take(cp->feed, &ended, &frc);
         if (!fed && !ended)
             return;
-        if (fed && fed->index == g && fed->status) {
-            /* a curve that failed: computed again here, the same bit for bit, for its error's detail (field,
-             * message); a failed curve ends its campaign, so the feeder is done too */
-            vafmd_feed_curve_free(&fed);
-            vafmd_feed_release(&cp->feed);
-        } else if (!fed || fed->index != g) {
+        if (!fed || fed->index != g) {
             char msg[160];
             snprintf(msg, sizeof msg, "the batch kernel's feeder ended before curve %" PRIu64 ": %s", g,
                      vafm_strerror(frc ? frc : VAFM_EINVAL));
