@@ -19,6 +19,7 @@
 #include "vafm/sim.h"
 #include "vafm/theory.h"
 #include "vafm/units.h"
+#include "core/guard.h"
 #include "core/kernel.h"
 
 #define T_PI 3.14159265358979323846
@@ -660,6 +661,81 @@ static void test_near_limit(void)
     ENSURE(n_ok >= 1);
 }
 
+
+/* The runtime stiffness guard's threshold (core/guard.h): sim.c solves the contact after a sample only for
+ * u above vafm_guard_threshold(), so every u at or below it must pass the guard, and the threshold must be
+ * tight (else a bisection bug that returned a tiny or −∞ u would still pass, and cost speed only). JKR at
+ * two adhesions and Hertz, an underdamped and the overdamped integrator, steps at 1/4, 1/2 and 0.99 of the
+ * step that is unstable at the stiffest point swept: 4000 points from u_detach to 4× the threshold's
+ * distance, each checked against the guard's own measure; then the threshold's neighbours 1e-5 above fail
+ * (within the 1e-6 margin, the guard's limit is reached just above). */
+static void test_guard_threshold(void)
+{
+    const struct {
+        const vafm_contact_type *type;
+        double gamma;
+    } cs[3] = {{vafm_contact_jkr, 0.229}, {vafm_contact_jkr, 1.2e-4}, {vafm_contact_hertz, 0.0}};
+    const vafm_integrator_type *its[2] = {vafm_integrator_gjf, vafm_integrator_brownian};
+    for (int ci = 0; ci < 3; ci++) {
+        vafm_contact c;
+        ENSURE(vafm_contact_init(&c, cs[ci].type, cs[ci].gamma) == 0);
+        for (int ii = 0; ii < 2; ii++) {
+            const vafm_integrator_type *it = its[ii];
+            vafm_kernel K;
+            memset(&K, 0, sizeof K);
+            K.m = 0.01;
+            K.k = 0.1;
+            K.contact = c;
+            K.cforce = c.type->force;
+            vafm_kernel_set_dt(&K, 1e-3);
+            /* the step at which the contact at u = 50 (deep in, far stiffer than the spring) is at the limit */
+            double sq = 0.0;
+            const double m1 = vafm_guard_measure(&K, it, 1.0, 50.0, &sq, NULL); /* measure ∝ dt */
+            ENSURE(m1 > 0);
+            const double fr[3] = {0.25, 0.5, 0.99};
+            for (int fi = 0; fi < 3; fi++) {
+                const double dt = fr[fi] * it->stability_limit / m1;
+                const double u_ok = vafm_guard_threshold(&K, it, dt);
+                ENSURE_MSG(isfinite(u_ok) && u_ok > c.u_detach, "%s %s dt %g: u_ok %g", c.type->name,
+                           it->name, dt, u_ok);
+                const double span = 4.0 * (u_ok - c.u_detach);
+                int below = 0, above_fail = 0;
+                for (int i = 0; i <= 4000; i++) {
+                    const double u = c.u_detach + span * i / 4000.0;
+                    sq = 0.0;
+                    const double m = vafm_guard_measure(&K, it, dt, u, &sq, NULL);
+                    if (u <= u_ok) {
+                        below++;
+                        ENSURE_MSG(m < it->stability_limit, "%s %s: u %.17g <= u_ok %.17g but measure %.17g",
+                                   c.type->name, it->name, u, u_ok, m);
+                    } else if (!(m < it->stability_limit)) {
+                        above_fail++;
+                    }
+                }
+                ENSURE(below >= 900 && above_fail >= 2900);
+                sq = 0.0;
+                ENSURE(vafm_guard_measure(&K, it, dt, u_ok, &sq, NULL) < it->stability_limit);
+                sq = 0.0;
+                const double m_up = vafm_guard_measure(&K, it, dt, u_ok + 1e-5 * fabs(u_ok - c.u_detach), &sq, NULL);
+                ENSURE_MSG(m_up >= (1.0 - 1e-5) * it->stability_limit, "%s %s: not tight: %.17g", c.type->name,
+                           it->name, m_up);
+            }
+            /* no contact solve can be skipped where the limit is already exceeded at u_detach, or without a step */
+            ENSURE(vafm_guard_threshold(&K, it, 0.0) == -INFINITY);
+            ENSURE(vafm_guard_threshold(&K, it, 1e6) == -INFINITY || c.type == vafm_contact_jkr);
+        }
+    }
+    vafm_contact none;
+    ENSURE(vafm_contact_init(&none, vafm_contact_none, 0.0) == 0);
+    vafm_kernel K;
+    memset(&K, 0, sizeof K);
+    K.m = 0.01;
+    K.k = 0.1;
+    K.contact = none;
+    K.cforce = none.type->force;
+    ENSURE(vafm_guard_threshold(&K, vafm_integrator_gjf, 1e-3) == -INFINITY);
+}
+
 int main(void)
 {
     RUN_TEST(test_stiff_spring);
@@ -669,5 +745,6 @@ int main(void)
     RUN_TEST(test_gamma_zero);
     RUN_TEST(test_at_u_min);
     RUN_TEST(test_near_limit);
+    RUN_TEST(test_guard_threshold);
     return harness_done();
 }

@@ -23,6 +23,7 @@
 #include "vafm/theory.h"
 #include "core/batch.h"
 #include "core/internal.h"
+#include "core/guard.h"
 #include "core/kernel.h"
 #include "core/piezo.h"
 #include "core/well_exact.h"
@@ -61,6 +62,8 @@ struct vafm_sim {
     int adaptive;       /* two step sizes: nm.dt near the instability, nm.dt_far elsewhere in contact */
     int well_ok;        /* the exact contact-well step may be used */
     double dt_cur;      /* the integrator step in use */
+    double guard_dt;    /* the step the stiffness guard's threshold belongs to (0: none computed yet) */
+    double guard_u;     /* for u ≤ guard_u the guard passes without a contact solve (s_guard_u) */
     s_weq weq;          /* the last well equilibrium (the next interval starts where it ends); reset per curve */
     long sub_left;      /* integrator steps left in the current sample interval (> 0 only while one runs, or
                          * when a step budget paused it: the next call goes on from there) */
@@ -652,6 +655,18 @@ static int s_integrate(vafm_sim *s, uint64_t *budget)
     return 0;
 }
 
+/* The guard's threshold for the step in use (guard.h), computed once per step size. */
+static double s_guard_u(vafm_sim *s)
+{
+    if (!(s->dt_cur > 0))
+        return -INFINITY;
+    if (s->guard_dt != s->dt_cur) {
+        s->guard_u = vafm_guard_threshold(&s->K, s->it, s->dt_cur);
+        s->guard_dt = s->dt_cur;
+    }
+    return s->guard_u;
+}
+
 /* One sample interval; *budget (integrator steps, NULL: none) may pause it inside its integrator run,
  * and the next call then goes on from there. @return 0 done, 2 paused, 3 handed to the batch kernel,
  * or a negative VAFM_E* code. */
@@ -709,13 +724,11 @@ static int s_step_interval(vafm_sim *s, uint64_t *budget)
                      s->dt_cur * s->nm.sc.time_s, s->p.dt_s > 0 ? "dt_s" : "omega_dt");
         return VAFM_EUNSTABLE;
     }
-    if (K->in_contact) {
+    if (K->in_contact && !(K->u <= s_guard_u(s))) {
         /* runtime guard: the contact reached may be stiffer than the scene predicted */
-        double sq = K->s, dF = 0.0;
-        K->cforce(&K->contact, K->u, &sq, &dF);
-        double Kl = K->k + dF;
+        double sq = K->s, Kl = 0.0;
+        const double stab = vafm_guard_measure(K, s->it, s->dt_cur, K->u, &sq, &Kl);
         if (Kl > 0) {
-            double stab = s->it->overdamped ? Kl * s->dt_cur / K->co[1].zeta : sqrt(Kl / K->m) * s->dt_cur;
             if (!(stab < s->it->stability_limit)) {
                 vafm_err_set(&s->err, VAFM_EUNSTABLE, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
                              "curve %llu at t = %.6g s: the contact reached (stiffness %.4g N/m, force %.4g N) gives "
