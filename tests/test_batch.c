@@ -11,6 +11,9 @@
  *    the scalar kernel and by the batch kernel at 1, 4 and 8 lanes (those the CPU has) and 1 and 2
  *    threads: every sample and every ground-truth row must be the same bytes.
  * 3. Kernel names and widths.
+ * 4. The scalar table loop compiled for SSE4.1 (core/kernel.h, VAFM_KLOOP_TABLE41) against the baseline
+ *    loop: whole curves of every integrator on paper-fig4 (ṽ = 1e-2) and of the underdamped ones on
+ *    contact-silica, the same bytes.
  */
 #include "harness.h"
 
@@ -308,6 +311,49 @@ static void test_campaign_measured_height(void)
     free(h.ref);
 }
 
+/* ---- 4. the SSE4.1 table loop ------------------------------------------------------------------ */
+
+static void test_table_loop_isa(void)
+{
+    const int has = s_kernel_sse41();
+    printf("  this CPU runs the %s table loop\n", has ? "SSE4.1" : "baseline");
+    const char *scenes[2] = {"paper-fig4", "contact-silica"};
+    int curves = 0;
+    for (int si = 0; si < 2; si++)
+        for (int ii = 0; ii < vafm_integrator_count(); ii++) {
+            vafm_params p;
+            if (si == 0)
+                t_scene(&p, 1e-2);
+            else
+                vafm_preset_apply(&p, scenes[si], NULL);
+            p.integrator = vafm_integrator_at(ii);
+            if (si == 1 && p.integrator->overdamped)
+                continue; /* brownian on contact-silica: ~1 min a curve at its own tiny step */
+            for (uint64_t idx = 0; idx < 2; idx++) {
+                t_trace tr[2];
+                vafm_curve_result res[2];
+                for (int b = 0; b < 2; b++) {
+                    memset(&tr[b], 0, sizeof tr[b]);
+                    vafm_kernel_baseline = b;
+                    vafm_sim *s = NULL;
+                    ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+                    ENSURE(vafm_sim_curve(s, idx, t_collect, &tr[b], &res[b]) == 0);
+                    vafm_sim_destroy(&s);
+                }
+                vafm_kernel_baseline = 0;
+                ENSURE_MSG(tr[0].n > 100 && res[0].steps_contact > 1000, "%s %s: %zu samples", scenes[si],
+                           p.integrator->name, tr[0].n);
+                ENSURE_MSG(t_trace_same(&tr[0], &tr[1]) && t_result_same(&res[0], &res[1]),
+                           "%s %s curve %llu: the SSE4.1 and baseline table loops differ", scenes[si],
+                           p.integrator->name, (unsigned long long)idx);
+                curves++;
+                t_trace_free(&tr[0]);
+                t_trace_free(&tr[1]);
+            }
+        }
+    printf("  %d curves, the same bytes with both loops\n", curves);
+}
+
 /* ---- 3. names ---------------------------------------------------------------------------------- */
 
 static void test_names(void)
@@ -345,5 +391,6 @@ int main(void)
     RUN_TEST(test_lanes);
     RUN_TEST(test_campaigns);
     RUN_TEST(test_campaign_measured_height);
+    RUN_TEST(test_table_loop_isa);
     return harness_done();
 }

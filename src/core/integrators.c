@@ -5,6 +5,8 @@
 
 #include "core/kernel.h"
 
+int vafm_kernel_baseline = 0;
+
 #define S_NINTEGRATORS 4
 
 static const vafm_integrator_type *s_get(int i)

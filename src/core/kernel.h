@@ -191,7 +191,33 @@ static inline void s_khot_post_move(const vafm_kernel *K, const vafm_jkr_table *
 #define VAFM_KCOLD
 #endif
 
-enum { VAFM_KLOOP_FREE, VAFM_KLOOP_TABLE, VAFM_KLOOP_ANY };
+/* VAFM_KLOOP_TABLE41: the table loop compiled for SSE4.1, where the CPU has it (every x86-64 since 2008; the
+ * library itself is built for the x86-64 baseline). The in-contact step is a chain of dependent operations
+ * (position, square root, table interval, cubic, force, position), so its latency is its cost: with roundsd
+ * the table interval's fraction x − trunc(x) takes one rounding where the baseline converts to an integer and
+ * back (≈ 3 ns of 34 a step, bench_step). For 0 ≤ x < 2³¹ both give the same double, bit for bit. */
+enum { VAFM_KLOOP_FREE, VAFM_KLOOP_TABLE, VAFM_KLOOP_ANY, VAFM_KLOOP_TABLE41 };
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define VAFM_KSSE41 __attribute__((target("sse4.1")))
+#define VAFM_KSSE41_OK 1
+#else
+#define VAFM_KSSE41
+#define VAFM_KSSE41_OK 0
+#endif
+
+/** Nonzero: run the baseline table loop even where the CPU has SSE4.1 (tests compare the two; integrators.c). */
+extern int vafm_kernel_baseline;
+
+/** Whether a table run takes the SSE4.1 loop. */
+static inline int s_kernel_sse41(void)
+{
+#if VAFM_KSSE41_OK
+    return !vafm_kernel_baseline && __builtin_cpu_supports("sse4.1");
+#else
+    return 0;
+#endif
+}
 
 /** Which loop a run() starting now takes. */
 static inline int s_kernel_loop_kind(const vafm_kernel *K)
@@ -206,12 +232,13 @@ static inline int s_kernel_loop_kind(const vafm_kernel *K)
 #define VAFM_KERNEL_RUN_PER_LOOP(loop)                                                                             \
     static long s_run_free(vafm_kernel *K, long n) { return loop(K, n, VAFM_KLOOP_FREE); }                       \
     static long s_run_table(vafm_kernel *K, long n) { return loop(K, n, VAFM_KLOOP_TABLE); }                     \
+    static VAFM_KSSE41 long s_run_table41(vafm_kernel *K, long n) { return loop(K, n, VAFM_KLOOP_TABLE41); }     \
     static long s_run_any(vafm_kernel *K, long n) { return loop(K, n, VAFM_KLOOP_ANY); }                         \
     static long s_run(vafm_kernel *K, long n)                                                                    \
     {                                                                                                            \
         switch (s_kernel_loop_kind(K)) {                                                                         \
         case VAFM_KLOOP_FREE: return s_run_free(K, n);                                                           \
-        case VAFM_KLOOP_TABLE: return s_run_table(K, n);                                                         \
+        case VAFM_KLOOP_TABLE: return s_kernel_sse41() ? s_run_table41(K, n) : s_run_table(K, n);                \
         default: return s_run_any(K, n);                                                                         \
         }                                                                                                        \
     }
@@ -254,7 +281,8 @@ vafm_kfs vafm_kernel_contact_eval(const vafm_kernel *K, double u, double s);
 vafm_kfs vafm_kernel_table_far(const vafm_kernel *K, double u, double s);
 
 /* vafm_jkr_table_force() on the loop's constants (the same expressions). */
-static VAFM_KALWAYS double s_kinv_table_force(const vafm_kernel *K, const vafm_kinv *v, double u, double *s_io)
+static VAFM_KALWAYS double s_kinv_table_force(const vafm_kernel *K, const vafm_kinv *v, double u, double *s_io,
+                                              const int sse41)
 {
     const double du = u - v->u_detach;
     const double xi = sqrt(du);
@@ -265,7 +293,7 @@ static VAFM_KALWAYS double s_kinv_table_force(const vafm_kernel *K, const vafm_k
         return r.F;
     }
     const int i = (int)x;
-    const double f = x - (double)i, g = 1.0 - f;
+    const double f = (sse41 ? x - __builtin_trunc(x) : x - (double)i), g = 1.0 - f;
     const double *p = v->node + 2 * i;
     const double t = g * g * (1.0 + 2.0 * f) * p[0] + f * f * (1.0 + 2.0 * g) * p[2] + f * g * (g * p[1] - f * p[3]);
     const double s = v->s_m + t, s3 = s * s * s;
@@ -283,13 +311,13 @@ static VAFM_KALWAYS void s_khot_post_move_k(const vafm_kernel *K, const vafm_kin
     h->n++;
     const double tau = (double)h->n * v->dt;
     h->u_spr = v->uspr0 + v->v_spr * tau;
-    if (kind == VAFM_KLOOP_TABLE) {
+    if (kind == VAFM_KLOOP_TABLE || kind == VAFM_KLOOP_TABLE41) {
         if (h->u < v->u_detach) {
             h->in_contact = 0;
             h->event = -1;
             h->Fc = 0.0;
         } else {
-            h->Fc = s_kinv_table_force(K, v, h->u, &h->s);
+            h->Fc = s_kinv_table_force(K, v, h->u, &h->s, kind == VAFM_KLOOP_TABLE41);
         }
     } else if (h->u >= v->u_touch) {
         h->in_contact = 1;
