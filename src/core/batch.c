@@ -167,8 +167,9 @@ typedef long long s_vl8 __attribute__((vector_size(64)));
 /* 8 lanes' 4 table doubles: one 32-byte load per lane, then an 8×4 transpose (cheaper than 4 gathers) */
 #define BTABLE(a, p0, p1, p2, p3)                                                                               \
     do {                                                                                                        \
-        long long ad_[8];                                                                                       \
-        memcpy(ad_, &(a), sizeof ad_);                                                                          \
+        long long ad_[8] __attribute__((aligned(64)));                                                          \
+        _mm512_store_si512((void *)ad_, (__m512i)(a));                                                          \
+        __asm__("" : "+m"(ad_)); /* read the addresses back from memory: cheaper than 8 lane extracts */       \
         const __m512d z0_ = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_loadu_pd((const double *)ad_[0])), \
                                                _mm256_loadu_pd((const double *)ad_[4]), 1);                     \
         const __m512d z1_ = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_loadu_pd((const double *)ad_[1])), \
