@@ -669,6 +669,17 @@ static void test_near_limit(void)
  * step that is unstable at the stiffest point swept: 4000 points from u_detach to 4× the threshold's
  * distance, each checked against the guard's own measure; then the threshold's neighbours 1e-5 above fail
  * (within the 1e-6 margin, the guard's limit is reached just above). */
+/* A kernel with the paper-fig4 mass and spring on contact c (what the guard reads). */
+static void t_guard_kernel(vafm_kernel *K, const vafm_contact *c)
+{
+    memset(K, 0, sizeof *K);
+    K->m = 0.01;
+    K->k = 0.1;
+    K->contact = *c;
+    K->cforce = c->type->force;
+    vafm_kernel_set_dt(K, 1e-3);
+}
+
 static void test_guard_threshold(void)
 {
     const struct {
@@ -682,12 +693,7 @@ static void test_guard_threshold(void)
         for (int ii = 0; ii < 2; ii++) {
             const vafm_integrator_type *it = its[ii];
             vafm_kernel K;
-            memset(&K, 0, sizeof K);
-            K.m = 0.01;
-            K.k = 0.1;
-            K.contact = c;
-            K.cforce = c.type->force;
-            vafm_kernel_set_dt(&K, 1e-3);
+            t_guard_kernel(&K, &c);
             /* the step at which the contact at u = 50 (deep in, far stiffer than the spring) is at the limit */
             double sq = 0.0;
             const double m1 = vafm_guard_measure(&K, it, 1.0, 50.0, &sq, NULL); /* measure ∝ dt */
@@ -728,11 +734,7 @@ static void test_guard_threshold(void)
     vafm_contact none;
     ENSURE(vafm_contact_init(&none, vafm_contact_none, 0.0) == 0);
     vafm_kernel K;
-    memset(&K, 0, sizeof K);
-    K.m = 0.01;
-    K.k = 0.1;
-    K.contact = none;
-    K.cforce = none.type->force;
+    t_guard_kernel(&K, &none);
     ENSURE(vafm_guard_threshold(&K, vafm_integrator_gjf, 1e-3) == -INFINITY);
 }
 
