@@ -62,8 +62,9 @@ struct vafm_sim {
     int adaptive;       /* two step sizes: nm.dt near the instability, nm.dt_far elsewhere in contact */
     int well_ok;        /* the exact contact-well step may be used */
     double dt_cur;      /* the integrator step in use */
-    double guard_dt;    /* the step the stiffness guard's threshold belongs to (0: none computed yet) */
-    double guard_u;     /* for u ≤ guard_u the guard passes without a contact solve (s_guard_u) */
+    double guard_dt[2]; /* the steps the stiffness guard's thresholds belong to (0: none computed yet) */
+    double guard_u[2];  /* for u ≤ guard_u[i] the guard at guard_dt[i] passes without a contact solve (s_guard_u) */
+    int guard_next;     /* the entry the next threshold replaces */
     s_weq weq;          /* the last well equilibrium (the next interval starts where it ends); reset per curve */
     long sub_left;      /* integrator steps left in the current sample interval (> 0 only while one runs, or
                          * when a step budget paused it: the next call goes on from there) */
@@ -655,16 +656,20 @@ static int s_integrate(vafm_sim *s, uint64_t *budget)
     return 0;
 }
 
-/* The guard's threshold for the step in use (guard.h), computed once per step size. */
+/* The guard's threshold for the step in use (guard.h), computed once per step size; two are kept (the
+ * adaptive step alternates between nm.dt and nm.dt_far). */
 static double s_guard_u(vafm_sim *s)
 {
     if (!(s->dt_cur > 0))
         return -INFINITY;
-    if (s->guard_dt != s->dt_cur) {
-        s->guard_u = vafm_guard_threshold(&s->K, s->it, s->dt_cur);
-        s->guard_dt = s->dt_cur;
-    }
-    return s->guard_u;
+    for (int i = 0; i < 2; i++)
+        if (s->guard_dt[i] == s->dt_cur)
+            return s->guard_u[i];
+    const int i = s->guard_next;
+    s->guard_next = 1 - i;
+    s->guard_u[i] = vafm_guard_threshold(&s->K, s->it, s->dt_cur);
+    s->guard_dt[i] = s->dt_cur;
+    return s->guard_u[i];
 }
 
 /* One sample interval; *budget (integrator steps, NULL: none) may pause it inside its integrator run,
