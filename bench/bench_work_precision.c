@@ -237,8 +237,8 @@ static const s_case s_cases[] = {
       "brownian, zeta = 1: dt <= 1/(20 eta) caps every omega_dt >= 0.13 to one step" },
     { "near instability, brownian", "paper-fig4", s_tweak_near_bd, S_PAPER_OMEGA_DT / 2.0, 400,
       "the overdamped group's scene: brownian at zeta = 0.01" },
-    { "paper-fig1 70 K", "paper-fig1", s_tweak_T70, S_PAPER_OMEGA_DT, 400, "coldest of distribution" },
-    { "paper-fig1 1121 K", "paper-fig1", s_tweak_T1121, S_PAPER_OMEGA_DT, 100, "hottest of distribution" },
+    { "paper-fig1 70 K", "paper-fig1", s_tweak_T70, S_REF_OMEGA_DT, 400, "coldest of distribution" },
+    { "paper-fig1 1121 K", "paper-fig1", s_tweak_T1121, S_REF_OMEGA_DT, 100, "hottest of distribution" },
 };
 #define S_NCASES ((int)(sizeof s_cases / sizeof s_cases[0]))
 
