@@ -6,7 +6,8 @@
 # N caps every case's curves per row (the case table in bench_work_precision.c sets them: 2000, fewer where a
 # curve is costly); CASES lists case numbers (default: all 13). Writes OUTDIR/case<i>/default_step.{csv,md},
 # OUTDIR/default_step.csv (every case), OUTDIR/athermal/default_step_athermal.{csv,md} (T = 0, one curve per
-# row) and OUTDIR/default_step_fit.md (bench/default_step_fit.py). 2026-11-26: ≈ 41 min of one core.
+# row) and OUTDIR/default_step_fit.md (bench/default_step_fit.py). 2026-11-26: ≈ 41 min of one core (0.6.0,
+# paper-fig1 without its dt0/4 rows), ≈ 24 min (0.6.1, with them: `meson test -C build --benchmark default-step`).
 set -eu
 bench=$1 out=$2 n=${3:-2000} cases=${4:-"0 1 2 3 4 5 6 7 8 9 10 11 12"}
 mkdir -p "$out"
