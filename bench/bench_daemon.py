@@ -158,7 +158,7 @@ def bench_max_rate(exe, rows, values=None, label="paper-fig1", lookahead_s=1.0):
     label = f"{label}, lookahead_s {lookahead_s:g}"
     s = d.sub()
     best = None
-    for fs in (2e3, 5e3, 10e3, 25e3, 50e3, 100e3, 200e3, 400e3, 1e6, 2e6, 4e6, 8e6):
+    for fs in (2e3, 5e3, 10e3, 25e3, 50e3, 100e3, 200e3, 400e3, 1e6, 2e6, 3e6, 4e6, 6e6, 8e6):
         d.cmd({"cmd": "set", "values": {"sample_rate_Hz": fs}})
         blocks, end, got = run(d, s, {"cmd": "curve", "index": 0})
         ok = end["late_blocks"] == 0 and end["status"] == "ok"
