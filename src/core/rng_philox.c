@@ -471,6 +471,14 @@ static void s_blocks4(const uint32_t ctr[4], const uint32_t key[2], uint32_t *ou
 }
 #endif
 
+/* Advance a counter's low 64 bits (c[0] | c[1] << 32) by n blocks. */
+static void s_ctr_add(uint32_t c[4], unsigned n)
+{
+    const uint64_t b = ((uint64_t)c[0] | (uint64_t)c[1] << 32) + n;
+    c[0] = (uint32_t)b;
+    c[1] = (uint32_t)(b >> 32);
+}
+
 VAFM_RNG_HIDDEN void vafm_philox4x32_10_blocks(const uint32_t ctr[4], const uint32_t key[2], unsigned nb, uint32_t *out)
 {
     uint32_t c[4] = { ctr[0], ctr[1], ctr[2], ctr[3] };
@@ -479,59 +487,49 @@ VAFM_RNG_HIDDEN void vafm_philox4x32_10_blocks(const uint32_t ctr[4], const uint
     if (__builtin_cpu_supports("avx512f")) {
         for (; j + 16 <= nb; j += 16) {
             s_blocks16_avx512(c, key, out + 4 * j);
-            const uint64_t b = ((uint64_t)c[0] | (uint64_t)c[1] << 32) + 16;
-            c[0] = (uint32_t)b;
-            c[1] = (uint32_t)(b >> 32);
+            s_ctr_add(c, 16);
         }
     }
     if (__builtin_cpu_supports("avx2")) {
         for (; j + 8 <= nb; j += 8) {
             s_blocks8_avx2(c, key, out + 4 * j);
-            const uint64_t b = ((uint64_t)c[0] | (uint64_t)c[1] << 32) + 8;
-            c[0] = (uint32_t)b;
-            c[1] = (uint32_t)(b >> 32);
+            s_ctr_add(c, 8);
         }
     }
 #endif
     for (; j < nb; j += 4) {
         s_blocks4(c, key, out + 4 * j);
-        const uint64_t b = ((uint64_t)c[0] | (uint64_t)c[1] << 32) + 4;
-        c[0] = (uint32_t)b;
-        c[1] = (uint32_t)(b >> 32);
+        s_ctr_add(c, 4);
     }
+}
+
+/* Refill q from r: q's unread words moved to the front, then what is left of r's current block, then the next
+ * VAFM_RNGQ_BLOCKS blocks of r's stream (r's counter advanced past them). The caller sets q->pos. */
+static void s_rngq_refill(vafm_rngq *q, vafm_rng *r)
+{
+    unsigned k = 0;
+    while (q->pos < q->len)
+        q->w[k++] = q->w[q->pos++];
+    while (r->pos < 4)
+        q->w[k++] = r->buf[r->pos++];
+    vafm_philox4x32_10_blocks(r->ctr, r->key, VAFM_RNGQ_BLOCKS, q->w + k);
+    s_ctr_add(r->ctr, VAFM_RNGQ_BLOCKS);
+    q->len = k + 4 * VAFM_RNGQ_BLOCKS;
 }
 
 VAFM_RNG_HIDDEN void vafm_rngq_top_up(vafm_rngq *q, vafm_rng *r)
 {
     if (q->len - q->pos >= 16)
         return;
-    unsigned k = 0;
-    while (q->pos < q->len)
-        q->w[k++] = q->w[q->pos++];
-    while (r->pos < 4)
-        q->w[k++] = r->buf[r->pos++];
-    vafm_philox4x32_10_blocks(r->ctr, r->key, VAFM_RNGQ_BLOCKS, q->w + k);
-    const uint64_t b = ((uint64_t)r->ctr[0] | (uint64_t)r->ctr[1] << 32) + VAFM_RNGQ_BLOCKS;
-    r->ctr[0] = (uint32_t)b;
-    r->ctr[1] = (uint32_t)(b >> 32);
+    s_rngq_refill(q, r);
     q->pos = 0;
-    q->len = k + 4 * VAFM_RNGQ_BLOCKS;
 }
 
 VAFM_RNG_HIDDEN uint64_t vafm_rngq_u64_slow(vafm_rngq *q, vafm_rng *r)
 {
     /* the unread words first (at most one: reads take two), then what is left of r's current block */
-    unsigned k = 0;
-    while (q->pos < q->len)
-        q->w[k++] = q->w[q->pos++];
-    while (r->pos < 4)
-        q->w[k++] = r->buf[r->pos++];
-    vafm_philox4x32_10_blocks(r->ctr, r->key, VAFM_RNGQ_BLOCKS, q->w + k);
-    const uint64_t b = ((uint64_t)r->ctr[0] | (uint64_t)r->ctr[1] << 32) + VAFM_RNGQ_BLOCKS;
-    r->ctr[0] = (uint32_t)b;
-    r->ctr[1] = (uint32_t)(b >> 32);
+    s_rngq_refill(q, r);
     q->pos = 2;
-    q->len = k + 4 * VAFM_RNGQ_BLOCKS;
     return (uint64_t)q->w[0] | (uint64_t)q->w[1] << 32;
 }
 
