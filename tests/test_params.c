@@ -17,6 +17,7 @@
 #include "vafm/integrator.h"
 #include "vafm/params.h"
 #include "vafm/units.h"
+#include "vafm/version.h"
 #include "vafm/sim.h"
 
 /* REAL fields that are dimensionless by design (a ratio): everything else must carry an SI unit. */
@@ -560,6 +561,10 @@ static void test_strerror(void)
             ENSURE_MSG(strcmp(s, vafm_strerror(codes[j])) != 0, "codes %d and %d share '%s'", codes[i], codes[j], s);
     }
     ENSURE(vafm_version() && vafm_version()[0]);
+    /* the release's version (meson.build), not the API's: 0.6.1 called itself 0.6.0 */
+    ENSURE_MSG(strcmp(vafm_version(), VAFM_PROJECT_VERSION) == 0, "vafm_version() '%s', meson.build '%s'",
+               vafm_version(), VAFM_PROJECT_VERSION);
+    ENSURE(vafm_version_api() == ((VAFM_API_VERSION_MAJOR << 16) | (VAFM_API_VERSION_MINOR << 8) | VAFM_API_VERSION_PATCH));
 }
 
 /* The cost estimate (issue #18, finding 5) against real curves: the typical duration within 30% of a

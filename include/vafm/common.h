@@ -47,7 +47,8 @@ typedef struct vafm_error {
 /** @return a static English description of a status code; never NULL. */
 VAFM_API const char *vafm_strerror(int code);
 
-/** @return the library version string, e.g. "0.1.0". */
+/** @return the release version of the library actually linked (meson.build's), e.g. "0.6.1"; the API
+ *  version it implements is vafm_version_api(). */
 VAFM_API const char *vafm_version(void);
 
 /** @return VAFM_API_VERSION_MAJOR << 16 | MINOR << 8 | PATCH of the library actually linked. */

@@ -22,12 +22,16 @@ const char *vafm_strerror(int code)
     }
 }
 
-#define S_STR2(x) #x
-#define S_STR(x) S_STR2(x)
+/* The release's version (meson.build), which names the files and packages; the API's version, which
+ * changes only with the interface, is vafm_version_api(). 0.6.1 returned the API's, so it called itself
+ * 0.6.0 in --version and in every file's "software version". */
+#ifndef VAFM_PROJECT_VERSION
+#error "meson.build defines VAFM_PROJECT_VERSION"
+#endif
 
 const char *vafm_version(void)
 {
-    return S_STR(VAFM_API_VERSION_MAJOR) "." S_STR(VAFM_API_VERSION_MINOR) "." S_STR(VAFM_API_VERSION_PATCH);
+    return VAFM_PROJECT_VERSION;
 }
 
 unsigned vafm_version_api(void)
