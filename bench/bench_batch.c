@@ -13,6 +13,12 @@
  *    Median of S_CREPS runs; the two kernels' results are compared (they must be the same bit for bit).
  * 3. The machine: this core's rate of independent vector multiplies and adds (8 chains, the widest vectors
  *    the CPU has), for a roofline: ops per curve-step against what the core did in the same run.
+ * 4. Floors: what the in-contact step's own arithmetic costs on this core when nothing else runs, from the
+ *    same kernel state: minimal loops of the batch kernel's common path (the same operations, the same
+ *    table and its load, the contact tests; noise read from a buffer, no random numbers drawn, no masks,
+ *    no chunks) for one curve (its latency) and for 1–4 vectors of 8 curves side by side (its throughput);
+ *    and both kernels without random numbers (the same kernels at kT = 0). A kernel cannot beat its floor
+ *    without different arithmetic, i.e. different curves.
  *
  * Usage: bench_batch [OUTDIR [quick]]: writes OUTDIR/bench_batch.csv and .md and prints the markdown.
  * "quick" runs fewer and shorter campaigns (a pipeline check).
@@ -31,6 +37,7 @@
 #include "vafm/units.h"
 #include "core/batch.h"
 #include "core/kernel.h"
+#include "core/table8.h"
 
 #define S_REPS 5
 #define S_CREPS 3
@@ -197,6 +204,208 @@ static double s_vector_ns(int *lanes)
     return NAN;
 }
 
+/* ---- 4. floors ---------------------------------------------------------------------------------- */
+
+/* The common path's constants and start state of a kernel (batch_lanes.h's BLOAD for one lane). */
+typedef struct s_fl {
+    double dt, hdm, hdmdt, drift, sig, a, b, binvm, uspr0, vspr, kk, udet, invh, xend, sm, c2;
+    const double *node;
+    double u, w, s, Fc, hf, us, nd;
+    double nz[S_STEPS]; /* the lane's noise, drawn once from its stream */
+} s_fl;
+
+static void s_fl_load(s_fl *c, const vafm_kernel *K0)
+{
+    vafm_kernel K = *K0;
+    const vafm_kcoef co = K.co[1];
+    vafm_kinv v;
+    s_kinv_load(&K, &v);
+    c->dt = K.dt;
+    c->hdm = 0.5 * K.dt / K.m;
+    c->hdmdt = c->hdm * K.dt;
+    c->drift = K.m * K.v_spr;
+    c->sig = K.thermal ? co.gjf_sig : 0.0;
+    c->a = co.gjf_a;
+    c->b = co.gjf_b;
+    c->binvm = co.gjf_b * (1.0 / K.m);
+    c->uspr0 = v.uspr0;
+    c->vspr = v.v_spr;
+    c->kk = v.k;
+    c->udet = v.u_detach;
+    c->invh = v.inv_h;
+    c->xend = v.x_end;
+    c->sm = v.s_m;
+    c->c2 = v.c2;
+    c->node = v.node;
+    c->u = K.u;
+    c->w = K.w;
+    c->s = K.s;
+    c->Fc = K.Fc;
+    c->hf = K.f;
+    c->us = K.u_spr;
+    c->nd = (double)K.n;
+    for (int j = 0; j < S_STEPS; j++)
+        c->nz[j] = K.thermal ? s_kernel_noise(&K) : 0.0;
+}
+
+/* One curve: the chain of S_STEPS steps from the start state; returns the steps that left the table (0). */
+__attribute__((target("sse4.1"), noinline)) static long s_floor1(const s_fl *c, double *sink)
+{
+    double u = c->u, w = c->w, hf = c->hf, nd = c->nd, au = 0, aus = 0, fmin = INFINITY, sn = c->s, Fn = c->Fc;
+    long left = 0;
+    for (int j = 0; j < S_STEPS; j++) {
+        const double f = hf + c->drift;
+        const double beta = c->sig * c->nz[j];
+        const double un = u + c->b * (c->dt * w + c->hdmdt * f + c->hdm * beta);
+        const double ndn = nd + 1.0;
+        const double usn = c->uspr0 + c->vspr * (ndn * c->dt);
+        const double x = sqrt(un - c->udet) * c->invh;
+        if (__builtin_expect(!(un >= c->udet) || !(x < c->xend), 0)) {
+            left++;
+            break;
+        }
+        const double fr = x - __builtin_trunc(x);
+        const double gg = 1.0 - fr;
+        const double *p = c->node + 2 * (long)x;
+        const double t = gg * gg * (1.0 + 2.0 * fr) * p[0] + fr * fr * (1.0 + 2.0 * gg) * p[2] +
+                         fr * gg * (gg * p[1] - fr * p[3]);
+        sn = c->sm + t;
+        const double s3 = sn * sn * sn;
+        Fn = s3 * ((4.0 / 3.0) * s3 - c->c2);
+        const double fs = c->kk * (usn - un);
+        const double hfn = fs - Fn;
+        w = c->a * w + c->hdm * (c->a * f + hfn + c->drift) + c->binvm * beta;
+        u = un;
+        hf = hfn;
+        nd = ndn;
+        au += un;
+        aus += usn;
+        fmin = fs < fmin ? fs : fmin;
+    }
+    *sink += u + w + au + aus + fmin + sn + Fn;
+    return left;
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+typedef double s_fd8 __attribute__((vector_size(64)));
+typedef long long s_fl8 __attribute__((vector_size(64)));
+
+/* G vectors of 8 curves side by side, S_STEPS steps each: batch_lanes.h's common path, term by term. */
+static inline __attribute__((always_inline, target("avx512f,avx512dq"))) long s_floor8(const s_fl *c, int G,
+                                                                                        double *sink)
+{
+    const s_fd8 z = { 0 };
+    const s_fd8 dt = z + c->dt, hdm = z + c->hdm, hdmdt = z + c->hdmdt, drift = z + c->drift, sig = z + c->sig,
+                a = z + c->a, b = z + c->b, binvm = z + c->binvm, uspr0 = z + c->uspr0, vspr = z + c->vspr,
+                kk = z + c->kk, udet = z + c->udet, invh = z + c->invh, xend = z + c->xend, sm = z + c->sm,
+                c2 = z + c->c2;
+    const s_fl8 node = (s_fl8) { 0 } + (long long)(uintptr_t)c->node;
+    s_fd8 u[4], w[4], hf[4], nd[4], au[4], aus[4], fmin[4], sv[4], Fv[4], us[4];
+    for (int q = 0; q < G; q++) {
+        u[q] = z + c->u;
+        w[q] = z + c->w;
+        hf[q] = z + c->hf;
+        nd[q] = z + c->nd;
+        au[q] = aus[q] = z;
+        fmin[q] = z + INFINITY;
+        sv[q] = z + c->s;
+        Fv[q] = z + c->Fc;
+        us[q] = z + c->us;
+    }
+    long left = 0;
+    for (int j = 0; j < S_STEPS; j++) {
+        const s_fd8 nz = z + c->nz[j];
+        for (int q = 0; q < G; q++) {
+            const s_fd8 f = hf[q] + drift;
+            const s_fd8 beta = sig * nz;
+            const s_fd8 un = u[q] + b * (dt * w[q] + hdmdt * f + hdm * beta);
+            const s_fd8 ndn = nd[q] + 1.0;
+            const s_fd8 usn = uspr0 + vspr * (ndn * dt);
+            const s_fd8 x = (s_fd8)_mm512_sqrt_pd((__m512d)(un - udet)) * invh;
+            const s_fl8 out = (s_fl8)(un < udet) | ~(s_fl8)(x < xend);
+            if (__builtin_expect(_mm512_movepi64_mask((__m512i)out) != 0, 0))
+                left++;
+            const __m256i x32 = _mm512_cvttpd_epi32((__m512d)x);
+            const s_fd8 fr = x - (s_fd8)_mm512_cvtepi32_pd(x32);
+            const s_fd8 gg = 1.0 - fr;
+            const s_fl8 addr = node + (s_fl8)_mm512_cvtepi32_epi64(x32) * 16;
+            __m512d q0, q1, q2, q3;
+            vafm_table8_load((__m512i)addr, &q0, &q1, &q2, &q3);
+            const s_fd8 p0 = (s_fd8)q0, p1 = (s_fd8)q1, p2 = (s_fd8)q2, p3 = (s_fd8)q3;
+            const s_fd8 t = gg * gg * (1.0 + 2.0 * fr) * p0 + fr * fr * (1.0 + 2.0 * gg) * p2 + fr * gg * (gg * p1 - fr * p3);
+            const s_fd8 sn = sm + t;
+            const s_fd8 s3 = sn * sn * sn;
+            const s_fd8 Fn = s3 * ((4.0 / 3.0) * s3 - c2);
+            const s_fd8 fs = kk * (usn - un);
+            const s_fd8 hfn = fs - Fn;
+            w[q] = a * w[q] + hdm * (a * f + hfn + drift) + binvm * beta;
+            u[q] = un;
+            sv[q] = sn;
+            Fv[q] = Fn;
+            hf[q] = hfn;
+            us[q] = usn;
+            nd[q] = ndn;
+            au[q] = au[q] + un;
+            aus[q] = aus[q] + usn;
+            const s_fl8 lt = (s_fl8)(fs < fmin[q]);
+            fmin[q] = (s_fd8)(((s_fl8)fs & lt) | ((s_fl8)fmin[q] & ~lt));
+        }
+    }
+    for (int q = 0; q < G; q++)
+        for (int l = 0; l < 8; l++)
+            *sink += u[q][l] + w[q][l] + au[q][l] + aus[q][l] + fmin[q][l] + sv[q][l] + Fv[q][l] + us[q][l];
+    return left;
+}
+
+#define S_FLOOR8(G)                                                                                     \
+    __attribute__((target("avx512f,avx512dq"), noinline)) static long s_floor8_##G(const s_fl *c, double *sink) \
+    {                                                                                                   \
+        return s_floor8(c, G, sink);                                                                    \
+    }
+S_FLOOR8(1)
+S_FLOOR8(2)
+S_FLOOR8(3)
+S_FLOOR8(4)
+#endif
+
+/* ns per curve-step of a floor loop (G = 0: one curve; else G vectors of 8), median of S_REPS; NAN if the
+ * CPU lacks the vectors or a lane left the table (the floor would not be the kernel's common path). */
+static double s_floor_ns(const s_fl *c, int G)
+{
+    long (*fn)(const s_fl *, double *) = s_floor1;
+#if defined(__x86_64__) && defined(__GNUC__)
+    long (*const f8[4])(const s_fl *, double *) = { s_floor8_1, s_floor8_2, s_floor8_3, s_floor8_4 };
+    if (G > 0) {
+        if (vafm_batch_width_max() < 8 || G > 4)
+            return NAN;
+        fn = f8[G - 1];
+    }
+#else
+    if (G > 0)
+        return NAN;
+#endif
+    const double curves = G > 0 ? 8.0 * G : 1.0;
+    double ns[S_REPS];
+    volatile double vsink = 0;
+    for (int r = -1; r < S_REPS; r++) {
+        double t0 = bench_clock_s(CLOCK_PROCESS_CPUTIME_ID), t1, sink = 0;
+        uint64_t steps = 0;
+        do {
+            for (int k = 0; k < 20; k++) {
+                if (fn(c, &sink))
+                    return NAN;
+                steps += S_STEPS;
+            }
+            t1 = bench_clock_s(CLOCK_PROCESS_CPUTIME_ID);
+        } while (t1 - t0 < S_MIN_REP_S);
+        vsink += sink;
+        if (r >= 0)
+            ns[r] = 1e9 * (t1 - t0) / ((double)steps * curves);
+    }
+    (void)vsink;
+    return bench_median(ns, S_REPS);
+}
+
 int main(int argc, char **argv)
 {
     const char *dir = argc > 1 ? argv[1] : ".";
@@ -223,6 +432,21 @@ int main(int argc, char **argv)
         fprintf(stderr, "lanes W=%d: in contact %.2f ns, free %.2f ns per curve-step\n", widths[i], lane_in[i],
                 lane_free[i]);
     }
+    /* 4. floors, from the same in-contact kernel */
+    s_fl *fl = malloc(sizeof *fl);
+    if (!fl)
+        return 1;
+    s_fl_load(fl, &kin);
+    double floor1 = s_floor_ns(fl, 0), floor8[4];
+    for (int g = 1; g <= 4; g++)
+        floor8[g - 1] = s_floor_ns(fl, g);
+    free(fl);
+    vafm_kernel kcold = kin;
+    kcold.thermal = 0; /* the same kernel, its noise terms zero: no random numbers drawn */
+    const double cold1 = s_lane_ns(&kcold, 1), cold8 = vafm_batch_width(8) == 8 ? s_lane_ns(&kcold, 8) : NAN;
+    fprintf(stderr, "floors: one curve %.2f ns; 8 lanes x G=1..4: %.2f %.2f %.2f %.2f ns; kernels at kT = 0: "
+                    "scalar %.2f, 8 lanes %.2f ns per curve-step\n",
+            floor1, floor8[0], floor8[1], floor8[2], floor8[3], cold1, cold8);
     vafm_sim_destroy(&sim);
 
     /* 2. campaigns */
@@ -280,6 +504,11 @@ int main(int argc, char **argv)
             fprintf(csv, "campaign,%s,scalar,%.4g,curves_per_cpu_s\ncampaign,%s,batch,%.4g,curves_per_cpu_s\n",
                     rows[i].label, rows[i].cps_scalar, rows[i].label, rows[i].cps_batch);
     fprintf(csv, "machine,vector_op,%d,%.4g,ns\n", vl, vns);
+    fprintf(csv, "floor,minimal_loop_one_curve,1,%.4g,ns\n", floor1);
+    for (int g = 1; g <= 4; g++)
+        fprintf(csv, "floor,minimal_loop_%d_vectors,8,%.4g,ns\n", g, floor8[g - 1]);
+    fprintf(csv, "floor,kernel_no_random_numbers,1,%.4g,ns\nfloor,kernel_no_random_numbers,8,%.4g,ns\n", cold1,
+            cold8);
     fclose(csv);
 
     FILE *outs[2] = { md, stdout };
@@ -315,6 +544,23 @@ int main(int argc, char **argv)
                        "plus one normal (½ Philox4x32-10 block and a ziggurat draw): %.2f ns of arithmetic at "
                        "that rate, against %.2f ns measured at 8 lanes.\n",
                     vns, vl, vns / vl, 55.0 * vns / vl, lane_in[2]);
+        double fbest = INFINITY;
+        int gbest = 0;
+        for (int g = 1; g <= 4; g++)
+            if (floor8[g - 1] < fbest)
+                fbest = floor8[g - 1], gbest = g;
+        fprintf(f, "\n### Floors: the in-contact step's own arithmetic (same kernel state, no random numbers)\n\n");
+        fprintf(f, "| in-contact curve-step | one curve | 8 lanes |\n|---|---|---|\n");
+        fprintf(f, "| the kernel (thermal) | %.2f ns | %.2f ns |\n", lane_in[0], lane_in[2]);
+        fprintf(f, "| the kernel at kT = 0 (no random numbers drawn) | %.2f ns | %.2f ns |\n", cold1, cold8);
+        fprintf(f, "| minimal loop of the same operations (best of 1–4 vectors: %d) | %.2f ns | %.2f ns |\n\n",
+                gbest, floor1, fbest);
+        fprintf(f, "Minimal 8-lane loop by vectors side by side: 1: %.2f, 2: %.2f, 3: %.2f, 4: %.2f ns per "
+                   "curve-step. The minimal loops have no random numbers, no lane masks and no chunks; they "
+                   "keep the square root, the table load (core/table8.h) and the contact tests. One curve "
+                   "is bound by the latency of its chain, 8 lanes by the core's throughput. A kernel with "
+                   "these curves, bit for bit, costs at least this plus its normal.\n",
+                floor8[0], floor8[1], floor8[2], floor8[3]);
     }
     fclose(md);
     return 0;

@@ -5,6 +5,7 @@
 
 #include "core/batch.h"
 #include "core/kernel.h"
+#include "core/table8.h"
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -164,28 +165,15 @@ typedef long long s_vl8 __attribute__((vector_size(64)));
 #define BTRUNC(x) _mm512_cvttpd_epi32((__m512d)(x))
 #define BI2D(i) ((s_vd8)_mm512_cvtepi32_pd(i))
 #define BI2L(i) ((s_vl8)_mm512_cvtepi32_epi64(i))
-/* 8 lanes' 4 table doubles: one 32-byte load per lane, then an 8×4 transpose (cheaper than 4 gathers) */
+/* 8 lanes' 4 table doubles (core/table8.h) */
 #define BTABLE(a, p0, p1, p2, p3)                                                                               \
     do {                                                                                                        \
-        long long ad_[8] __attribute__((aligned(64)));                                                          \
-        _mm512_store_si512((void *)ad_, (__m512i)(a));                                                          \
-        __asm__("" : "+m"(ad_)); /* read the addresses back from memory: cheaper than 8 lane extracts */       \
-        const __m512d z0_ = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_loadu_pd((const double *)ad_[0])), \
-                                               _mm256_loadu_pd((const double *)ad_[4]), 1);                     \
-        const __m512d z1_ = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_loadu_pd((const double *)ad_[1])), \
-                                               _mm256_loadu_pd((const double *)ad_[5]), 1);                     \
-        const __m512d z2_ = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_loadu_pd((const double *)ad_[2])), \
-                                               _mm256_loadu_pd((const double *)ad_[6]), 1);                     \
-        const __m512d z3_ = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_loadu_pd((const double *)ad_[3])), \
-                                               _mm256_loadu_pd((const double *)ad_[7]), 1);                     \
-        const __m512d t0_ = _mm512_unpacklo_pd(z0_, z1_), t1_ = _mm512_unpackhi_pd(z0_, z1_);                  \
-        const __m512d t2_ = _mm512_unpacklo_pd(z2_, z3_), t3_ = _mm512_unpackhi_pd(z2_, z3_);                  \
-        const __m512i ilo_ = _mm512_set_epi64(13, 12, 5, 4, 9, 8, 1, 0);                                       \
-        const __m512i ihi_ = _mm512_set_epi64(15, 14, 7, 6, 11, 10, 3, 2);                                     \
-        (p0) = (s_vd8)_mm512_permutex2var_pd(t0_, ilo_, t2_);                                                   \
-        (p2) = (s_vd8)_mm512_permutex2var_pd(t0_, ihi_, t2_);                                                   \
-        (p1) = (s_vd8)_mm512_permutex2var_pd(t1_, ilo_, t3_);                                                   \
-        (p3) = (s_vd8)_mm512_permutex2var_pd(t1_, ihi_, t3_);                                                   \
+        __m512d q0_, q1_, q2_, q3_;                                                                             \
+        vafm_table8_load((__m512i)(a), &q0_, &q1_, &q2_, &q3_);                                                 \
+        (p0) = (s_vd8)q0_;                                                                                      \
+        (p1) = (s_vd8)q1_;                                                                                      \
+        (p2) = (s_vd8)q2_;                                                                                      \
+        (p3) = (s_vd8)q3_;                                                                                      \
     } while (0)
 #define BANY(m) (_mm512_movepi64_mask((__m512i)(m)) != 0)
 #define BWIDE 1
