@@ -248,8 +248,15 @@ static void s_fl_load(s_fl *c, const vafm_kernel *K0)
         c->nz[j] = K.thermal ? s_kernel_noise(&K) : 0.0;
 }
 
-/* One curve: the chain of S_STEPS steps from the start state; returns the steps that left the table (0). */
-__attribute__((target("sse4.1"), noinline)) static long s_floor1(const s_fl *c, double *sink)
+/* One curve: the chain of S_STEPS steps from the start state; returns the steps that left the table (0).
+ * On x86 compiled for SSE4.1 (one roundsd for the interval's fraction, as the kernel's table loop where the
+ * CPU has it; s_floor_ns checks the CPU). */
+#if defined(__x86_64__) && defined(__GNUC__)
+#define S_FLOOR1_ATTR __attribute__((target("sse4.1"), noinline))
+#else
+#define S_FLOOR1_ATTR __attribute__((noinline))
+#endif
+S_FLOOR1_ATTR static long s_floor1(const s_fl *c, double *sink)
 {
     double u = c->u, w = c->w, hf = c->hf, nd = c->nd, au = 0, aus = 0, fmin = INFINITY, sn = c->s, Fn = c->Fc;
     long left = 0;
@@ -375,6 +382,9 @@ static double s_floor_ns(const s_fl *c, int G)
     long (*fn)(const s_fl *, double *) = s_floor1;
 #if defined(__x86_64__) && defined(__GNUC__)
     long (*const f8[4])(const s_fl *, double *) = { s_floor8_1, s_floor8_2, s_floor8_3, s_floor8_4 };
+    __builtin_cpu_init();
+    if (G == 0 && !__builtin_cpu_supports("sse4.1"))
+        return NAN;
     if (G > 0) {
         if (vafm_batch_width_max() < 8 || G > 4)
             return NAN;
