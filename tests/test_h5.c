@@ -819,7 +819,7 @@ static void test_reference_file(void)
 enum {
     B_NONE, B_K_STRING, B_UNIT_INT, B_POINT_COUNT, B_EXTRA_DSET, B_SUBGROUP, B_ROOT_OBJ, B_UNKNOWN_ATTR, B_LENGTHS,
     B_2D, B_SEG_FLOAT, B_NO_SWVERSION, B_FIXED_STR, B_SEG_VALUE, B_CREEP, B_SW_INT, B_UNIT_NN, B_F32, B_NAME_01,
-    B_SOFTLINK, B_NO_FORCE, B_TIME_BACK, B_TIP_WRONG, B_DATE, B_FORMAT2, B_COUNT
+    B_SOFTLINK, B_NO_FORCE, B_TIME_BACK, B_TIP_WRONG, B_DATE, B_FORMAT2, B_SEG_NEG, B_EMPTY, B_HUGE, B_COUNT
 };
 
 typedef struct bad_case {
@@ -856,6 +856,11 @@ static const bad_case s_bad[] = {
     { B_TIP_WRONG, 0, NULL, "[L14]", "/0/tip position" },
     { B_DATE, 0, NULL, "[L15]", "'date'" },
     { B_FORMAT2, VAFM_EFORMAT, "format version 2.0", "[V1]", "vafm format version" },
+    /* 0.6.1: HDF5 clamped -1 to 0 (an approach sample); a zero-length curve was read; the checker allocated
+     * what a dataset declared (1e12 samples: 8 TB) before looking for its data */
+    { B_SEG_NEG, VAFM_EFORMAT, "/0/segment holds a value outside 0-255 (negative", "[L7]", "/0/segment" },
+    { B_EMPTY, VAFM_EFORMAT, "/0/force holds no samples", "[L7]", "/0/force: holds no samples" },
+    { B_HUGE, VAFM_EFORMAT, "declares 1000000000000 samples", "VAFM_H5_MAX_SAMPLES", "/0/force" },
 };
 
 static void write_bad(const char *path, int kind)
@@ -872,6 +877,7 @@ static void write_bad(const char *path, int kind)
         h_str(f, "vafm format version", "2.0", 0);
     hid_t g = H5Gcreate2(f, kind == B_NAME_01 ? "01" : "0", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
     enum { N = 64 };
+    const hsize_t nn = kind == B_EMPTY ? 0 : N;
     double fo[N], h[N], t[N], tip[N], k = 0.1;
     uint8_t seg[N];
     for (int i = 0; i < N; i++) {
@@ -887,7 +893,16 @@ static void write_bad(const char *path, int kind)
         tip[5] += 1e-9;
     if (kind == B_SEG_VALUE)
         seg[7] = 5;
-    if (kind == B_2D) {
+    if (kind == B_HUGE) { /* declared, chunked, never written: 7 kB on disk */
+        hsize_t big = 1000000000000ull, chunk = 1u << 20;
+        hid_t sp = H5Screate_simple(1, &big, NULL), dcpl = H5Pcreate(H5P_DATASET_CREATE);
+        H5Pset_chunk(dcpl, 1, &chunk);
+        hid_t d = H5Dcreate2(g, "force", H5T_IEEE_F64LE, sp, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+        h_str(d, "unit", "N", 0);
+        H5Dclose(d);
+        H5Pclose(dcpl);
+        H5Sclose(sp);
+    } else if (kind == B_2D) {
         hsize_t d2[2] = { N / 2, 2 };
         hid_t sp = H5Screate_simple(2, d2, NULL);
         hid_t d = H5Dcreate2(g, "force", H5T_IEEE_F64LE, sp, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
@@ -901,17 +916,23 @@ static void write_bad(const char *path, int kind)
         h_i64(d, "unit", 1);
         H5Dclose(d);
     } else if (kind != B_NO_FORCE) {
-        h_dset(g, "force", kind == B_F32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, fo, N,
+        h_dset(g, "force", kind == B_F32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, fo, nn,
                kind == B_UNIT_NN ? "nN" : "N", 0);
     }
-    h_dset(g, "height (measured)", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, h, N, "m", 0);
-    h_dset(g, "height (piezo)", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, h, kind == B_LENGTHS ? N - 1 : N, "m", 0);
-    if (kind == B_SEG_FLOAT)
-        h_dset(g, "segment", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, h, N, "", 0);
-    else
-        h_dset(g, "segment", H5T_STD_U8LE, H5T_NATIVE_UINT8, seg, N, "", 0);
-    h_dset(g, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, t, N, "s", 0);
-    h_dset(g, "tip position", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, tip, N, "m", 0);
+    h_dset(g, "height (measured)", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, h, nn, "m", 0);
+    h_dset(g, "height (piezo)", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, h, kind == B_LENGTHS ? nn - 1 : nn, "m", 0);
+    if (kind == B_SEG_FLOAT) {
+        h_dset(g, "segment", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, h, nn, "", 0);
+    } else if (kind == B_SEG_NEG) {
+        int64_t s64[N];
+        for (int i = 0; i < N; i++)
+            s64[i] = i == 7 ? -1 : seg[i];
+        h_dset(g, "segment", H5T_STD_I64LE, H5T_NATIVE_INT64, s64, nn, "", 0);
+    } else {
+        h_dset(g, "segment", H5T_STD_U8LE, H5T_NATIVE_UINT8, seg, nn, "", 0);
+    }
+    h_dset(g, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, t, nn, "s", 0);
+    h_dset(g, "tip position", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, tip, nn, "m", 0);
     if (kind == B_EXTRA_DSET)
         h_dset(g, "deflection", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, h, N, "m", 0);
     if (kind == B_SUBGROUP)
@@ -921,7 +942,7 @@ static void write_bad(const char *path, int kind)
         h_str(g, "spring constant", "0.1", 0);
     else
         h_f64(g, "spring constant", k);
-    h_i64(g, "point count", kind == B_POINT_COUNT ? N + 1 : N);
+    h_i64(g, "point count", kind == B_POINT_COUNT ? N + 1 : (int64_t)nn);
     if (kind == B_UNKNOWN_ATTR)
         h_f64(g, "temperature", 300);
     h_str(g, "date", kind == B_DATE ? "04/03/2021" : "2021-03-04", 0);
@@ -1061,6 +1082,23 @@ static void test_writer_refusals(void)
     ENSURE(vafm_h5_writer_append(w, &s.c, &s.truth, &e) == 0 && vafm_h5_writer_count(w) == 2);
     ENSURE(vafm_h5_writer_close(&w, &e) == 0);
     ENSURE_MSG(vafm_h5_check(path, &e) == 0, "%s", e.message);
+    syn_free(&s);
+    /* a file with its scene and no curve yet (killed before its first curve, a daemon log started and
+     * stopped): resumed from curve 0 (0.6.1 passed the rows' NULL to memcpy: UBSan) */
+    const char *path0 = "t_h5_zero_curves.h5";
+    o.resume = 0;
+    o.overwrite = 1;
+    ENSURE(vafm_h5_writer_open(&w, path0, &o, &e) == 0 && vafm_h5_writer_set_provenance(w, &p, NULL, &e) == 0);
+    ENSURE(vafm_h5_writer_close(&w, &e) == 0);
+    o.resume = 1;
+    o.overwrite = 0;
+    ENSURE_MSG(vafm_h5_writer_open(&w, path0, &o, &e) == 0, "%s", e.message);
+    ENSURE(w && vafm_h5_writer_count(w) == 0 && vafm_h5_writer_set_provenance(w, &p, NULL, &e) == 0);
+    syn_make(&s, 200, 0.05, 0);
+    ENSURE_MSG(w && vafm_h5_writer_append(w, &s.c, &s.truth, &e) == 0 && vafm_h5_writer_count(w) == 1, "%s",
+               e.message);
+    ENSURE(vafm_h5_writer_close(&w, &e) == 0);
+    ENSURE_MSG(vafm_h5_check(path0, &e) == 0, "%s", e.message);
     syn_free(&s);
     vafm_h5_writer_destroy(&w); /* NULL-safe */
     vafm_h5_reader_destroy(NULL);

@@ -745,10 +745,10 @@ int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
     vafm_h5_curve c;
     if (!n || vafm_h5_reader_curve_info(r, 0, &c, NULL) || c.meta.grid_shape_x < 1 || c.meta.grid_shape_y < 1)
         return 0; /* not a map */
+    if (c.meta.grid_shape_x > VAFM_MAP_MAX_SIDE || c.meta.grid_shape_y > VAFM_MAP_MAX_SIDE)
+        return 0; /* compared as read (int64): 2^32 + 1 was 1 as an int */
     int nx = (int)c.meta.grid_shape_x, ny = (int)c.meta.grid_shape_y;
     size_t np = (size_t)nx * (size_t)ny;
-    if (nx > VAFM_MAP_MAX_SIDE || ny > VAFM_MAP_MAX_SIDE)
-        return 0;
     fprintf(o, "map          %d x %d pixels over %.6g x %.6g um centred at (%.6g, %.6g) um; curve = iy*%d + ix; "
                "%zu of %zu pixels recorded\n",
             nx, ny, c.meta.grid_size_x_m * 1e6, c.meta.grid_size_y_m * 1e6, c.meta.grid_center_x_m * 1e6,

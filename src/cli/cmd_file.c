@@ -2,6 +2,8 @@
 /* `vafm info` and `vafm export`: HDF5 force-curve files, vafm's or another program's. */
 #include "cli/cli.h"
 
+#define S_INFO_MAX_POINTS 65536 /* grid points whose statistics info prints (one line each) */
+
 /* ---- vafm info ------------------------------------------------------------------------------------ */
 
 static int s_need_file(const vafm_cli_args *a)
@@ -188,7 +190,14 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
         printf("map          n/a: out of memory\n");
     if (pv.is_vafm && ip.scene_ok && ip.grid_ok && !ip.is_map && n) {
         size_t np = vafm_campaign_points(&ip.spec);
-        vafm_point_stats *stats = calloc(np, sizeof *stats);
+        /* the grid comes from the file: its lists size the table (0.6.1 allocated 3000³ points for a 0.5 MB
+         * file); counted in double, as the product of three list lengths may not fit a size_t */
+        const double npd = (double)(ip.spec.n_T ? ip.spec.n_T : 1) * (double)(ip.spec.n_v ? ip.spec.n_v : 1) *
+                           (double)(ip.spec.n_k ? ip.spec.n_k : 1);
+        vafm_point_stats *stats = npd <= S_INFO_MAX_POINTS ? calloc(np, sizeof *stats) : NULL;
+        if (npd > S_INFO_MAX_POINTS)
+            printf("statistics   not summed up: the grid has %.6g points (info sums up at most %d)\n", npd,
+                   S_INFO_MAX_POINTS);
         if (stats) {
             uint64_t missing = vafm_cli_truth_stats(r, np, stats);
             vafm_cli_print_statistics(stdout, &ip.p, &ip.spec, stats);

@@ -12,6 +12,8 @@
  * error. Every parameter error repeats the library's vafm_error message, which names the field, value
  * and range.
  */
+#include <signal.h>
+
 #include "cli/cli.h"
 #include "cli/cmd_client.h"
 #include "cli/study.h"
@@ -491,6 +493,9 @@ static int s_dispatch(const vafm_cli_args *a)
 
 int main(int argc, char **argv)
 {
+    /* A file-size limit (ulimit -f) must be an error naming the file, as a full disk is, not a kill:
+     * ignored, SIGXFSZ becomes EFBIG from write(), which the writers report and survive. */
+    signal(SIGXFSZ, SIG_IGN);
     const vafm_cli_command *ext = argc > 1 ? s_command_find(argv[1]) : NULL;
     if (ext && ext->main) {
         int erc = ext->main(argc - 1, argv + 1);

@@ -49,7 +49,7 @@ static const s_setting s_settings[] = {
     { "speed", S_SET_REAL, "", 0.01, 1000, 0, "pacing speed factor (1: real time; applies from the next run)" },
     { "free_run", S_SET_BOOL, "", 0, 1, 0, "true: no pacing, blocks are released as fast as computed" },
     { "block_s", S_SET_REAL, "s", 1e-3, 1e-2, 0, "duration of the samples of one data block" },
-    { "hwm", S_SET_INT, "messages", 1, 1e7, 1, "stream send high-water mark per subscriber (--hwm; read-only)" },
+    { "hwm", S_SET_INT, "messages", 1, 1e7, 1, "stream send high-water mark per subscriber (--hwm; read-only; at most 256 MiB queued per subscriber)" },
     { "kernel", S_SET_CHOICE, "", 0, 0, 0,
       "scalar|batch: how a campaign's curves are computed; batch (free run, not a map): ahead, several at once in "
       "SIMD lanes, the same curves bit for bit" },

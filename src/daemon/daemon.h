@@ -203,6 +203,7 @@ typedef struct vafmd_log {
 } vafmd_log;
 
 #define VAFMD_LOOKAHEAD_MAX_BYTES (256u << 20) /* memory of a run's compute-ahead FIFO (sim_thread.c) */
+#define VAFMD_STREAM_MAX_BYTES (256u << 20)   /* samples queued for one subscriber (sim_thread.c) */
 #define VAFMD_MAX_BLOCK_SAMPLES 262144 /* bounds a block's memory at very high sample rates */
 /* Samples per data block: round(fs · block duration), at least 1, at most VAFMD_MAX_BLOCK_SAMPLES. */
 static inline size_t vafmd_block_samples(double fs, double block_s)

@@ -44,7 +44,8 @@ static const char s_usage[] =
     "  --speed F          pacing speed factor in [0.01, 1000] (1: real time)\n"
     "  --free-run         no pacing: release blocks as fast as they are computed\n"
     "  --sensitivity S    detector sensitivity (InvOLS), m/V (default 50e-9)\n"
-    "  --hwm N            stream send high-water mark per subscriber, messages (default 1000)\n"
+    "  --hwm N            stream send high-water mark per subscriber, messages (default 1000; a run\n"
+    "                     of large messages gets fewer: at most 256 MiB queued per subscriber)\n"
     "  -h, --help         this text\n"
     "  --version          print the version\n"
     "\nSETTINGS (get/set like scene parameters): speed, free_run, block_s, hwm, lookahead_s (s of\n"
@@ -406,6 +407,8 @@ int main(int argc, char **argv)
     sigaddset(&block, SIGINT);
     sigaddset(&block, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &block, &old);
+    /* a file-size limit is a log write error (EFBIG, status.log.error), not a kill (SIGXFSZ) */
+    signal(SIGXFSZ, SIG_IGN);
     pthread_t th, lth, ath;
     int trc = pthread_create(&th, NULL, vafmd_sim_main, &d);
     int ltrc = trc ? -1 : pthread_create(&lth, NULL, vafmd_log_main, &d);

@@ -176,6 +176,7 @@ typedef struct s_ctx {
     s_run run;
     vafmd_campaign *camp;  /* the campaign in progress (owned), or NULL */
     int nodrop;            /* current ZMQ_XPUB_NODROP setting */
+    int sndhwm;            /* current ZMQ_SNDHWM of the stream (s_stream_bound), 0: the start's */
     int64_t t_boot;        /* CLOCK_MONOTONIC ns at thread start */
     vafmd_log_pool *pool;  /* the log block pool of the current block size, or NULL */
     vafmd_log_pool *retired; /* replaced pools with blocks still at the writer (freed once all are home) */
@@ -208,6 +209,27 @@ static void s_set_nodrop(s_ctx *x, int on)
         zmq_setsockopt(x->d->pub, ZMQ_XPUB_NODROP, &on, sizeof on);
         x->nodrop = on;
     }
+}
+
+/* Bound each subscriber's queue in bytes as well as in messages: the setting hwm counts messages, and
+ * a data message of a run carries up to VAFMD_MAX_BLOCK_SAMPLES samples of each channel (≈ 10 MB), so
+ * a subscriber that stops reading could make the daemon queue hwm × 10 MB (GB at the default 1000).
+ * Before a run, the send high-water mark becomes min(hwm, VAFMD_STREAM_MAX_BYTES / the run's largest
+ * message), at least 2; libzmq applies a changed ZMQ_SNDHWM to the pipes already connected too. */
+static void s_stream_bound(s_ctx *x, unsigned chmask, size_t block_n, int hwm_set)
+{
+    size_t nch = 0;
+    for (int i = 0; i < VAFMD_CH_COUNT; i++)
+        nch += chmask >> i & 1;
+    const double msg = 256.0 + (double)(nch * block_n * sizeof(double)); /* header and topic: < 256 B */
+    double h = floor((double)VAFMD_STREAM_MAX_BYTES / msg);
+    if (h > hwm_set)
+        h = hwm_set;
+    if (h < 2)
+        h = 2;
+    const int hwm = (int)h;
+    if (hwm != x->sndhwm && zmq_setsockopt(x->d->pub, ZMQ_SNDHWM, &hwm, sizeof hwm) == 0)
+        x->sndhwm = hwm;
 }
 
 /* Send one multipart message without blocking. With XPUB_NODROP on, a frame that some matching
@@ -1009,6 +1031,7 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     unsigned chmask = c->replay ? vafmd_replay_channels(c->replay)
                                 : VAFMD_CH_LIVE_MASK | (vafm_detector_height_differs(p) ? 1u << VAFMD_CH_HEIGHT_MEASURED : 0u);
     r->src_rc = 1;
+    s_stream_bound(x, chmask, r->block_n, c->set.hwm);
     int rc = s_queue_alloc(x, chmask, p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay));
     if (!rc && !c->replay)
     {

@@ -93,10 +93,21 @@ static int s_dataset(s_ctx *x, hid_t g, const char *gname, const char *name, int
         vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L7] %s: %s: is not a 1-D dataset", x->path, obj);
         goto done;
     }
-    if (dim < 1 || (*have_n && dim != *n)) {
+    if (dim < 1) {
+        vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L7] %s: %s: holds no samples (a channel has at least 1)",
+                     x->path, obj);
+        goto done;
+    }
+    if (*have_n && dim != *n) {
         vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj,
-                     "[L7] %s: %s: %llu samples where the group's other channels have %zu (same length, at least 1)",
-                     x->path, obj, (unsigned long long)dim, *n);
+                     "[L7] %s: %s: %llu samples where the group's other channels have %zu (same length)", x->path, obj,
+                     (unsigned long long)dim, *n);
+        goto done;
+    }
+    if (dim > VAFM_H5_MAX_SAMPLES) { /* before any allocation: a small file can declare terabytes */
+        vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj,
+                     "%s: %s: declares %llu samples, more than a curve may have (%llu, VAFM_H5_MAX_SAMPLES): not read",
+                     x->path, obj, (unsigned long long)dim, (unsigned long long)VAFM_H5_MAX_SAMPLES);
         goto done;
     }
     *n = (size_t)dim;
@@ -114,14 +125,14 @@ static int s_dataset(s_ctx *x, hid_t g, const char *gname, const char *name, int
                      unit, c->unit);
         goto done;
     }
+    if (vafm_h5i_storage_complete(o, dim)) { /* before the allocation: data that is not there is not read */
+        vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L2] %s: %s: part of the data has no storage (damaged chunk index)",
+                     x->path, obj);
+        goto done;
+    }
     *data = malloc(*n * (c->is_segment ? 1 : 8));
     if (!*data) {
         vafm_h5i_err(x->err, rc = VAFM_ENOMEM, obj, "%s: %s: out of memory", x->path, obj);
-        goto done;
-    }
-    if (vafm_h5i_storage_complete(o, dim)) {
-        vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L2] %s: %s: part of the data has no storage (damaged chunk index)",
-                     x->path, obj);
         goto done;
     }
     if (H5Dread(o, c->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, *data) < 0) {

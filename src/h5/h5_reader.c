@@ -226,6 +226,22 @@ static const char *s_class_name(H5T_class_t c)
     }
 }
 
+/* A conversion to the reader's type that would clamp a value (HDF5's default) aborts the read instead. */
+typedef struct s_conv_range {
+    int hit, low;
+} s_conv_range;
+
+static H5T_conv_ret_t s_conv_abort(H5T_conv_except_t e, hid_t src, hid_t dst, void *sbuf, void *dbuf, void *user)
+{
+    (void)src, (void)dst, (void)sbuf, (void)dbuf;
+    s_conv_range *r = user;
+    if (e != H5T_CONV_EXCEPT_RANGE_HI && e != H5T_CONV_EXCEPT_RANGE_LOW)
+        return H5T_CONV_UNHANDLED;
+    r->hit = 1;
+    r->low = e == H5T_CONV_EXCEPT_RANGE_LOW;
+    return H5T_CONV_ABORT;
+}
+
 static int s_read_channel(hid_t g, const char *path, const char *gname, const char *name, int ci, int read_data,
                           uint64_t file_size, size_t *n, int *have_n, vafm_h5i_curvebuf *buf, vafm_h5_curve *out,
                           vafm_error *err)
@@ -285,6 +301,10 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
                      path, obj, (unsigned long long)dims[0], (unsigned long long)*n);
         goto done;
     }
+    if (dims[0] == 0) {
+        vafm_h5i_err(err, rc, obj, "%s: %s holds no samples (L7: a channel has at least 1)", path, obj);
+        goto done;
+    }
     size_t esize = c->is_segment ? 1 : 8;
     /* gzip compresses at most ~1030:1: a longer claim is damage, not data */
     if (dims[0] > VAFM_H5_MAX_SAMPLES) { /* checked before any data is read: a small file of deflated zeros
@@ -326,8 +346,25 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
             vafm_h5i_err(err, rc, obj, "%s: %s: part of the data has no storage (damaged chunk index)", path, obj);
             goto done;
         }
-        if (*n && H5Dread(o, c->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT,
-                          dst) < 0) {
+        /* segment labels of a wider or signed type: a value outside 0-255 stops the read (HDF5 would clamp
+         * it, and -1 would pass as 0, the approach) */
+        s_conv_range conv = { 0 };
+        hid_t dx = c->is_segment ? H5Pcreate(H5P_DATASET_XFER) : H5P_DEFAULT;
+        if (dx < 0 || (c->is_segment && H5Pset_type_conv_cb(dx, s_conv_abort, &conv) < 0)) {
+            if (dx >= 0 && dx != H5P_DEFAULT)
+                H5Pclose(dx);
+            vafm_h5i_err_hdf5(err, rc, obj, "%s: %s: cannot be read", path, obj);
+            goto done;
+        }
+        herr_t rrc = *n ? H5Dread(o, c->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, dx, dst) : 0;
+        if (dx != H5P_DEFAULT)
+            H5Pclose(dx);
+        if (rrc < 0 && conv.hit) {
+            vafm_h5i_err(err, rc, obj, "%s: %s holds a value outside 0-255 (%s; segment labels are 0 approach, 1 "
+                         "retract, 2 dwell)", path, obj, conv.low ? "negative" : "above 255");
+            goto done;
+        }
+        if (rrc < 0) {
             vafm_h5i_err_hdf5(err, rc, obj, "%s: %s: data cannot be read (damaged file or checksum mismatch)", path, obj);
             goto done;
         }

@@ -361,7 +361,8 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
             vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
             goto done;
         }
-        memcpy(w->rows, rows, (size_t)c * sizeof *rows);
+        if (c) /* a file killed before its first curve has no rows (rows NULL) */
+            memcpy(w->rows, rows, (size_t)c * sizeof *rows);
         w->nrows = (size_t)c;
     }
     if (s_merge_rows(w) || H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0) {
