@@ -430,8 +430,13 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         if (!strcmp(json_string_value(cmd), s_cmd_names[i]) && strlen(s_cmd_names[i]) == json_string_length(cmd))
             kind = i;
     if (kind < 0) {
-        vafmd_err_set(e, VAFMD_E_UNKNOWN_COMMAND, "cmd", "unknown command '%.64s' (known: hello get set presets "
-                      "curve tune abort status shutdown campaign log replay faults)", json_string_value(cmd));
+        char known[256] = ""; /* from the table, so the list cannot miss one (0.6.1's lacked map) */
+        for (size_t i = 0; i < sizeof s_cmd_names / sizeof *s_cmd_names; i++)
+            if (s_cmd_names[i])
+                snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s", known[0] ? " " : "",
+                         s_cmd_names[i]);
+        vafmd_err_set(e, VAFMD_E_UNKNOWN_COMMAND, "cmd", "unknown command '%.64s' (known: %s)",
+                      json_string_value(cmd), known);
         return -1;
     }
     const char *key;
