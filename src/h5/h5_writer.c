@@ -483,24 +483,32 @@ static int s_grid_json(const vafm_campaign_spec *g, char *buf, size_t len)
     return k < 0 || (size_t)k >= len - pos ? -1 : 0;
 }
 
-/* Name the first JSON key at which a and b differ (the key whose value holds the difference). */
+/* Name the first JSON key at which a and b differ: the last key of a that starts at or before the first
+ * differing character (the key whose value holds the difference, or the key name that differs: 0.6.1
+ * said '?' when the first key's name itself differed). */
 static void s_first_diff_key(const char *a, const char *b, char *key, size_t len)
 {
     size_t i = 0;
     while (a[i] && a[i] == b[i])
         i++;
     snprintf(key, len, "?");
-    /* walk back to the last "name": before the difference */
-    for (size_t j = i; j-- > 0;) {
-        if (a[j] == ':' && j > 0 && a[j - 1] == '"') {
-            size_t e = j - 1, s = e;
-            while (s > 0 && a[s - 1] != '"')
-                s--;
-            size_t m = e - s < len - 1 ? e - s : len - 1;
-            memcpy(key, a + s, m);
+    for (size_t j = 0; a[j] && j <= i; j++) {
+        if (a[j] != '"')
+            continue;
+        size_t e = j + 1; /* the string's closing quote */
+        while (a[e] && a[e] != '"')
+            e += a[e] == '\\' && a[e + 1] ? 2 : 1;
+        size_t k = a[e] ? e + 1 : e;
+        while (a[k] == ' ')
+            k++;
+        if (a[k] == ':') { /* a key */
+            size_t m = e - (j + 1) < len - 1 ? e - (j + 1) : len - 1;
+            memcpy(key, a + j + 1, m);
             key[m] = 0;
-            return;
         }
+        if (!a[e])
+            break;
+        j = e;
     }
 }
 
