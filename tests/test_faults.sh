@@ -124,6 +124,23 @@ expect "-n 1e9 over three points: the file size is estimated and refused" 2 "mor
     campaign -n 1000000000 --preset paper-fig4 --T 1,2,3 --out huge.h5
 if [ ! -e big.h5 ] && [ ! -e huge.h5 ]; then ok "refused campaigns leave no file"; else bad "refused campaigns leave no file"; fi
 
+# 0.6.2: a grid of 1e9 points is refused before its statistics are allocated; a grid too long for the file's
+# 'vafm grid' attribute is refused before the file is created or overwritten (0.6.1 truncated it first);
+# short curves count their metadata in the disk check (0.6.1: 4e-10 GB estimated for 3.8 MB)
+L1000=$(printf '300,%.0s' $(seq 1000)); L1000=${L1000%,}
+expect "a grid of 1000 x 1000 x 1000 points is refused, naming the limit" 2 "at most 65536" -- \
+    curves -n 1 --threads 1 -q --preset cell-liquid --T "$L1000" --v "$L1000" --k "$L1000"
+run campaign -n 2 "${FAST[@]}" --out keepgrid.h5
+cp keepgrid.h5 keepgrid0.h5
+L20000=$(printf '300,%.0s' $(seq 20000)); L20000=${L20000%,}
+expect "a grid too long for the file is refused, naming T_K" 2 "T_K has the most" -- \
+    campaign -n 1 "${FAST[@]}" --T "$L20000" --out keepgrid.h5 --overwrite
+if cmp -s keepgrid0.h5 keepgrid.h5; then ok "... and the file it would have overwritten is unchanged"
+else bad "... and the file it would have overwritten is unchanged" "$(ls -l keepgrid.h5)"; fi
+expect "-n 1e9 curves of 2 samples are refused by the disk check" 2 "more than the" -- \
+    campaign -n 1000000000 --v 300 --preset cell-liquid --threads 1 --out tiny.h5
+if [ ! -e tiny.h5 ]; then ok "... and leave no file"; else bad "... and leave no file"; fi
+
 # ---- 6: a decompression bomb -------------------------------------------------------------------
 if "$PY" -c 'import h5py, numpy' 2>/dev/null; then
     "$PY" - <<'EOF'

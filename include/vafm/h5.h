@@ -168,6 +168,15 @@ VAFM_API int vafm_h5_writer_set_provenance(vafm_h5_writer *w, const vafm_params 
                                            const vafm_campaign_spec *grid, vafm_error *err);
 
 /**
+ * Check that a scene and a grid can be recorded: their JSON texts (the root attributes "vafm scene" and
+ * "vafm grid") fit the format's 64 KiB each. Call before creating or overwriting a file, so that a grid
+ * too long to record leaves any file as it was (vafm_h5_writer_set_provenance would refuse it after
+ * vafm_h5_writer_open had created or truncated the file).
+ * @return 0, VAFM_EINVAL (naming the grid's longest list, or "scene"), VAFM_ENOMEM.
+ */
+VAFM_API int vafm_h5_provenance_check(const vafm_params *scene, const vafm_campaign_spec *grid, vafm_error *err);
+
+/**
  * Check, without changing a byte of it, that `path` can be resumed with this scene and grid: a vafm file
  * of this format major version whose stored scene and grid equal them (as vafm_h5_writer_set_provenance
  * compares them). Call before vafm_h5_writer_open with resume, which may drop an unflushed tail.

@@ -50,6 +50,7 @@ enum { VAFM_CLI_EXIT_OK = 0, VAFM_CLI_EXIT_RUNTIME = 1, VAFM_CLI_EXIT_USAGE = 2 
 #define VAFM_CLI_PROGRESS_PERIOD_S 0.5
 #define VAFM_CLI_CHUNK_SAMPLES 64 /* samples per vafm_sim_advance call: progress granularity of one curve */
 #define VAFM_CLI_MAX_TOTAL_CURVES 1000000000000000ULL
+#define VAFM_CLI_MAX_POINTS 65536 /* grid points of curves and campaign (--T x --v x --k) */
 #define VAFM_CLI_MAX_CURVE_ERRORS 20 /* vafm info names at most this many unreadable curves */
 
 enum vafm_cli_opt {

@@ -92,6 +92,16 @@ static int s_grid_parse(const vafm_cli_args *a, s_grid *g)
     g->spec.curves_per_point = N;
     g->spec.threads = (int)threads;
     g->spec.first_curve = first;
+    /* the lists' product, in double (three long lists overflow a size_t): each point has its statistics
+     * and is validated before the first curve (0.6.1 tried to allocate 1e9 points' statistics) */
+    const double npd = (double)(g->spec.n_T ? g->spec.n_T : 1) * (double)(g->spec.n_v ? g->spec.n_v : 1) *
+                       (double)(g->spec.n_k ? g->spec.n_k : 1);
+    if (npd > VAFM_CLI_MAX_POINTS) {
+        vafm_cli_error("vafm %s: the grid --T x --v x --k has %.6g points (%zu x %zu x %zu values); at most %d",
+                       a->cmd->name, npd, g->spec.n_T ? g->spec.n_T : 1, g->spec.n_v ? g->spec.n_v : 1,
+                       g->spec.n_k ? g->spec.n_k : 1, VAFM_CLI_MAX_POINTS);
+        return VAFM_CLI_EXIT_USAGE;
+    }
     size_t np = vafm_campaign_points(&g->spec);
     if ((double)np * (double)N > (double)VAFM_CLI_MAX_TOTAL_CURVES) {
         vafm_cli_error("vafm %s: %zu grid points x %" PRIu64 " curves is too many", a->cmd->name, np, N);

@@ -2,7 +2,6 @@
 /* `vafm info` and `vafm export`: HDF5 force-curve files, vafm's or another program's. */
 #include "cli/cli.h"
 
-#define S_INFO_MAX_POINTS 65536 /* grid points whose statistics info prints (one line each) */
 
 /* ---- vafm info ------------------------------------------------------------------------------------ */
 
@@ -194,10 +193,10 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
          * file); counted in double, as the product of three list lengths may not fit a size_t */
         const double npd = (double)(ip.spec.n_T ? ip.spec.n_T : 1) * (double)(ip.spec.n_v ? ip.spec.n_v : 1) *
                            (double)(ip.spec.n_k ? ip.spec.n_k : 1);
-        vafm_point_stats *stats = npd <= S_INFO_MAX_POINTS ? calloc(np, sizeof *stats) : NULL;
-        if (npd > S_INFO_MAX_POINTS)
+        vafm_point_stats *stats = npd <= VAFM_CLI_MAX_POINTS ? calloc(np, sizeof *stats) : NULL;
+        if (npd > VAFM_CLI_MAX_POINTS)
             printf("statistics   not summed up: the grid has %.6g points (info sums up at most %d)\n", npd,
-                   S_INFO_MAX_POINTS);
+                   VAFM_CLI_MAX_POINTS);
         if (stats) {
             uint64_t missing = vafm_cli_truth_stats(r, np, stats);
             vafm_cli_print_statistics(stdout, &ip.p, &ip.spec, stats);

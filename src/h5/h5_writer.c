@@ -537,6 +537,34 @@ static int s_prov_compare(const char *path, const char *stored_scene, const char
     return VAFM_EINVAL;
 }
 
+int vafm_h5_provenance_check(const vafm_params *scene, const vafm_campaign_spec *grid, vafm_error *err)
+{
+    char *sj = malloc(S_JSON_MAX), *gj = malloc(S_JSON_MAX);
+    int rc = 0;
+    if (!sj || !gj) {
+        vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "out of memory");
+    } else if (scene && vafm_params_to_json(scene, sj, S_JSON_MAX) < 0) {
+        vafm_h5i_err(err, rc = VAFM_EINVAL, "scene", "the scene does not fit in %d bytes of JSON", S_JSON_MAX);
+    } else if (s_grid_json(grid, gj, S_JSON_MAX)) {
+        /* name the longest list: the one to shorten */
+        const char *f = "grid";
+        size_t n = 0;
+        if (grid && grid->T_K && grid->n_T > n)
+            f = "T_K", n = grid->n_T;
+        if (grid && grid->v_m_per_s && grid->n_v > n)
+            f = "v_m_per_s", n = grid->n_v;
+        if (grid && grid->k_N_per_m && grid->n_k > n)
+            f = "k_N_per_m", n = grid->n_k;
+        vafm_h5i_err(err, rc = VAFM_EINVAL, f,
+                     "the grid's lists (T_K %zu, v_m_per_s %zu, k_N_per_m %zu values) do not fit in the %d bytes of "
+                     "the file's 'vafm grid' (about 2500 values in all); %s has the most", grid ? grid->n_T : 0,
+                     grid ? grid->n_v : 0, grid ? grid->n_k : 0, S_JSON_MAX, f);
+    }
+    free(sj);
+    free(gj);
+    return rc;
+}
+
 int vafm_h5_resume_check(const char *path, const vafm_params *scene, const vafm_campaign_spec *grid, vafm_error *err)
 {
     if (!path || !scene) {

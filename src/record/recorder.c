@@ -186,7 +186,9 @@ int vafm_recorder_open(vafm_recorder **out, const char *path, const vafm_recorde
     wo.gzip_level = o.gzip_level;
     double t0 = s_now();
     /* a resume that would be refused (another scene or grid) is refused before a byte of the file changes */
-    int rc = wo.resume && scene ? vafm_h5_resume_check(path, scene, grid, err) : 0;
+    int rc = scene ? vafm_h5_provenance_check(scene, grid, err) : 0; /* before any file is touched */
+    if (!rc && wo.resume && scene)
+        rc = vafm_h5_resume_check(path, scene, grid, err);
     if (!rc)
         rc = vafm_h5_writer_open(&r->w, path, &wo, err);
     if (!rc && scene) {
