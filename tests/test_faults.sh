@@ -204,6 +204,14 @@ EOF
     run info bigshape.h5
     if [ "$rc" -eq 0 ] && ! grep -q "^map " "$TMP/out"; then ok "info prints no map for a grid shape of 2^32 + 1"
     else bad "info prints no map for a grid shape of 2^32 + 1" "exit $rc: $(grep "^map" "$TMP/out")"; fi
+    cp full3.h5 unitarr.h5
+    "$PY" -c '
+import h5py, numpy as np
+with h5py.File("unitarr.h5", "r+") as f:
+    d = f["0"]["force"]; del d.attrs["unit"]
+    d.attrs.create("unit", np.array(["N", "N"], dtype=h5py.string_dtype()))'
+    expect "a unit attribute of two strings is named as such (0.6.1: \"is ''\")" 1 "holds 2 values" -- \
+        export unitarr.h5 --curve 0
 else
     ok "hostile grids: skipped (no h5py for $PY)"
 fi

@@ -290,7 +290,12 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
         vafm_h5i_err_hdf5(err, rc, obj, "%s: %s: attribute 'unit' cannot be read (damaged file)", path, obj);
         goto done;
     }
-    if (unit.cls != H5T_STRING || unit.npoints != 1 || strcmp(unit.s, c->unit)) {
+    if (unit.npoints != 1) {
+        vafm_h5i_err(err, rc, obj, "%s: %s: attribute 'unit' holds %lld values, the layout wants the single string '%s'",
+                     path, obj, (long long)unit.npoints, c->unit);
+        goto done;
+    }
+    if (unit.cls != H5T_STRING || strcmp(unit.s, c->unit)) {
         vafm_h5i_err(err, rc, obj, "%s: %s: attribute 'unit' is %s%s%s, the layout wants the string '%s'", path, obj,
                      unit.cls == H5T_STRING ? "'" : s_class_name(unit.cls), unit.cls == H5T_STRING && unit.s ? unit.s : "",
                      unit.cls == H5T_STRING ? "'" : "", c->unit);
