@@ -391,6 +391,7 @@ def vafm_info_ok(path):
         return
     p = subprocess.run([VAFM_CLI, "info", str(path)], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stdout + p.stderr
+    assert "conformance  ok" in p.stdout, p.stdout  # 0.6.1: a detector log failed [V2] (no tip position)
 
 
 def test_log_file_equals_stream(fig4, tmp_path):

@@ -248,6 +248,41 @@ def test_detector_faults_kept_as_is(fig4, tmp_path):
         assert rc == 1 and "detector dropout" in err and "L16" in err, err
 
 
+def test_altered_force_written_without_tip(fig4, tmp_path):
+    """A saturate or stuck-dropout fault alters the force and not the ground-truth tip, so the force is a
+    measured one: vafmd's log and `vafm listen` write the curve without 'tip position' (hdf5.md V2, as with
+    the detector on). 0.6.1 refused it (L14: log_failed in the log, exit 1 in listen)."""
+    h5py = pytest.importorskip("h5py")
+    c = fig4.client
+    log = tmp_path / "log.h5"
+    assert c.request({"cmd": "log", "path": str(log)})["status"] == "ok"
+    plans = [{"script": [{"kind": "saturate", "block": 2, "samples": 10}]},
+             {"script": [{"kind": "dropout", "block": 2, "samples": 10, "value": "stuck"}]}]
+    for i, plan in enumerate(plans):
+        c.faults(plan)
+        out = tmp_path / f"listen{i}.h5"
+        li = fig4.listen("--out", str(out), "--runs", "1")
+        c.curve(index=1)
+        c.wait_idle()
+        rc, err = finish(li)
+        assert rc == 0, err
+        with h5py.File(out, "r") as f:
+            assert "tip position" not in f["0"] and "force" in f["0"]
+    for _ in range(100):  # the writer appends after the run's end
+        if c.status()["log"]["curves"] == 2:
+            break
+        time.sleep(0.05)
+    st = c.status()["log"]
+    assert st["curves"] == 2 and st["curves_dropped"] == 0, st
+    assert c.request({"cmd": "log", "stop": True})["status"] == "ok"
+    with h5py.File(log, "r") as f:
+        assert len(f) == 2 and all("tip position" not in f[g] for g in f)
+    if VAFM_CLI:
+        for p in (log, tmp_path / "listen0.h5", tmp_path / "listen1.h5"):
+            r = subprocess.run([VAFM_CLI, "info", str(p)], capture_output=True, text=True, timeout=60)
+            assert r.returncode == 0 and "conformance  ok" in r.stdout, r.stdout + r.stderr
+
+
 def test_no_trigger(fig4):
     """A trigger that never fires: the approach runs to its travel limit and the curve says so (flag 8,
     no_trigger), the record names the run and the block where the approach turned, and the next curve

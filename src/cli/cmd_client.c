@@ -579,6 +579,7 @@ typedef struct s_run {
     uint64_t gaps;
     int restarted;         /* the publisher restarted (a new session) while the run was received */
     uint64_t clipped;      /* blocks flagged CLIPPED (ADC saturation) */
+    int altered;           /* a saturate or dropout fault record of this run: its force is not the physics' */
     double *col[S_NCH], *time_s;
     uint8_t *seg;
     size_t n, cap;
@@ -615,6 +616,7 @@ static void s_run_reset(s_run *r)
     r->gaps = 0;
     r->restarted = 0;
     r->clipped = 0;
+    r->altered = 0;
     r->n = 0;
 }
 
@@ -711,14 +713,17 @@ static int s_write_h5(s_listen *L, const s_run *r, json_t *end)
                       .deflection_m = r->col[1], .force_N = r->col[2], .tip_m = r->col[4], .segment = r->seg,
                       .height_measured_m = r->map[5] >= 0 ? r->col[5] : NULL};
     /* with the detector signals on, force is the measured (noisy) one: no tip position = height + force/k
-     * column then (hdf5.md L14), as in vafmd's own log (wire.md §3.1.1); the file's provenance is the
+     * column then (hdf5.md L14), as in vafmd's own log (wire.md §3.1.1); so with a saturate (CLIPPED
+     * blocks) or stuck-dropout fault of the run (its record on the "faults" topic), which alters the
+     * force and not the ground-truth tip (0.6.1 refused those curves); the file's provenance is the
      * scene of its first curve, as vafmd's log does */
     vafm_record_curve rec = { .samples = &s, .params = &p, .result = &res,
                               .point = s_ju64(json_object_get(r->start, "campaign"), "point"),
                               .run_id = (uint64_t)r->run_id,
                               .client_run_id = json_string_value(json_object_get(r->start, "client_run_id")),
                               .sensitivity_m_per_V = s_jnum(r->start, "sensitivity_m_per_V"),
-                              .measured_force = json_is_true(json_object_get(json_object_get(r->start, "detector"), "on")) };
+                              .measured_force = json_is_true(json_object_get(json_object_get(r->start, "detector"), "on")) ||
+                                                r->clipped || r->altered };
     res.index = s_ju64(r->start, "index");
     if ((rc = vafm_recorder_append(L->w, &rec, &e)) != 0) {
         s_err(L->x, "%s: run %" PRId64 ": %s%s%s", L->out, r->run_id, e.message, e.field[0] ? " at " : "",
@@ -1018,6 +1023,18 @@ int vafm_cli_listen(int argc, char **argv)
             if (hb_uptime >= 0 && up - hb_uptime >= 1.5)
                 s_err(&x, "the stream stalled: no message for %.1f s (heartbeats included)", up - hb_uptime);
             hb_uptime = up;
+        }
+        if (m.kind == VAFM_MSG_OTHER && !strcmp(m.topic, "faults") && m.json) {
+            /* a controller fault that altered the force of the run being recorded (the client library
+             * leaves this topic unparsed: run_id -1) */
+            json_t *fr = json_loads(m.json, 0, NULL);
+            const char *kind = json_string_value(json_object_get(fr, "kind"));
+            const json_t *rid = json_object_get(fr, "run_id");
+            if (r.active && !r.skip && json_is_integer(rid) && json_integer_value(rid) == r.run_id && kind &&
+                (!strcmp(kind, "saturate") || !strcmp(kind, "dropout")))
+                r.altered = 1;
+            json_decref(fr);
+            continue;
         }
         if (r.active && !r.skip && m.run_id != r.run_id &&
             (m.kind == VAFM_MSG_RUN_START || m.kind == VAFM_MSG_HEARTBEAT ||

@@ -144,6 +144,7 @@ typedef struct vafmd_log_begin {
 typedef struct vafmd_log_end {
     int ok;                   /* 1: the curve ran to its end (aborted and failed curves are not logged) */
     int broken;               /* 1: a block of it was lost (full ring, empty pool) */
+    int force_altered;        /* 1: a saturate or stuck-dropout fault altered its force (protocol/faults.md) */
     vafm_curve_result result;
 } vafmd_log_end;
 

@@ -110,13 +110,14 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
                        .height_measured_m = c->has_measured ? c->height_measured_m : NULL };
     /* the group number is the file's curve count; the random stream index and the run are kept in the
      * curve id (the curve-group attribute list is closed). With the detector on the force is a measured
-     * (noisy, quantised) one, so "tip position" = height + force/k (hdf5.md L14) is left out. */
+     * (noisy, quantised) one, so "tip position" = height + force/k (hdf5.md L14) is left out; so it is
+     * when a saturate or stuck-dropout fault altered the force (0.6.1 refused such a curve: log_failed). */
     vafm_curve_result res = end->result;
     res.index = c->begin->index;
     vafm_record_curve rc = { .samples = &s, .params = &c->begin->p, .result = &res, .point = c->begin->point,
                              .run_id = c->begin->run_id, .client_run_id = c->begin->client_run_id,
                              .sensitivity_m_per_V = c->begin->p.sensitivity_m_per_V,
-                             .measured_force = c->begin->detector };
+                             .measured_force = c->begin->detector || end->force_altered };
     if (c->begin->is_map) {
         rc.map = &c->begin->map;
         rc.pixel = &c->begin->pixel;

@@ -134,6 +134,8 @@ typedef struct s_run {
     uint64_t drop_left;            /* blocks still to drop */
     vafmd_fault_rec drop_rec;
     uint64_t sat_left, dout_left;  /* controller faults: samples still to alter */
+    int force_altered;             /* a controller fault altered the measured chain: the log's force is a
+                                      measured one (no tip position column, as with the detector on) */
     double sat_level;
     int dout_stuck;
     int no_trig;                   /* a no_trigger fault struck this curve: its record waits for the turn */
@@ -421,12 +423,14 @@ static void s_fault_compute(s_ctx *x, s_block *b, uint64_t bi)
             b->ch[2][i] = k * b->ch[1][i];
         }
         b->flags |= VAFM_WIRE_FLAG_CLIPPED;
+        r->force_altered = 1;
     }
     if (r->dout_left) {
         if (bi == 0 && !r->dout_stuck) /* nothing before: NaN; stuck at the first sample's values */
             r->last_v[0] = r->last_v[1] = r->last_v[2] = NAN;
         else if (bi == 0)
             r->last_v[0] = b->ch[3][0], r->last_v[1] = b->ch[1][0], r->last_v[2] = b->ch[2][0];
+        r->force_altered = 1;
         for (i = 0; i < b->n && r->dout_left; i++, r->dout_left--) {
             b->ch[3][i] = r->dout_stuck ? r->last_v[0] : NAN;
             b->ch[1][i] = r->dout_stuck ? r->last_v[1] : NAN;
@@ -907,6 +911,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
         if (le) {
             le->ok = !strcmp(status, "ok") && !err_code && !silent;
             le->broken = r->log_broken;
+            le->force_altered = r->force_altered;
             if (s_run_result(r, &le->result))
                 le->ok = 0;
             log_pending = le->ok;
