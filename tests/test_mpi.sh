@@ -156,6 +156,20 @@ if "$VAFM" "${MAP[@]}" -o "$TMP/mapref.h5" >/dev/null 2>&1 &&
 else
     bad "mpirun -np 2 vafm map" "$(tail -c 300 "$TMP/map2.out")"
 fi
+# 0.6.2: an 8 x 8 map of uneven curves on 2 ranks with the batch kernel (16 curves in flight per worker) hung
+# in 6 of 10 runs: a fast rank took the whole reorder window while the slow rank's worker held the next
+# curve to write in a lane and waited for an index. Per-rank quotas; three runs, each must finish.
+MAPU=(map --preset contact-silica --nx 8 --ny 8 --size 4e-6 --pattern domains --pattern-param domain_m=1e-6
+      --threads 1 --kernel batch -q)
+"$VAFM" "${MAPU[@]}" -o "$TMP/mapuref.h5" >/dev/null 2>&1
+hung=0
+for i in 1 2 3; do
+    rm -f "$TMP/mapu.h5"
+    timeout -s KILL 60 "${MPI[@]}" -np 2 "$VAFM" "${MAPU[@]}" -o "$TMP/mapu.h5" >"$TMP/mapu.out" 2>&1 || hung=$((hung + 1))
+done
+if [ $hung -eq 0 ]; then ok "mpirun -np 2 vafm map, 8 x 8 uneven curves, batch kernel: 3 of 3 runs finish"
+else bad "mpirun -np 2 vafm map, 8 x 8 uneven curves, batch kernel: every run finishes" "$hung of 3 hung or failed"; fi
+same "... and the last equals the plain map" "$TMP/mapuref.h5" "$TMP/mapu.h5"
 timeout 60 "${MPI[@]}" -np 1 "$VAFM" "${MAP[@]}" -o "$TMP/mapmix.h5" : -np 1 "$VAFM" "${MAP0[@]}" --nx 5 \
     -o "$TMP/mapmix.h5" >"$TMP/mapmix.out" 2>&1
 st=$?

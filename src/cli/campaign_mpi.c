@@ -11,8 +11,14 @@
  *
  * Balancing: indices go out one at a time on request (dynamic self-scheduling), so a rank that drew
  * slow curves simply asks less often. Each rank keeps one request in flight ahead of its threads, to
- * hide the round trip. Rank 0 hands out no index more than `window` ahead of the next curve it has to
- * write, which bounds the curves it buffers for reordering.
+ * hide the round trip. Rank 0 hands each rank at most `quota` indices it has not written yet (the rank's
+ * campaign window, its send queue and its prefetched index, with slack), which bounds the curves it
+ * buffers for reordering to ranks x quota. A quota per rank, not one window for all: with one window a
+ * fast rank could take all of it while a slow rank's batch worker held the next curve to write in a lane;
+ * that worker then asked for an index to fill another lane, waited for it, and so never finished the
+ * curve rank 0 was waiting for (0.6.1: `mpirun -np 2 vafm map`, 8 x 8, hung in a third of the runs).
+ * Within its quota a rank's request is answered at once, and a rank whose quota is used up has curves
+ * waiting at rank 0 only behind another rank's curve, which that rank can always finish.
  *
  * Messages: REQ rank→0 "one more index"; IDX 0→rank (on a duplicate of MPI_COMM_WORLD, so rank 0's
  * service thread never probes its own replies), the index or S_NONE; CURVE
@@ -456,13 +462,16 @@ static int s_send_curve(void *user, const vafm_campaign_curve *c)
 
 typedef struct s_slot {
     char *buf; /* the packed curve, NULL: not in yet */
+    int owner; /* the rank the index went to */
 } s_slot;
 
 typedef struct s_server {
     vafm_cli_mpi *m;
     const vafm_params *point_params;
     uint64_t N, total, next, deliver_next;
-    size_t window;
+    size_t window;         /* ranks x quota: the indices in [deliver_next, next) never exceed it */
+    uint64_t quota;        /* indices a rank may hold that are not written yet */
+    uint64_t *held;        /* per rank: its indices in [deliver_next, next) */
     s_slot *slots;
     int *pending;          /* ranks waiting for an index, FIFO */
     int n_pending;
@@ -502,22 +511,25 @@ static void s_deliver(s_server *sv)
         }
         free(sl->buf);
         sl->buf = NULL;
+        sv->held[sl->owner]--;
         sv->deliver_next++;
     }
 }
 
-/* With the MPI lock held: answer the waiting ranks the window allows. */
+/* With the MPI lock held: answer the waiting ranks their quotas allow. */
 static void s_answer(s_server *sv)
 {
     int kept = 0;
     for (int i = 0; i < sv->n_pending; i++) {
         int to = sv->pending[i];
         uint64_t idx;
-        if (sv->stop || sv->error || sv->next >= sv->total)
+        if (sv->stop || sv->error || sv->next >= sv->total) {
             idx = S_NONE;
-        else if (sv->next < sv->deliver_next + sv->window)
+        } else if (sv->held[to] < sv->quota) { /* then next − deliver_next < ranks x quota = window */
             idx = sv->next++;
-        else {
+            sv->slots[idx % sv->window].owner = to;
+            sv->held[to]++;
+        } else {
             sv->pending[kept++] = to;
             continue;
         }
@@ -606,8 +618,8 @@ int vafm_cli_mpi_run(vafm_cli_mpi *m, const vafm_params *base, const vafm_campai
     m->threads_total = total_threads;
     /* the indices every rank's campaign may hold ahead of delivery (the batch kernel keeps several curves
      * per thread in flight): rank 0 must hand out that many ahead, or a rank waits on it forever */
-    int ahead = (int)vafm_campaign_window(base, &sp), total_ahead = ahead;
-    if (s_allreduce(m, &ahead, &total_ahead, 1, MPI_INT, MPI_SUM))
+    int ahead = (int)vafm_campaign_window(base, &sp), max_ahead = ahead;
+    if (s_allreduce(m, &ahead, &max_ahead, 1, MPI_INT, MPI_MAX))
         return VAFM_EIO;
 
     s_server sv;
@@ -621,16 +633,18 @@ int vafm_cli_mpi_run(vafm_cli_mpi *m, const vafm_params *base, const vafm_campai
         sv.N = sp.curves_per_point;
         sv.total = sv.N * (uint64_t)np;
         sv.next = sv.deliver_next = sp.first_curve < sv.total ? sp.first_curve : sv.total;
-        /* Every rank's campaign window (every thread busy with its curves in flight, and slack for uneven
-         * curves), every rank one index ahead, and as much again. */
-        sv.window = (size_t)total_ahead + 2 * (size_t)m->size;
+        /* A rank's quota: its campaign's window (every thread busy with its curves in flight), the curves
+         * its sender may queue, its prefetched index and slack for uneven curves. */
+        sv.quota = (uint64_t)max_ahead + S_SENDS + 4;
+        sv.window = (size_t)sv.quota * (size_t)m->size;
+        sv.held = calloc((size_t)m->size, sizeof *sv.held);
         sv.fn = fn;
         sv.user = user;
         pp = calloc(np, sizeof *pp);
         sv.slots = calloc(sv.window, sizeof *sv.slots);
         sv.pending = calloc((size_t)m->size, sizeof *sv.pending);
         sv.per_rank = calloc((size_t)m->size, sizeof *sv.per_rank);
-        if (!pp || !sv.slots || !sv.pending || !sv.per_rank) {
+        if (!pp || !sv.slots || !sv.pending || !sv.per_rank || !sv.held) {
             fprintf(stderr, "vafm: out of memory\n");
             MPI_Abort(MPI_COMM_WORLD, 1);
         }
@@ -693,6 +707,7 @@ int vafm_cli_mpi_run(vafm_cli_mpi *m, const vafm_params *base, const vafm_campai
     for (size_t i = 0; i < sv.window; i++)
         free(sv.slots[i].buf);
     free(sv.slots);
+    free(sv.held);
     free(sv.pending);
     free(pp);
     m->per_rank = sv.per_rank;
