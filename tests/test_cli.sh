@@ -53,6 +53,12 @@ run help run
 if [ "$rc" -eq 0 ] && grep -q "^vafm run" "$TMP/out" && grep -q "^  k_N_per_m " "$TMP/out"; then ok "help run"; else bad "help run" "exit $rc"; fi
 run curves --help
 if [ "$rc" -eq 0 ] && grep -q -- "--threads" "$TMP/out"; then ok "curves --help"; else bad "curves --help" "exit $rc"; fi
+# an integer field shows its own range from the table (0.6.1 showed [0, 2^64-1], the seed's, for all)
+run help params
+if [ "$rc" -eq 0 ] && grep -qE '^  adc_bits +bits +integer \[0, 24\] ' "$TMP/out" &&
+    grep -qE '^  segment_samples +samples +integer \[0, 16777216\] ' "$TMP/out" &&
+    grep -qE '^  seed +- +integer \[0, 2\^64-1\] ' "$TMP/out"; then ok "help params: integer fields show their own range"
+else bad "help params integer ranges" "exit $rc: $(grep -E '^  (adc_bits|segment_samples|seed) ' "$TMP/out")"; fi
 run --version
 if [ "$rc" -eq 0 ] && grep -q "^vafm [0-9]" "$TMP/out"; then ok "--version"; else bad "--version" "exit $rc"; fi
 

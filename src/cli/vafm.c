@@ -250,10 +250,15 @@ static void s_print_param_help(FILE *o)
             snprintf(allowed, sizeof allowed, "[%.6g, %.6g]", f->min, f->max);
             snprintf(shown, sizeof shown, "%.6g", strtod(val, NULL));
         } else {
-            snprintf(allowed, sizeof allowed, "%s",
-                     f->kind == VAFM_PARAM_CHOICE ? f->choices
-                     : f->kind == VAFM_PARAM_BOOL ? "true|false"
-                                                  : "integer [0, 2^64-1]");
+            /* an INT field has its own range in the table (adc_bits [0, 24], segment_samples [0, 16777216]);
+             * only the seed spans all of uint64 */
+            if (f->kind == VAFM_PARAM_INT)
+                snprintf(allowed, sizeof allowed, "integer [%.0f, %.0f]", f->min, f->max);
+            else
+                snprintf(allowed, sizeof allowed, "%s",
+                         f->kind == VAFM_PARAM_CHOICE ? f->choices
+                         : f->kind == VAFM_PARAM_BOOL ? "true|false"
+                                                      : "integer [0, 2^64-1]");
             snprintf(shown, sizeof shown, "%.63s", val);
         }
         fprintf(o, "  %-20s %-6s %-32s %s\n  %-20s %s\n", f->name, f->unit[0] ? f->unit : "-", allowed, shown, "",
