@@ -88,6 +88,23 @@ if grep -q '"T_K": 123.456,' "$TMP/mod.json" && grep -q '"integrator": "baoab"' 
 
 run params --json --k_N_per_m 1 --k_N_per_m=2
 if [ "$rc" -eq 0 ] && grep -q '"k_N_per_m": 2,' "$TMP/out"; then ok "overrides apply in order"; else bad "override order" "exit $rc"; fi
+# --T, --v and --k (a campaign's grid axes) set a single scene in command-line order too (0.6.1 applied them
+# after every other override: the first value won)
+run params --json --k 1 --k_N_per_m 2
+kk=$rc; grep -q '"k_N_per_m": 2,' "$TMP/out"; kk=$((kk + $?))
+run params --json --k_N_per_m 2 --k 1
+grep -q '"k_N_per_m": 1,' "$TMP/out"; kk=$((kk + rc + $?))
+run params --json --speed 2um/s --v 5um/s --v_retract_m_per_s 1um/s --T_K 5 --T 7
+grep -q '"v_approach_m_per_s": 5e-06,' "$TMP/out" && grep -q '"v_retract_m_per_s": 1e-06,' "$TMP/out" &&
+    grep -q '"T_K": 7,' "$TMP/out"; kk=$((kk + rc + $?))
+run params --k 1 --T 5 --k_N_per_m 2
+grep -q -- "overrides --k_N_per_m=1 --T_K=5 --k_N_per_m=2$" "$TMP/out"; kk=$((kk + rc + $?))
+if [ "$kk" -eq 0 ]; then ok "--T, --v, --k apply in command-line order with the other overrides"
+else bad "--T/--v/--k order" "$(grep -E '^scene' "$TMP/out")"; fi
+run curves -n 1 --preset paper-fig4 --T 1,2 --k_N_per_m 0.3 --k 0.1,0.2 --quiet --csv -
+if [ "$rc" -eq 0 ] && [ "$(grep -cE '^[0-9]+,[0-3],[12],[^,]*,0\.[12]0000' "$TMP/out")" -eq 4 ]; then
+    ok "curves: --T and --k lists stay a grid (4 points)"
+else bad "curves grid" "exit $rc: $(head -c 300 "$TMP/err")"; fi
 
 # A file's "preset" key applies first wherever it stands; overrides come after the file.
 printf '{"T_K": 5, "preset": "paper-fig4", "dwell_s": 0.25}\n' >"$TMP/pre.json"

@@ -78,12 +78,13 @@ static const struct {
     { "radius", "R_m", NULL },
 };
 
-static int s_add_override(vafm_cli_args *a, const char *field, const char *value)
+static vafm_cli_override *s_add_override(vafm_cli_args *a, const char *field, const char *value)
 {
     vafm_cli_override *o = &a->ov[a->n_ov++];
     snprintf(o->name, sizeof o->name, "%s", field);
     o->value = value;
-    return 0;
+    o->axis = 0;
+    return o;
 }
 
 /* `--NAME=VALUE` or `--NAME VALUE` for a parameter of the table or one of its instrument words. */
@@ -153,6 +154,19 @@ static int s_parse_option(vafm_cli_args *a, int argc, char **argv, int *i)
         return VAFM_CLI_EXIT_USAGE;
     }
     a->val[id] = inline_value ? inline_value : argv[++*i];
+    /* --T, --v and --k are a campaign's grid axes; for a single scene they set the temperature, both speeds
+     * and the spring constant, in command-line order like every override (the last value of a field wins):
+     * they take their place among the overrides now, and s_check_options drops them where they are axes */
+    static const struct {
+        int id;
+        const char *f1, *f2;
+    } axes[] = { { O_T, "T_K", NULL }, { O_V, "v_approach_m_per_s", "v_retract_m_per_s" }, { O_K, "k_N_per_m", NULL } };
+    for (size_t k = 0; k < sizeof axes / sizeof axes[0]; k++)
+        if (axes[k].id == id) {
+            s_add_override(a, axes[k].f1, a->val[id])->axis = 1 + id;
+            if (axes[k].f2)
+                s_add_override(a, axes[k].f2, a->val[id])->axis = 1 + id;
+        }
     return 0;
 }
 
@@ -183,22 +197,22 @@ static int s_parse_positional(vafm_cli_args *a, const char *arg)
 static int s_check_options(vafm_cli_args *a)
 {
     const vafm_cli_command *c = a->cmd;
-    /* --T, --v and --k are a campaign's grid axes; for a single scene they set the temperature, both speeds
-     * and the spring constant */
-    if (c->scene) {
-        static const struct {
-            int id;
-            const char *f1, *f2;
-        } one[] = { { O_T, "T_K", NULL }, { O_V, "v_approach_m_per_s", "v_retract_m_per_s" }, { O_K, "k_N_per_m", NULL } };
-        for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
-            if (a->on[one[i].id] && !(c->opts & M(one[i].id))) {
-                s_add_override(a, one[i].f1, a->val[one[i].id]);
-                if (one[i].f2)
-                    s_add_override(a, one[i].f2, a->val[one[i].id]);
-                a->on[one[i].id] = 0;
-                a->val[one[i].id] = NULL;
-            }
+    /* --T, --v and --k: a grid axis where the command takes the option (its list is in a->val), else, for a
+     * single scene, the overrides s_parse_option put in their place */
+    int n = 0;
+    for (int i = 0; i < a->n_ov; i++) {
+        int id = a->ov[i].axis - 1;
+        if (id >= 0 && (!c->scene || (c->opts & M(id))))
+            continue;
+        a->ov[n++] = a->ov[i];
     }
+    a->n_ov = n;
+    if (c->scene)
+        for (int id = O_T; id <= O_K; id++) /* O_T, O_V, O_K: adjacent in the enum */
+            if (a->on[id] && !(c->opts & M(id))) {
+                a->on[id] = 0;
+                a->val[id] = NULL;
+            }
     for (int id = 0; id < VAFM_CLI_NOPT; id++)
         if (a->on[id] && !(c->opts & M(id)) && !(c->scene && (S_SCENE_OPTS & M(id)))) {
             vafm_cli_error("option %s does not apply to `vafm %s` (see vafm %s --help)", s_options[id].name, c->name,
@@ -215,7 +229,7 @@ static int s_check_options(vafm_cli_args *a)
 static int s_parse_args(vafm_cli_args *a, int argc, char **argv)
 {
     memset(a, 0, sizeof *a);
-    a->ov = calloc(2 * (size_t)argc + 8, sizeof *a->ov); /* an alias may set two fields; --T/--v/--k one more */
+    a->ov = calloc(2 * (size_t)argc + 8, sizeof *a->ov); /* an alias or --v sets two fields per argument */
     if (!a->ov) {
         vafm_cli_error("out of memory");
         return VAFM_CLI_EXIT_RUNTIME;
