@@ -241,6 +241,18 @@ else bad "samples" "exit $rc, segments '$segs', $badrows bad rows"; fi
 run samples --preset paper-fig4 --tune
 segs=$(tail -n +2 "$TMP/out" | cut -d, -f6 | sort -u | tr '\n' ' ')
 if [ "$rc" -eq 0 ] && [ "$segs" = "3 " ]; then ok "samples --tune: segment 3 only"; else bad "samples --tune" "exit $rc, '$segs'"; fi
+# A tune is bounded by its own length and rate, not by the force curve's (0.6.1 checked the curve at the tune's
+# 100 kHz: a 400 s curve at 1 nm/s made the 0.5 s tune "4e+07 samples at sample_rate_Hz = 100000 Hz")
+run samples --tune --v 1e-9 --csv "$TMP/tune1.csv"
+t1=$rc; n1=$(wc -l <"$TMP/tune1.csv" 2>/dev/null)
+run samples --tune --tune_rate_Hz 5e7 --tune_duration_s 1e-3 --v 1e-8 --csv "$TMP/tune2.csv"
+if [ "$t1" -eq 0 ] && [ "$n1" -eq 50001 ] && [ "$rc" -eq 0 ] && [ "$(wc -l <"$TMP/tune2.csv")" -eq 50001 ]; then
+    ok "samples --tune at slow speeds: the curve's length does not limit the tune"
+else bad "samples --tune at slow speeds" "exit $t1 ($n1 rows), $rc: $(head -c 300 "$TMP/err")"; fi
+expect_fail "a tune too long for its rate names tune_duration_s and tune_rate_Hz" 2 tune_duration_s tune_rate_Hz \
+    "VAFM_SIM_MAX_SAMPLES" -- samples --tune --tune_duration_s 1000 --csv "$TMP/tune3.csv"
+if ! grep -q "sample_rate_Hz = " "$TMP/err" && [ ! -e "$TMP/tune3.csv" ]; then ok "... before any output, not naming the curve's rate"
+else bad "tune refusal" "$(head -c 300 "$TMP/err")"; fi
 
 # ---- HDF5 files: campaign, info, export -----------------------------------------------------------
 

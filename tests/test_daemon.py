@@ -1258,6 +1258,29 @@ def test_huge_curves_refused_before_they_start(tmp_path):
         assert d.stop() == 0
 
 
+def test_tune_limited_by_its_own_length():
+    """A tune runs at its own rate and is bounded by its own length (tune_duration_s at tune_rate_Hz), not by
+    the force curve's at that rate: 0.6.1 refused a 10 ms tune of a 1 nm/s scene as invalid_scene, a 400 s
+    curve of 4e7 samples at the tune's 100 kHz, and a 1 ms tune at 5e7 Hz of a 10 nm/s scene."""
+    d = Daemon("--free-run")
+    try:
+        assert d.cmd({"cmd": "set", "values": {"v_approach_m_per_s": 1e-9, "v_retract_m_per_s": 1e-9}})["status"] == "ok"
+        r = d.cmd({"cmd": "tune", "duration_s": 0.01})
+        assert r["status"] == "ok", r
+        d.wait_idle()
+        assert d.cmd({"cmd": "set", "values": {"v_approach_m_per_s": 1e-8, "v_retract_m_per_s": 1e-8,
+                                               "tune_rate_Hz": 5e7}})["status"] == "ok"
+        r = d.cmd({"cmd": "tune", "duration_s": 1e-3})
+        assert r["status"] == "ok", r
+        d.wait_idle()
+        r = d.cmd({"cmd": "tune", "duration_s": 10})  # 5e8 samples: the tune's own limit
+        error_ok(r, "out_of_range", "duration_s")
+        assert "tune_rate_Hz" in r["message"] and "VAFM_SIM_MAX_SAMPLES" in r["message"], r
+        assert d.cmd({"cmd": "status"})["state"] == "idle"
+    finally:
+        assert d.stop() == 0
+
+
 def test_log_on_a_full_disk_fails_cleanly(tmp_path):
     """Issue #18, finding 3: the log's file system fills up (RLIMIT_FSIZE: writes fail with EFBIG, as with
     ENOSPC): the curves that do not fit are announced log_failed, status.log names the OS's reason, the

@@ -787,8 +787,44 @@ static void test_tune_rate(void)
     ENSURE(vafm_params_tune_rate_Hz(&p) == 250e3);
 }
 
+/* vafm_sim_new_tune: a tune is bounded by its own length at its own rate, not by the force curve's at that
+ * rate (0.6.1's CLI and vafmd refused a 10 ms tune of a 1 nm/s scene: a 400 s curve at the tune's 100 kHz);
+ * a too long tune is refused naming tune_duration_s and tune_rate_Hz; a tune-only simulation runs no curve. */
+static void test_sim_new_tune(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL); /* tune at 100 kHz */
+    p.v_approach_m_per_s = p.v_retract_m_per_s = 1e-9;
+    p.tune_duration_s = 1e-3;
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    vafm_sim *sim = NULL;
+    ENSURE(vafm_params_validate(&p, &e) == 0); /* at the curve's 10 kHz the curve fits */
+    vafm_params q;
+    vafm_params_tune_scene(&p, &q);
+    ENSURE(vafm_sim_new(&sim, &q, &e) == VAFM_EINVAL && !sim); /* at the tune's rate a curve would not */
+    ENSURE_MSG(vafm_sim_new_tune(&sim, &p, &e) == 0 && sim, "%s", e.message);
+    if (sim) {
+        ENSURE(vafm_sim_params(sim)->sample_rate_Hz == 100e3);
+        ENSURE(vafm_sim_tune(sim, 0, NULL, NULL) == 0);
+        ENSURE(vafm_sim_curve_begin(sim, 0) == VAFM_EINVAL && vafm_sim_error(sim) &&
+               strstr(vafm_sim_error(sim)->message, "vafm_sim_new_tune"));
+        vafm_sim_destroy(&sim);
+    }
+    p.tune_rate_Hz = 5e7; /* 1 ms: 50000 samples; a curve at 1 nm/s there: ~2e10 */
+    ENSURE_MSG(vafm_sim_new_tune(&sim, &p, &e) == 0 && sim, "%s", e.message);
+    vafm_sim_destroy(&sim);
+    p.tune_duration_s = 10; /* 5e8 samples */
+    memset(&e, 0, sizeof e);
+    ENSURE(vafm_sim_new_tune(&sim, &p, &e) == VAFM_EINVAL && !sim);
+    ENSURE_MSG(!strcmp(e.field, "tune_duration_s") && strstr(e.message, "tune_rate_Hz") &&
+               strstr(e.message, "VAFM_SIM_MAX_SAMPLES"), "%s: %s", e.field, e.message);
+    ENSURE(vafm_sim_new_tune(&sim, NULL, &e) == VAFM_EINVAL && !sim);
+}
+
 int main(void)
 {
+    RUN_TEST(test_sim_new_tune);
     RUN_TEST(test_tune_rate);
     RUN_TEST(test_units_parse);
     RUN_TEST(test_resolve);

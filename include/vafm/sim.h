@@ -107,6 +107,14 @@ VAFM_API int vafm_sim_estimate_cost(const vafm_params *p, vafm_sim_estimate *out
 
 VAFM_API int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err);
 
+/** Create a simulation for thermal tunes of scene p. It runs p's tune scene (vafm_params_tune_scene: the
+ *  sample rate tune_rate_Hz, or sample_rate_Hz raised to show the resonance), checked as vafm_sim_new checks
+ *  a scene, except that a force curve's cost limits, which depend on the speeds and grow with the rate, give
+ *  way to the tune's own: tune_duration_s at the tune's rate within VAFM_SIM_MAX_SAMPLES and
+ *  VAFM_SIM_MAX_STEPS (VAFM_EINVAL naming tune_duration_s and tune_rate_Hz). vafm_sim_tune_begin runs on
+ *  it; vafm_sim_curve_begin refuses (VAFM_EINVAL). @return as vafm_sim_new. */
+VAFM_API int vafm_sim_new_tune(vafm_sim **out, const vafm_params *p, vafm_error *err);
+
 /** Destroy a simulation; NULL-safe; sets *s to NULL. */
 VAFM_API void vafm_sim_destroy(vafm_sim **s);
 

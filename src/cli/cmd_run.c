@@ -14,12 +14,20 @@ static int s_index_arg(const vafm_cli_args *a, uint64_t *index)
 /* The scene, the --index and a simulation for it: the common start of vafm run and vafm samples. */
 static int s_open_sim(const vafm_cli_args *a, vafm_cli_scene *sc, uint64_t *index, vafm_sim **sim)
 {
-    int rc = vafm_cli_resolve_scene(a, sc, 1);
+    /* a tune runs no force curve: it is checked at its own rate (tune_rate_Hz) against its own limits
+     * (tune_duration_s) by vafm_sim_new_tune, not against a curve's at either rate */
+    int rc = vafm_cli_resolve_scene(a, sc, !a->on[O_TUNE]);
     if (rc || (rc = s_index_arg(a, index)) != 0)
         return rc;
-    if (a->on[O_TUNE]) /* a tune samples fast enough to show the resonance (tune_rate_Hz) */
-        vafm_params_tune_scene(&sc->p, &sc->p);
-    return vafm_cli_new_sim(&sc->p, sim);
+    if (!a->on[O_TUNE])
+        return vafm_cli_new_sim(&sc->p, sim);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_sim_new_tune(sim, &sc->p, &err);
+    if (r)
+        return vafm_cli_report(&err, r);
+    sc->p = *vafm_sim_params(*sim); /* the tune's scene, at the tune's sample rate (the detector's too) */
+    return 0;
 }
 
 int vafm_cli_cmd_run(const vafm_cli_args *a)

@@ -48,15 +48,21 @@ typedef struct vafm_numerics {
 /** Derive the numerics of a scene and check them (time step against the stability limit, step count).
  *  out may be NULL. @return 0 or VAFM_EUNSTABLE / VAFM_EINVAL with err filled. */
 int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err);
+/** vafm_numerics_check for a force curve (tune_scene 0) or for a scene that runs thermal tunes only
+ *  (vafm_sim_new_tune): there the curve's cost limits give way to the tune's (vafm_numerics_check_tune). */
+int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune_scene, vafm_error *err);
+/** vafm_params_validate of a curve scene (tune_scene 0) or of a tune-only scene (vafm_numerics_check_scene). */
+int vafm_params_validate_scene(const vafm_params *p, int tune_scene, vafm_error *err);
 
 /** The JKR solver (contact_jkr.c): √a(u) on the physical branch (reduced), for u ≥ u_min; NaN below.
  *  s_guess ≤ 0: cold start. Internal (the tests reach it through the static core). */
 double vafm_jkr_sqrt_a(double c, double s_m, double u, double s_guess);
 
 /** A thermal tune of the scene within VAFM_SIM_MAX_SAMPLES and VAFM_SIM_MAX_STEPS? @return 0 or
- *  VAFM_EINVAL naming tune_duration_s. (Checked when a tune starts, not by validation: a scene for fast
- *  curves at a high sample rate is valid though its default tune would not be.) */
-int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, vafm_error *err);
+ *  VAFM_EINVAL naming tune_duration_s (and the rate to lower: tune_rate_Hz for a tune scene, tune_scene 1,
+ *  else sample_rate_Hz). (Checked when a tune starts, and by vafm_sim_new_tune, not by validation: a scene
+ *  for fast curves at a high sample rate is valid though its default tune would not be.) */
+int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, int tune_scene, vafm_error *err);
 
 /** The cost estimate of a scene from its numerics (vafm_sim_estimate). */
 void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out);

@@ -90,23 +90,32 @@ static int s_check_cost(const vafm_params *p, const vafm_numerics *nm, vafm_erro
     return 0;
 }
 
-int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, vafm_error *err)
+int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, int tune_scene, vafm_error *err)
 {
     vafm_sim_estimate est;
     vafm_numerics_estimate(p, nm, &est);
     if (est.tune_samples > (double)VAFM_SIM_MAX_SAMPLES || est.tune_steps > VAFM_SIM_MAX_STEPS) {
+        /* a tune scene's rate is the tune's own (tune_rate_Hz, or sample_rate_Hz raised to show f0) */
+        const char *rate = tune_scene ? "the tune rate (tune_rate_Hz; 0: sample_rate_Hz raised to 4 f0)"
+                                      : "sample_rate_Hz";
         vafm_err_set(err, VAFM_EINVAL, "tune_duration_s",
-                     "a thermal tune of tune_duration_s = %.6g s at %.6g Hz would have %.3g samples and %.3g steps: "
-                     "more than %llu samples (VAFM_SIM_MAX_SAMPLES) or %.0e steps (VAFM_SIM_MAX_STEPS); shorten it or "
-                     "lower sample_rate_Hz",
-                     p->tune_duration_s, p->sample_rate_Hz, est.tune_samples, est.tune_steps,
-                     (unsigned long long)VAFM_SIM_MAX_SAMPLES, VAFM_SIM_MAX_STEPS);
+                     "a thermal tune of tune_duration_s = %.6g s at %.6g Hz, %s, would have %.3g samples and %.3g "
+                     "steps: more than %llu samples (VAFM_SIM_MAX_SAMPLES) or %.0e steps (VAFM_SIM_MAX_STEPS); "
+                     "shorten tune_duration_s or lower %s",
+                     p->tune_duration_s, p->sample_rate_Hz, rate, est.tune_samples, est.tune_steps,
+                     (unsigned long long)VAFM_SIM_MAX_SAMPLES, VAFM_SIM_MAX_STEPS,
+                     tune_scene ? "tune_rate_Hz" : "sample_rate_Hz");
         return VAFM_EINVAL;
     }
     return 0;
 }
 
 int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *err)
+{
+    return vafm_numerics_check_scene(p, out, 0, err);
+}
+
+int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune_scene, vafm_error *err)
 {
     vafm_numerics nm_local, *nm = out ? out : &nm_local;
     vafm_units_reduce(p, &nm->r);
@@ -232,7 +241,8 @@ int vafm_numerics_check(const vafm_params *p, vafm_numerics *out, vafm_error *er
         nm->n_sub_far = nf < 1 ? 1 : nf;
         nm->dt_far = nm->Ts / (double)nm->n_sub_far;
     }
-    if (s_check_cost(p, nm, err))
+    /* a tune scene runs no force curve: its curve at the tune rate may be as long as it likes, its tune may not */
+    if (tune_scene ? vafm_numerics_check_tune(p, nm, 1, err) : s_check_cost(p, nm, err))
         return VAFM_EINVAL;
     if (it == vafm_integrator_paper_vv) {
         double eta_dt = (1.0 + (has_contact ? r->eta_cont : 0.0)) * dt;

@@ -788,6 +788,11 @@ static int s_check_derived(const char *field, double have, const char *setting, 
 
 int vafm_params_validate(const vafm_params *p, vafm_error *err)
 {
+    return vafm_params_validate_scene(p, 0, err);
+}
+
+int vafm_params_validate_scene(const vafm_params *p, int tune_scene, vafm_error *err)
+{
     if (!p) {
         vafm_err_set(err, VAFM_EINVAL, "", "no parameters given");
         return VAFM_EINVAL;
@@ -900,5 +905,5 @@ int vafm_params_validate(const vafm_params *p, vafm_error *err)
                      p->start_height_m);
         return VAFM_EINVAL;
     }
-    return vafm_numerics_check(p, NULL, err);
+    return vafm_numerics_check_scene(p, NULL, tune_scene, err);
 }

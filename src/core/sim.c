@@ -82,6 +82,7 @@ struct vafm_sim {
     double F_hold;      /* constant-force dwell: the force the feedback holds (reduced) */
     double fb_gain;     /* constant-force dwell: piezo speed per unit force error, 1/(k·τ) (reduced) */
     int trigger_off;    /* fault injection: the trigger never fires (vafm_sim_set_trigger) */
+    int tune_only;      /* made by vafm_sim_new_tune: a curve's cost was not checked, curves are refused */
     int touched, detached_in_retract, flags, retract_samples;
     double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
     double touch_t, touch_uspr;
@@ -112,21 +113,22 @@ int vafm_sim_estimate_cost(const vafm_params *p, vafm_sim_estimate *out, vafm_er
     return vafm_params_validate(p, err);
 }
 
-int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
+static int s_sim_new(vafm_sim **out, const vafm_params *p, int tune_only, vafm_error *err)
 {
     if (!out) {
         vafm_err_set(err, VAFM_EINVAL, "", "vafm_sim_new: out is NULL");
         return VAFM_EINVAL;
     }
     *out = NULL;
-    int r = vafm_params_validate(p, err);
+    int r = vafm_params_validate_scene(p, tune_only, err);
     if (r)
         return r;
     vafm_sim *s = calloc(1, sizeof *s);
     if (!s)
         return VAFM_ENOMEM;
     s->p = *p;
-    vafm_numerics_check(p, &s->nm, NULL);
+    s->tune_only = tune_only;
+    vafm_numerics_check_scene(p, &s->nm, tune_only, NULL);
     s->it = p->integrator;
     void *buf = malloc(S_BLOCK * (6 * sizeof(double) + 1));
     if (!buf) {
@@ -182,6 +184,23 @@ int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
                  s->nm.n_sub >= S_WELL_MIN_STEPS;
     *out = s;
     return 0;
+}
+
+int vafm_sim_new(vafm_sim **out, const vafm_params *p, vafm_error *err)
+{
+    return s_sim_new(out, p, 0, err);
+}
+
+int vafm_sim_new_tune(vafm_sim **out, const vafm_params *p, vafm_error *err)
+{
+    if (!p) {
+        vafm_err_set(err, VAFM_EINVAL, "", "no parameters given");
+        return VAFM_EINVAL;
+    }
+    /* the tune's rate: a force curve at that rate would often exceed a curve's limits, and is never run */
+    vafm_params q;
+    vafm_params_tune_scene(p, &q);
+    return s_sim_new(out, &q, 1, err);
 }
 
 void vafm_sim_destroy(vafm_sim **s)
@@ -415,6 +434,12 @@ int vafm_sim_curve_begin(vafm_sim *s, uint64_t index)
 {
     if (!s)
         return VAFM_EINVAL;
+    if (s->tune_only) {
+        memset(&s->err, 0, sizeof s->err);
+        vafm_err_set(&s->err, VAFM_EINVAL, "", "this simulation runs thermal tunes only (vafm_sim_new_tune): its "
+                     "scene is at the tune's sample rate, and a force curve's cost there was not checked");
+        return VAFM_EINVAL;
+    }
     s_begin(s, index, S_SCENE_CURVE);
     return 0;
 }
@@ -424,7 +449,7 @@ int vafm_sim_tune_begin(vafm_sim *s, uint64_t index)
     if (!s)
         return VAFM_EINVAL;
     memset(&s->err, 0, sizeof s->err);
-    int rc = vafm_numerics_check_tune(&s->p, &s->nm, &s->err);
+    int rc = vafm_numerics_check_tune(&s->p, &s->nm, s->tune_only, &s->err);
     if (rc)
         return rc;
     s_begin(s, index, S_SCENE_TUNE);

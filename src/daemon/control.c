@@ -496,8 +496,6 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     if (kind == VAFMD_RUN_REPLAY)
         return s_start_replay(d, c, e);
     vafm_params p = d->scene;
-    if (kind == VAFMD_RUN_TUNE) /* a tune samples fast enough to show the resonance (tune_rate_Hz) */
-        vafm_params_tune_scene(&d->scene, &p);
     if (c->has_duration) {
         char buf[64];
         snprintf(buf, sizeof buf, "%.17g", c->duration_s);
@@ -509,23 +507,21 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     }
     vafm_sim *sim = NULL;
     vafm_error verr = { 0 };
-    int rc = vafm_sim_new(&sim, &p, &verr);
+    /* a tune runs at its own rate (tune_rate_Hz) and is bounded by its own length, not by a force curve's at
+     * that rate (vafm_sim_new_tune), as vafm samples --tune */
+    int rc = kind == VAFMD_RUN_TUNE ? vafm_sim_new_tune(&sim, &p, &verr) : vafm_sim_new(&sim, &p, &verr);
+    if (rc && kind == VAFMD_RUN_TUNE && !strcmp(verr.field, "tune_duration_s")) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s", "%s", verr.message); /* the tune's own length */
+        return NULL;
+    }
     if (rc) {
         vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "cannot build the simulation: %s",
                       verr.message[0] ? verr.message : vafm_strerror(rc));
         return NULL;
     }
+    if (kind == VAFMD_RUN_TUNE)
+        p = *vafm_sim_params(sim); /* the tune's scene, at the tune's sample rate */
     if (kind == VAFMD_RUN_CURVE && s_log_fits(d, &p, "curve", e)) {
-        vafm_sim_destroy(&sim);
-        return NULL;
-    }
-    vafm_sim_estimate est;
-    if (kind == VAFMD_RUN_TUNE && !vafm_sim_estimate_cost(&p, &est, NULL) &&
-        (est.tune_samples > (double)VAFM_SIM_MAX_SAMPLES || est.tune_steps > VAFM_SIM_MAX_STEPS)) {
-        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s",
-                      "a tune of %.6g s at %.6g Hz would have %.3g samples (at most %llu, VAFM_SIM_MAX_SAMPLES) and %.3g "
-                      "steps (at most %.0e): shorten it or lower sample_rate_Hz", p.tune_duration_s, p.sample_rate_Hz,
-                      est.tune_samples, (unsigned long long)VAFM_SIM_MAX_SAMPLES, est.tune_steps, VAFM_SIM_MAX_STEPS);
         vafm_sim_destroy(&sim);
         return NULL;
     }
