@@ -213,6 +213,31 @@ def test_ctl_commands(fig4, tmp_path):
     assert p.returncode == 1 and "no reply" in p.stderr, p
 
 
+def test_cli_refuses_non_finite_numbers(fig4, tmp_path):
+    """A number for the daemon that is not finite or outside the range the CLI knows is a usage error naming
+    the option, refused before anything is sent: jansson's json_real() is NULL for NaN and inf, and
+    json_object_set_new then dropped the key (0.6.1: `ctl tune nan` ran the scene's tune, `replay --speed
+    inf` ran at the daemon's speed, `listen --start tune --duration inf` recorded a 0.5 s tune, all "ok")."""
+    out = tmp_path / "l.csv"
+    cases = [(("ctl", "tune", v), "tune SECONDS") for v in ("nan", "inf", "-inf", "1e400", "-1", "2e5")]
+    cases += [(("ctl", "set", "k_N_per_m=1e400"), "k_N_per_m=1e400"),
+              (("ctl", "campaign", "n=1", "T_K=[300,1e400]"), "T_K=")]
+    cases += [(("listen", "--start", "tune", "--duration", v, "-o", str(out)), "--duration")
+              for v in ("inf", "nan", "1e400", "0", "2e5")]
+    cases += [(("replay", str(tmp_path / "x.h5"), "--speed", v, "--curves", "0"), "--speed")
+              for v in ("nan", "inf", "1e400", "0.001", "2000")]
+    cases += [(("replay", str(tmp_path / "x.h5"), "--loop", v), "--loop") for v in ("0", "1000001", "99999999999999999999")]
+    for args, needle in cases:
+        p = fig4.cli(*args)
+        assert p.returncode == 2 and needle in p.stderr and "usage" in p.stderr, (args, p)
+    assert not out.exists()
+    st = fig4.client.status()
+    assert st["state"] == "idle" and st["runs_started"] == 0, st  # nothing reached the daemon
+    # in range it goes through: 10 ms at paper-fig4's tune rate of 1 MHz (the scene's own tune: 50 ms)
+    p = fig4.cli("listen", "--start", "tune", "--duration", "0.01", "-o", str(out))
+    assert p.returncode == 0 and len(out.read_text().splitlines()) == 1 + 10000, p
+
+
 def test_status(fig4, tmp_path):
     fig4.client.curve(index=0)
     fig4.client.wait_idle()

@@ -260,14 +260,37 @@ static const char *s_ctl_usage =
     "                                (campaign: campaign.end) when it comes; exit 1 unless status ok\n"
     "Commands (protocol/wire.md): hello get set presets curve tune campaign replay abort status log shutdown.\n";
 
-/* VALUE as JSON when it parses as a number, boolean, null, array or object, else as a string. */
+/* VALUE as JSON when it parses as a number, boolean, null, array or object, else as a string. NULL when it
+ * cannot be sent as it was meant: a number beyond a double (1e400: jansson refuses it, and sent as the
+ * string "1e400" it would be the daemon's type error instead of ours), or text that is not UTF-8. */
 static json_t *s_value(const char *v)
 {
-    json_t *j = json_loads(v, JSON_DECODE_ANY, NULL);
+    json_error_t je;
+    json_t *j = json_loads(v, JSON_DECODE_ANY, &je);
     if (j && !json_is_string(j))
         return j;
     json_decref(j);
+#if JANSSON_VERSION_HEX >= 0x020b00
+    if (!j && json_error_code(&je) == json_error_numeric_overflow)
+        return NULL;
+#endif
     return json_string(v);
+}
+
+/* A duration in seconds as a tune takes it: finite, within tune_duration_s's range (the daemon's check,
+ * made here so that nothing is sent); lo_open: 0 itself is refused. @return 0, or -1 (message in m). */
+static int s_parse_duration(const char *opt, const char *text, int lo_open, double *out, char *m, size_t mlen)
+{
+    const vafm_param_info *f = vafm_params_field_find("tune_duration_s");
+    double lo = f ? f->min : 0.0, hi = f ? f->max : 1e5;
+    char *end;
+    double d = strtod(text, &end);
+    if (end == text || *end || !(d >= lo && d <= hi) || (lo_open && !(d > lo))) { /* NaN fails too */
+        snprintf(m, mlen, "%s needs seconds in %s%g, %g], not '%.60s'", opt, lo_open ? "(" : "[", lo, hi, text);
+        return -1;
+    }
+    *out = d;
+    return 0;
 }
 
 static int s_parse_u64(const char *s, json_int_t *out)
@@ -350,22 +373,31 @@ static int s_ctl_run(s_conn *x, int argc, char **argv)
                 rc = s_usage(x, s_ctl_usage, "--index needs a non-negative integer");
             else
                 json_object_set_new(req, "index", json_integer(v));
-        } else if (is_get && !eq && a[0] != '-')
-            json_array_append_new(names, json_string(a));
-        else if (is_tune && i == 1 && !eq && a[0] != '-') {
-            char *end;
-            double d = strtod(a, &end);
-            if (*end || end == a)
-                rc = s_usage(x, s_ctl_usage, "tune SECONDS must be a number");
+        } else if (is_get && !eq && a[0] != '-') {
+            if (json_array_append_new(names, json_string(a))) /* NULL for text that is not UTF-8 */
+                rc = s_usage(x, s_ctl_usage, "get: a NAME is not UTF-8 text");
+        } else if (is_tune && i == 1 && !eq && strncmp(a, "--", 2)) { /* -1 too: refused with the range */
+            /* json_real(NaN or inf) is NULL and json_object_set_new drops the key: 0.6.1 sent no duration
+             * then, and the daemon ran the scene's tune */
+            double d;
+            if (s_parse_duration("tune SECONDS", a, 0, &d, msg, sizeof msg))
+                rc = s_usage(x, s_ctl_usage, msg);
             else
                 json_object_set_new(req, "duration_s", json_real(d));
         } else if (eq && eq != a) {
             char key[128];
             snprintf(key, sizeof key, "%.*s", (int)(eq - a), a);
-            if (is_set && strcmp(key, "preset"))
-                json_object_set_new(values, key, s_value(eq + 1));
-            else
-                json_object_set_new(req, key, s_value(eq + 1));
+            json_t *v = s_value(eq + 1);
+            if (!v || json_object_set_new(is_set && strcmp(key, "preset") ? values : req, key, v)) {
+                json_t *text = json_string(eq + 1); /* NULL: not UTF-8; else a number beyond a double */
+                if (text)
+                    snprintf(msg, sizeof msg, "%.60s=%.60s: a number beyond the range of a double (numbers must "
+                             "be finite)", key, eq + 1);
+                else
+                    snprintf(msg, sizeof msg, "%.60s: the value is not UTF-8 text", key);
+                json_decref(text);
+                rc = s_usage(x, s_ctl_usage, msg);
+            }
         } else {
             snprintf(msg, sizeof msg, "unexpected argument '%s' (arguments are KEY=VALUE)", a);
             rc = s_usage(x, s_ctl_usage, msg);
@@ -882,6 +914,7 @@ int vafm_cli_listen(int argc, char **argv)
     s_listen L = {.x = &x, .out = "-"};
     long long runs = 1;
     const char *start = NULL, *duration = NULL;
+    double duration_s = 0;
     json_int_t index = 0;
     int overwrite = 0, have_index = 0;
     for (int i = 1; i < argc; i++) {
@@ -912,11 +945,10 @@ int vafm_cli_listen(int argc, char **argv)
                 return s_usage(&x, s_listen_usage, "--index needs a non-negative integer");
             have_index = 1;
         } else if (!strcmp(a, "--duration") && has_v) {
-            duration = argv[++i];
-            char *end;
-            double d = strtod(duration, &end);
-            if (*end || end == duration || !(d > 0))
-                return s_usage(&x, s_listen_usage, "--duration needs a positive number of seconds");
+            char m[160];
+            if (s_parse_duration("--duration", argv[++i], 1, &duration_s, m, sizeof m))
+                return s_usage(&x, s_listen_usage, m); /* inf passed "> 0" in 0.6.1 and was dropped */
+            duration = argv[i];
         } else if (!strcmp(a, "--overwrite"))
             overwrite = 1;
         else {
@@ -971,7 +1003,7 @@ int vafm_cli_listen(int argc, char **argv)
     if (!rc && start) {
         json_t *req = json_pack("{s:s,s:I}", "cmd", start, "index", index), *reply = NULL;
         if (duration)
-            json_object_set_new(req, "duration_s", json_real(strtod(duration, NULL)));
+            json_object_set_new(req, "duration_s", json_real(duration_s)); /* finite: checked above */
         if ((rc = s_send(&x, req, &reply)) == 0)
             want = json_integer_value(json_object_get(reply, "run_id"));
         json_decref(reply);

@@ -36,10 +36,28 @@ static const char *s_usage_text =
     "exit status: 0 the replay started (--wait: and ended ok), 1 runtime failure (no reply, daemon error,\n"
     "             --wait: the run did not end ok or the stream went silent for 10 s), 2 usage\n";
 
+/* The ranges vafmd takes (src/daemon/cmd_json.c: the `speed` setting, replay's "loop"): checked here so
+ * that a bad value is a usage error naming the option before anything is sent. */
+#define S_SPEED_MIN 0.01
+#define S_SPEED_MAX 1000.0
+#define S_LOOP_MAX 1000000
+
 static int s_usage(const char *what)
 {
     fprintf(stderr, "vafm replay: %s\n%s", what, s_usage_text);
     return 2;
+}
+
+/* Set key to a new JSON value, or refuse: jansson's constructors return NULL for a non-finite real or text
+ * that is not UTF-8, and json_object_set_new then drops the key without a word (0.6.1 replayed at the
+ * default speed when given --speed nan). @return 0 or the usage exit status. */
+static int s_set(json_t *req, const char *key, json_t *value, const char *what)
+{
+    if (!value || json_object_set_new(req, key, value)) {
+        json_decref(req);
+        return s_usage(what);
+    }
+    return 0;
 }
 
 int vafm_cli_replay(int argc, char **argv)
@@ -91,31 +109,39 @@ int vafm_cli_replay(int argc, char **argv)
         json_decref(req);
         return s_usage("FILE is not valid UTF-8");
     }
-    if (curves)
-        json_object_set_new(req, "curves", json_string(curves));
+    if (curves && s_set(req, "curves", json_string(curves), "--curves is not valid UTF-8"))
+        return 2;
     char *end;
     if (speed) {
         double x = strtod(speed, &end);
-        if (end == speed || *end) {
+        char m[160];
+        snprintf(m, sizeof m, "--speed needs a number in [%g, %g], not '%.60s'", S_SPEED_MIN, S_SPEED_MAX, speed);
+        if (end == speed || *end || !(x >= S_SPEED_MIN && x <= S_SPEED_MAX)) { /* NaN fails too */
             json_decref(req);
-            return s_usage("--speed needs a number");
+            return s_usage(m);
         }
-        json_object_set_new(req, "speed", json_real(x));
+        if (s_set(req, "speed", json_real(x), m))
+            return 2;
     }
     if (loop) {
-        if (!strcmp(loop, "forever"))
-            json_object_set_new(req, "loop", json_string("forever"));
-        else {
+        char m[160];
+        snprintf(m, sizeof m, "--loop needs a number of passes, 1 to %d, or 'forever', not '%.60s'", S_LOOP_MAX, loop);
+        if (!strcmp(loop, "forever")) {
+            if (s_set(req, "loop", json_string("forever"), m))
+                return 2;
+        } else {
+            errno = 0;
             long long n = strtoll(loop, &end, 10);
-            if (end == loop || *end) {
+            if (end == loop || *end || errno || n < 1 || n > S_LOOP_MAX) {
                 json_decref(req);
-                return s_usage("--loop needs a number of passes or 'forever'");
+                return s_usage(m);
             }
-            json_object_set_new(req, "loop", json_integer(n));
+            if (s_set(req, "loop", json_integer(n), m))
+                return 2;
         }
     }
-    if (crid)
-        json_object_set_new(req, "client_run_id", json_string(crid));
+    if (crid && s_set(req, "client_run_id", json_string(crid), "--client-run-id is not valid UTF-8"))
+        return 2;
     long tmo = 30000;
     if (timeout) {
         tmo = strtol(timeout, &end, 10);
