@@ -819,7 +819,8 @@ static void test_reference_file(void)
 enum {
     B_NONE, B_K_STRING, B_UNIT_INT, B_POINT_COUNT, B_EXTRA_DSET, B_SUBGROUP, B_ROOT_OBJ, B_UNKNOWN_ATTR, B_LENGTHS,
     B_2D, B_SEG_FLOAT, B_NO_SWVERSION, B_FIXED_STR, B_SEG_VALUE, B_CREEP, B_SW_INT, B_UNIT_NN, B_F32, B_NAME_01,
-    B_SOFTLINK, B_NO_FORCE, B_TIME_BACK, B_TIP_WRONG, B_DATE, B_FORMAT2, B_SEG_NEG, B_EMPTY, B_HUGE, B_COUNT
+    B_SOFTLINK, B_NO_FORCE, B_TIME_BACK, B_TIP_WRONG, B_DATE, B_FORMAT2, B_SEG_NEG, B_EMPTY, B_HUGE, B_EXTERNAL,
+    B_VIRTUAL, B_COUNT
 };
 
 typedef struct bad_case {
@@ -861,7 +862,14 @@ static const bad_case s_bad[] = {
     { B_SEG_NEG, VAFM_EFORMAT, "/0/segment holds a value outside 0-255 (negative", "[L7]", "/0/segment" },
     { B_EMPTY, VAFM_EFORMAT, "/0/force holds no samples", "[L7]", "/0/force: holds no samples" },
     { B_HUGE, VAFM_EFORMAT, "declares 1000000000000 samples", "VAFM_H5_MAX_SAMPLES", "/0/force" },
+    /* 0.6.2 said "part of the data has no storage (damaged chunk index)" of raw data in an external file;
+     * both point at a FIFO (S_FIFO), which blocks whoever opens it: the data must never be read */
+    { B_EXTERNAL, VAFM_EFORMAT, "/0/force is stored in an external file (not read)", "[L2]",
+      "/0/force: is stored in an external file" },
+    { B_VIRTUAL, VAFM_EFORMAT, "/0/force is a virtual dataset", "[L2]", "/0/force: is a virtual dataset" },
 };
+
+#define S_FIFO "t_h5_bad.fifo" /* a FIFO without a writer: opening it to read blocks */
 
 static void write_bad(const char *path, int kind)
 {
@@ -897,6 +905,18 @@ static void write_bad(const char *path, int kind)
         hsize_t big = 1000000000000ull, chunk = 1u << 20;
         hid_t sp = H5Screate_simple(1, &big, NULL), dcpl = H5Pcreate(H5P_DATASET_CREATE);
         H5Pset_chunk(dcpl, 1, &chunk);
+        hid_t d = H5Dcreate2(g, "force", H5T_IEEE_F64LE, sp, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+        h_str(d, "unit", "N", 0);
+        H5Dclose(d);
+        H5Pclose(dcpl);
+        H5Sclose(sp);
+    } else if (kind == B_EXTERNAL || kind == B_VIRTUAL) { /* the data "in" S_FIFO */
+        hsize_t nf = N;
+        hid_t sp = H5Screate_simple(1, &nf, NULL), dcpl = H5Pcreate(H5P_DATASET_CREATE);
+        if (kind == B_EXTERNAL)
+            H5Pset_external(dcpl, S_FIFO, 0, N * sizeof(double));
+        else
+            H5Pset_virtual(dcpl, sp, S_FIFO, "force", sp);
         hid_t d = H5Dcreate2(g, "force", H5T_IEEE_F64LE, sp, H5P_DEFAULT, dcpl, H5P_DEFAULT);
         h_str(d, "unit", "N", 0);
         H5Dclose(d);
@@ -970,6 +990,9 @@ static int s_read_all(const char *path, vafm_error *e)
 static void test_bad_files(void)
 {
     const char *path = "t_h5_bad.h5";
+    remove(S_FIFO);
+    ENSURE(mkfifo(S_FIFO, 0600) == 0);
+    alarm(60); /* a read of S_FIFO would block: fail instead of hanging */
     for (size_t i = 0; i < sizeof s_bad / sizeof s_bad[0]; i++) {
         const bad_case *b = &s_bad[i];
         write_bad(path, b->kind);
@@ -989,6 +1012,8 @@ static void test_bad_files(void)
         else
             ENSURE_MSG(rc == 0, "case %d: checker: %s", b->kind, e.message);
     }
+    alarm(0);
+    remove(S_FIFO);
     /* not HDF5 at all */
     FILE *f = fopen(path, "w");
     fputs("# force-distance curve, tab separated\n1\t2\n", f);

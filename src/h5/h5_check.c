@@ -85,6 +85,11 @@ static int s_dataset(s_ctx *x, hid_t g, const char *gname, const char *name, int
                      x->path, obj);
         goto done;
     }
+    const char *foreign = vafm_h5i_storage_foreign(o); /* before its shape: nothing outside the file is opened */
+    if (foreign) {
+        vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L2] %s: %s: is %s", x->path, obj, foreign);
+        goto done;
+    }
     sp = H5Dget_space(o);
     t = H5Dget_type(o);
     hsize_t dim = 0;

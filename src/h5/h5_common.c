@@ -849,6 +849,24 @@ int vafm_h5i_storage_complete(hid_t d, hsize_t n)
     return rc;
 }
 
+const char *vafm_h5i_storage_foreign(hid_t d)
+{
+    hid_t dcpl = H5Dget_create_plist(d);
+    if (dcpl < 0)
+        return "a dataset whose storage layout cannot be read (not read)";
+    const char *why = NULL;
+    H5D_layout_t layout = H5Pget_layout(dcpl);
+    int next = H5Pget_external_count(dcpl);
+    if (layout == H5D_VIRTUAL)
+        why = "a virtual dataset, its data in other files (not read)";
+    else if (next != 0) /* < 0: the list cannot be read, so where the data lie is not known either */
+        why = "stored in an external file (not read)";
+    else if (layout != H5D_CONTIGUOUS && layout != H5D_CHUNKED && layout != H5D_COMPACT)
+        why = "a dataset whose storage layout cannot be read (not read)";
+    H5Pclose(dcpl);
+    return why;
+}
+
 void vafm_h5i_names_free(vafm_h5i_names *l)
 {
     for (size_t i = 0; i < l->n; i++)

@@ -224,6 +224,15 @@ int vafm_h5i_gheap_check(hid_t file, const char *path, char *why, size_t len);
  */
 int vafm_h5i_storage_complete(hid_t d, hsize_t n);
 
+/**
+ * Why dataset d's raw data are not read, when they do not lie in the file itself: raw data in an external
+ * file (H5Pset_external) or a virtual dataset's source files can name any path, a FIFO or a device among
+ * them, and HDF5 opens it on the first read (a FIFO with no writer blocks forever). Called before the
+ * dataset's shape or data are touched. @return NULL (the data are in the file), or a phrase to follow
+ * "'name' is": "stored in an external file (not read)", ...
+ */
+const char *vafm_h5i_storage_foreign(hid_t d);
+
 /* ---- reading one curve group (reader, writer's resume) -------------------------------------------- */
 
 /** Storage behind a vafm_h5_curve that was read. */

@@ -52,6 +52,13 @@ static int s_dataset(hid_t f, const char *path, const char *name, int *ny, int *
         vafm_h5i_err_hdf5(err, VAFM_EFORMAT, name, "%s: '%s' is not a readable dataset", path, name);
         return VAFM_EFORMAT;
     }
+    const char *foreign = vafm_h5i_storage_foreign(d); /* before its shape: nothing outside the file is opened */
+    if (foreign) {
+        vafm_h5i_err(err, VAFM_EFORMAT, name, "%s: '%s' is %s; a map grid's datasets hold their data in the file",
+                     path, name, foreign);
+        H5Dclose(d);
+        return VAFM_EFORMAT;
+    }
     hid_t sp = H5Dget_space(d), ty = H5Dget_type(d);
     hsize_t dims[2] = { 0, 0 };
     int rank = sp >= 0 ? H5Sget_simple_extent_ndims(sp) : -1;

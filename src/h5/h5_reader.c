@@ -262,6 +262,11 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
                      path, obj);
         goto done;
     }
+    const char *foreign = vafm_h5i_storage_foreign(o); /* before its shape: nothing outside the file is opened */
+    if (foreign) {
+        vafm_h5i_err(err, rc, obj, "%s: %s is %s", path, obj, foreign);
+        goto done;
+    }
     sp = H5Dget_space(o);
     t = H5Dget_type(o);
     if (sp < 0 || t < 0) {
