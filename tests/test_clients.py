@@ -469,6 +469,54 @@ def test_loader_reads_foreign_file(tmp_path):
         load_h5(str(path))
 
 
+def test_loader_refuses_data_outside_the_file(tmp_path):
+    """A channel whose data lie outside the file (external raw-data storage, a virtual dataset) is refused
+    naming the file and the dataset, never read: here they point at a FIFO, which blocks whoever opens it
+    (0.6.2 hung in load_h5). In a child, so that a hang fails the test instead of stalling it."""
+    h5py = pytest.importorskip("h5py")
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    n = 8
+    for kind in ("external", "virtual"):
+        path = tmp_path / f"{kind}.h5"
+        with h5py.File(path, "w") as f:
+            f.attrs["software"], f.attrs["software version"] = "handmade", "1"
+            grp = f.create_group("0")
+            if kind == "external":
+                d = grp.create_dataset("force", shape=(n,), dtype="<f8", external=[(str(fifo), 0, 8 * n)])
+            else:
+                lay = h5py.VirtualLayout(shape=(n,), dtype="<f8")
+                lay[:] = h5py.VirtualSource(str(fifo), "force", shape=(n,))
+                d = grp.create_virtual_dataset("force", lay, fillvalue=0)
+            d.attrs["unit"] = "N"
+            for name, unit in (("height (measured)", "m"), ("height (piezo)", "m")):
+                grp.create_dataset(name, data=np.linspace(1e-7, 0, n)).attrs["unit"] = unit
+            grp.create_dataset("segment", data=np.zeros(n, np.uint8)).attrs["unit"] = ""
+            grp.attrs["imaging mode"] = "force-distance"
+        p = subprocess.run([sys.executable, "-c", "import sys; sys.path.insert(0, sys.argv[1]); "
+                            "from vafm_client import load_h5; load_h5(sys.argv[2])", PYCLIENT, str(path)],
+                           capture_output=True, text=True, timeout=30)
+        want = "stored in an external file (not read)" if kind == "external" else "a virtual dataset"
+        assert p.returncode != 0 and f"[L2] {path}: /0/force: {want}" in p.stderr, p
+
+
+def test_loader_refuses_huge_declared_length(tmp_path):
+    """A channel declaring 10**12 samples (chunked, never written: a few kB on disk) is refused before it is
+    read, naming VAFM_H5_MAX_SAMPLES (0.6.2: numpy was asked for 8 TB)."""
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "huge.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["software"], f.attrs["software version"] = "handmade", "1"
+        grp = f.create_group("0")
+        for name, unit in (("force", "N"), ("height (measured)", "m"), ("height (piezo)", "m"), ("segment", "")):
+            grp.create_dataset(name, shape=(10**12,), dtype="u1" if name == "segment" else "<f8",
+                               chunks=(1 << 20,)).attrs["unit"] = unit
+        grp.attrs["imaging mode"] = "force-distance"
+    with pytest.raises(ValueError, match=r"\[L7\] .*huge\.h5: /0: datasets declare 1000000000000 samples, more than a "
+                                         r"curve may have \(33554432, VAFM_H5_MAX_SAMPLES\)"):
+        load_h5(str(path))
+
+
 # ---- the examples (each writes a PNG without a display) ---------------------------------------------------
 
 def run_example(name, *args, timeout=180):

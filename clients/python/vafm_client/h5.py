@@ -16,6 +16,8 @@ Any file of the layout loads (vafm's, afmformats' exports, instrument conversion
 A file that breaks the layout's structure (root objects that are not curve groups named 0..n-1, a curve
 without force/heights/segment, channels of different lengths, an imaging mode other than
 force-distance) raises ValueError naming the file, the object and the rule (protocol/hdf5.md L4-L10).
+So does a dataset whose data lie outside the file (external raw-data storage, a virtual dataset: L2), which
+is never read, and a channel longer than a vafm curve may be (VAFM_H5_MAX_SAMPLES), before it is read.
 """
 import json
 
@@ -24,6 +26,7 @@ import numpy as np
 CHANNELS = ("force", "height (measured)", "height (piezo)", "segment", "time", "tip position")
 REQUIRED = ("force", "height (measured)", "height (piezo)", "segment")
 TRUTH = "vafm ground truth"
+MAX_SAMPLES = 1 << 25  # VAFM_H5_MAX_SAMPLES (include/vafm/h5.h): samples of one curve
 
 
 def _str(v):
@@ -191,6 +194,15 @@ def load_h5(path, channels=True):
             for n in grp:
                 if n not in CHANNELS:
                     raise _bad(path, f"/{g}/{n}", "L5", "not a dataset name of the layout")
+                d = grp[n]
+                if not isinstance(d, h5py.Dataset):
+                    raise _bad(path, f"/{g}/{n}", "L5", "not a dataset (a curve group holds no subgroups)")
+                # before its shape or data: HDF5 opens such a dataset's other files on a read, and they can
+                # name any path (a FIFO blocks the reader for ever)
+                if d.is_virtual:
+                    raise _bad(path, f"/{g}/{n}", "L2", "a virtual dataset, its data in other files (not read)")
+                if d.external:
+                    raise _bad(path, f"/{g}/{n}", "L2", "stored in an external file (not read)")
             for n in REQUIRED:
                 if n not in grp:
                     raise _bad(path, f"/{g}", "L6", f"dataset '{n}' missing")
@@ -201,6 +213,9 @@ def load_h5(path, channels=True):
             lengths = {n: grp[n].shape for n in grp}
             if len(set(lengths.values())) != 1 or len(next(iter(lengths.values()))) != 1:
                 raise _bad(path, f"/{g}", "L7", f"datasets are not 1-D of one length: {lengths}")
+            if next(iter(lengths.values()))[0] > MAX_SAMPLES:  # a small file can declare terabytes
+                raise _bad(path, f"/{g}", "L7", f"datasets declare {next(iter(lengths.values()))[0]} samples, more "
+                                                f"than a curve may have ({MAX_SAMPLES}, VAFM_H5_MAX_SAMPLES): not read")
             chans = {n: grp[n][()] for n in grp} if channels else {}
             row = rows.get(g)
             t = {k: _str(row[k]) for k in row.dtype.names} if row is not None else None
