@@ -517,6 +517,74 @@ def test_loader_refuses_huge_declared_length(tmp_path):
         load_h5(str(path))
 
 
+def test_loader_refuses_hostile_map(tmp_path):
+    """A map whose pixel indices would misplace a curve (a negative index, which numpy wraps; two curves on
+    one pixel), whose shape would size the array from the file (10**6 pixels a side: 0.6.2 allocated it), or
+    whose ground-truth tables are not such tables raises ValueError naming the file and what is wrong
+    (0.6.2: a wrong map without a word, "invalid literal for int()", "no field of name curve")."""
+    h5py = pytest.importorskip("h5py")
+    if not VAFM_CLI:
+        pytest.skip("VAFM_CLI not set")
+    good = tmp_path / "hm.h5"
+    subprocess.run([VAFM_CLI, "map", "--preset", "cell-liquid", "--nx", "2", "--ny", "2", "--threads", "1",
+                    "--pattern", "dome", "--out", str(good), "-q"], check=True, capture_output=True, timeout=60)
+    f = load_h5(str(good))
+    assert f.is_map and f.map_shape == (2, 2)
+    assert np.array_equal(f.map_array([c.group for c in f]), [[0, 1], [2, 3]])
+
+    def hostile(name, edit):
+        path = tmp_path / f"{name}.h5"
+        path.write_bytes(good.read_bytes())
+        with h5py.File(path, "a") as h:
+            edit(h)
+        return str(path)
+
+    def set_attr(curves, **kv):
+        def edit(h):
+            for c in curves:
+                for k, v in kv.items():
+                    h[str(c)].attrs[k.replace("_", " ")] = v
+        return edit
+
+    p = hostile("negative", set_attr([3], grid_index_x=-2))
+    with pytest.raises(ValueError, match=r"\[L17\] .*negative\.h5: /3: 'grid index x' is -2 \(afmformats wants a "
+                                         r"non-negative integer\)"):
+        load_h5(p).map_array(range(4))
+    p = hostile("outside", set_attr([3], grid_index_y=2))
+    with pytest.raises(ValueError, match=r"outside\.h5: /3: 'grid index y' is 2, above 1 \(outside 'grid shape y' 2\)"):
+        load_h5(p).map_array(range(4))
+    p = hostile("duplicate", set_attr([3], grid_index_x=0, grid_index_y=0))
+    with pytest.raises(ValueError, match=r"duplicate\.h5: /3: pixel \(0, 0\) is curve 0's too"):
+        load_h5(p).map_array(range(4))
+    p = hostile("shape", set_attr(range(4), grid_shape_x=10**6))  # 16 MB if allocated: 0.6.2 returned it
+    with pytest.raises(ValueError, match=r"shape\.h5: /0: 'grid shape x' is 1000000, above 1024 \(a map has at "
+                                         r"most 1024 pixels a side"):
+        load_h5(p).map_shape
+    with pytest.raises(ValueError, match=r"'grid shape x' is 1000000"):
+        load_h5(p).map_array(range(4))
+
+    def rename_truth(h):
+        t = h.attrs["vafm ground truth"]
+        del h.attrs["vafm ground truth"]
+        h.attrs["vafm ground truth from x"] = t
+    with pytest.raises(ValueError, match=r"\[V4\] .*suffix\.h5: /: attribute 'vafm ground truth from x': a part of "
+                                         r"the ground truth is named"):
+        load_h5(hostile("suffix", rename_truth))
+
+    def truth_without_curve(h):
+        t = h.attrs["vafm ground truth"]
+        del h.attrs["vafm ground truth"]
+        h.attrs["vafm ground truth"] = np.zeros(len(t), dtype=[("point", "<u8"), ("E_star_Pa", "<f8")])
+    with pytest.raises(ValueError, match=r"\[V4\] .*nocurve\.h5: /: attribute 'vafm ground truth' lacks the "
+                                         r"integer field 'curve'"):
+        load_h5(hostile("nocurve", truth_without_curve))
+
+    def truth_twice(h):
+        h.attrs["vafm ground truth from 3"] = h.attrs["vafm ground truth"][3:]
+    with pytest.raises(ValueError, match=r"twice\.h5: /: two ground-truth rows for curve 3"):
+        load_h5(hostile("twice", truth_twice))
+
+
 # ---- the examples (each writes a PNG without a display) ---------------------------------------------------
 
 def run_example(name, *args, timeout=180):

@@ -17,7 +17,9 @@ A file that breaks the layout's structure (root objects that are not curve group
 without force/heights/segment, channels of different lengths, an imaging mode other than
 force-distance) raises ValueError naming the file, the object and the rule (protocol/hdf5.md L4-L10).
 So does a dataset whose data lie outside the file (external raw-data storage, a virtual dataset: L2), which
-is never read, and a channel longer than a vafm curve may be (VAFM_H5_MAX_SAMPLES), before it is read.
+is never read, and a channel longer than a vafm curve may be (VAFM_H5_MAX_SAMPLES), before it is read. The
+map's pixel indices, its shape (at most VAFM_MAP_MAX_SIDE a side) and the ground-truth tables are checked
+as they are used: a hostile file raises ValueError naming it, it is not misread.
 """
 import json
 
@@ -26,6 +28,8 @@ import numpy as np
 CHANNELS = ("force", "height (measured)", "height (piezo)", "segment", "time", "tip position")
 REQUIRED = ("force", "height (measured)", "height (piezo)", "segment")
 TRUTH = "vafm ground truth"
+TRUTH_PART = TRUTH + " from "  # + the part's first curve: the rows of one flush (a killed writer's file)
+MAP_MAX_SIDE = 1024  # VAFM_MAP_MAX_SIDE (include/vafm/map.h): pixels a side of a map
 MAX_SAMPLES = 1 << 25  # VAFM_H5_MAX_SAMPLES (include/vafm/h5.h): samples of one curve
 
 
@@ -112,11 +116,26 @@ class H5File:
         return bool(self.curves) and all(k in self.curves[0].meta for k in
                                          ("grid shape x", "grid shape y", "grid index x", "grid index y"))
 
+    def _grid_int(self, c, name, hi, limit):
+        """Curve c's attribute `name` (afmformats' grid shape or index) as an int in [0, hi], else ValueError
+        naming the file, the curve and the attribute, and for a value above hi the `limit`."""
+        v = c.meta.get(name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not float(v).is_integer() or v < 0:
+            raise _bad(self.path, f"/{c.group}", "L17", f"'{name}' is {v!r} (afmformats wants a non-negative integer)")
+        if v > hi:
+            raise ValueError(f"{self.path}: /{c.group}: '{name}' is {int(v)}, above {hi} ({limit})")
+        return int(v)
+
     @property
     def map_shape(self):
-        """(nx, ny) of a map, from curve 0's "grid shape x|y"."""
-        m = self.curves[0].meta
-        return int(m["grid shape x"]), int(m["grid shape y"])
+        """(nx, ny) of a map, from curve 0's "grid shape x|y": 1 to MAP_MAX_SIDE each (vafm's limit; a larger
+        shape raises ValueError instead of allocating what the file claims)."""
+        c = self.curves[0]
+        nx, ny = (self._grid_int(c, f"grid shape {a}", MAP_MAX_SIDE, f"a map has at most {MAP_MAX_SIDE} pixels a "
+                                 f"side, VAFM_MAP_MAX_SIDE") for a in "xy")
+        if not nx or not ny:
+            raise _bad(self.path, f"/{c.group}", "L17", "'grid shape x|y' is 0 (a map has at least one pixel)")
+        return nx, ny
 
     @property
     def map_extent(self):
@@ -133,11 +152,20 @@ class H5File:
 
     def map_array(self, values):
         """Per-curve values (one per curve, in curve order) as a 2-D array [iy, ix] placed by each curve's
-        "grid index x|y"; NaN where no curve sits."""
+        "grid index x|y"; NaN where no curve sits. An index that is not a whole number inside the map's shape,
+        or two curves on one pixel, raise ValueError (numpy would wrap a negative index, and the later curve
+        would overwrite the other: a wrong map without a word)."""
         nx, ny = self.map_shape
         out = np.full((ny, nx), np.nan)
+        owner = {}
         for c, v in zip(self.curves, values):
-            out[int(c.meta["grid index y"]), int(c.meta["grid index x"])] = np.nan if v is None else v
+            ix, iy = (self._grid_int(c, f"grid index {a}", n - 1, f"outside 'grid shape {a}' {n}")
+                      for a, n in (("x", nx), ("y", ny)))
+            if (ix, iy) in owner:
+                raise ValueError(f"{self.path}: /{c.group}: pixel ({ix}, {iy}) is curve {owner[ix, iy]}'s too "
+                                 f"(one curve per pixel)")
+            owner[ix, iy] = c.group
+            out[iy, ix] = np.nan if v is None else v
         return out
 
     def __len__(self):
@@ -157,18 +185,36 @@ def _bad(path, obj, rule, what):
     return ValueError(f"[{rule}] {path}: {obj}: {what}")
 
 
-def _truth_table(root):
-    """The merged table plus any per-flush parts a killed writer left ("vafm ground truth from <i>")."""
+def _truth_table(path, root):
+    """The merged table plus any per-flush parts a killed writer left ("vafm ground truth from <i>"), sorted
+    by curve; ValueError naming the file and the attribute for what is not such a table (V4)."""
     parts = []
-    if TRUTH in root.attrs:
-        parts.append(np.asarray(root.attrs[TRUTH]))
-    for name in sorted((n for n in root.attrs if n.startswith(TRUTH + " from ")),
-                       key=lambda n: int(n.rsplit(" ", 1)[1])):
-        parts.append(np.asarray(root.attrs[name]))
+    for name in root.attrs:
+        if name != TRUTH and not name.startswith(TRUTH_PART):
+            continue
+        first = name[len(TRUTH_PART):] if name != TRUTH else "-1"
+        if name != TRUTH and not (first.isascii() and first.isdigit()):
+            raise _bad(path, "/", "V4", f"attribute '{name}': a part of the ground truth is named "
+                                        f"'{TRUTH_PART}<first curve>', a decimal number")
+        p = np.asarray(root.attrs[name])
+        if p.dtype.names is None or p.ndim != 1:
+            raise _bad(path, "/", "V4", f"attribute '{name}' is not a 1-D compound table (the ground truth)")
+        if "curve" not in p.dtype.names or p.dtype["curve"].kind not in "iu":
+            raise _bad(path, "/", "V4", f"attribute '{name}' lacks the integer field 'curve'")
+        parts.append((int(first), name, p))
     if not parts:
         return None
-    t = np.concatenate([p.reshape(-1) for p in parts])
-    return t[np.argsort(t["curve"], kind="stable")]
+    parts.sort(key=lambda x: x[0])
+    try:
+        t = np.concatenate([p for _, _, p in parts])
+    except (TypeError, ValueError) as e:  # numpy: the parts' fields differ
+        raise _bad(path, "/", "V4", f"the ground-truth attributes {[n for _, n, _ in parts]} are tables of "
+                                    f"different fields ({e})") from None
+    t = t[np.argsort(t["curve"], kind="stable")]
+    dup = np.flatnonzero(t["curve"][1:] == t["curve"][:-1])
+    if dup.size:
+        raise _bad(path, "/", "V4", f"two ground-truth rows for curve {int(t['curve'][dup[0]])} (one row per curve)")
+    return t
 
 
 def load_h5(path, channels=True):
@@ -186,7 +232,7 @@ def load_h5(path, channels=True):
         groups = sorted(int(n) for n in names)
         if groups != list(range(len(groups))):
             raise _bad(path, "/", "L4", "curve groups are not numbered 0..n-1 without gaps")
-        truth = _truth_table(root)
+        truth = _truth_table(path, root)
         rows = {int(r["curve"]): r for r in truth} if truth is not None else {}
         curves = []
         for g in groups:
