@@ -53,6 +53,16 @@ static void test_bad_input(void)
     ENSURE(vafm_map_set(&s, "no_such", "1", &e) == VAFM_ENOTFOUND && strstr(e.message, "period_m"));
     ENSURE(vafm_map_set(&s, "b_contact", "glue", &e) == VAFM_EINVAL && !strcmp(e.field, "b_contact"));
     ENSURE(vafm_map_set(&s, "start", "sideways", &e) == VAFM_EINVAL && !strcmp(e.field, "start"));
+    /* domains of 1e-300 m: x / domain_m overflowed the noise's int64 lattice index (0.6.2 accepted it) */
+    ENSURE(vafm_map_set(&s, "domain_m", "1e-300", &e) == VAFM_EINVAL);
+    ENSURE_MSG(!strcmp(e.field, "domain_m") && strstr(e.message, "[1e-12, 0.01] m"), "%s", e.message);
+    ENSURE(s.domain_m == 1e-6); /* unchanged */
+    ENSURE(vafm_map_set(&s, "domain_m", "1e-12", &e) == 0 && s.domain_m == 1e-12);
+    s.pattern = VAFM_MAP_DOMAINS;
+    s.domain_m = 1e-300; /* set directly: validation and the pixel refuse it too */
+    ENSURE(vafm_map_validate(&s, &base, &e) == VAFM_EINVAL && !strcmp(e.field, "domain_m"));
+    ENSURE(vafm_map_pixel(&s, &base, 0, 0, NULL, NULL, &e) == VAFM_EINVAL && !strcmp(e.field, "domain_m"));
+    vafm_map_spec_default(&s);
     /* a dome higher than its radius; a fixed start below the body's top; a pixel's bad scene names the pixel */
     s.pattern = VAFM_MAP_DOME;
     s.height_m = 4e-6;

@@ -23,6 +23,9 @@ expect_fail "map: an unknown pattern names the known ones" 2 "pattern 'spiral'" 
 expect_fail "map: a negative size names size_x_m and its range" 2 "size_x_m" "(0, 0.01]" -- map --size -1e-6 --out "$B"
 expect_fail "map: an unknown pattern parameter lists the known ones" 2 "'bogus'" "period_m" -- map --pattern-param bogus=1 --out "$B"
 expect_fail "map: a pattern parameter out of range names it" 2 "b_E_star_Pa" -- map --pattern-param b_E_star_Pa=-5 --out "$B"
+expect_fail "map: domains of 1e-300 m name domain_m and its range (0.6.2: int64 overflow, a degenerate map)" 2 \
+    "domain_m" "[1e-12, 0.01] m" -- map --preset cell-liquid --nx 2 --ny 2 --threads 1 --pattern domains \
+    --pattern-param domain_m=1e-300 --out "$B"
 expect_fail "map: a fixed start below the dome's top names start_height_m" 2 "start_height_m" "fixed" -- \
     map --preset cell-liquid --pattern dome --pattern-param start=fixed,height_m=1e-6 --out "$B"
 expect_fail "map: --out is required" 2 "--out" -- map --nx 2

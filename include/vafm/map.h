@@ -93,7 +93,7 @@ typedef struct vafm_map_spec {
     double radius_m;         /**< disc, dome: radius of the body's footprint, m, (0, 1e-2] (default 3e-6) */
     double height_m;         /**< disc, dome: height of the body above the substrate, m, [0, 1e-4]
                                   (default 0.5e-6; a dome needs height_m ≤ radius_m) */
-    double domain_m;         /**< domains: lattice spacing of the noise (typical domain size), m, (0, 1e-2]
+    double domain_m;         /**< domains: lattice spacing of the noise (typical domain size), m, [1e-12, 1e-2]
                                   (default 1e-6) */
     uint64_t domain_seed;    /**< domains: seed of the pattern (default 1) */
     double fraction;         /**< domains: threshold of the noise, about the area fraction of material 1,

@@ -45,7 +45,10 @@ static const s_mfield s_fields[] = {
     MF(period_m, S_REAL, "m", 0, 1e-2),
     MF(radius_m, S_REAL, "m", 0, 1e-2),
     MF(height_m, S_REAL, "m", 0, 1e-4),
-    MF(domain_m, S_REAL, "m", 0, 1e-2),
+    /* at least a picometre: the noise's lattice index floor(2x / domain_m) stays below 3e10 for any pixel
+     * (|x| <= |center| + size/2 <= 1.5e-2 m), far inside int64 and exact in a double (1e-300 overflowed the
+     * conversion, undefined behaviour, and made a degenerate map) */
+    MF(domain_m, S_REAL, "m", 1e-12, 1e-2),
     MF(domain_seed, S_SEED, "", 0, 0),
     MF(fraction, S_REAL, "", 0, 1),
 };
@@ -213,7 +216,8 @@ static double s_lattice(uint64_t seed, int64_t i, int64_t j)
     return (double)(z >> 11) * 0x1.0p-53;
 }
 
-/* Value noise: the lattice values interpolated with a smoothstep, at (x, y) in lattice units. */
+/* Value noise: the lattice values interpolated with a smoothstep, at (x, y) in lattice units; |x|, |y| are at
+ * most 3e10 (domain_m's lower bound), so the conversions to int64 and i + 1 cannot overflow. */
 static double s_noise(uint64_t seed, double x, double y)
 {
     double fx = floor(x), fy = floor(y);
