@@ -52,6 +52,11 @@ check "study: missing name exits 2" "[ $? -eq 2 ]"
 check "study: unknown study exits 2 naming the known ones" "[ $? -eq 2 ] && grep -q 'velocity-thermal' '$TMP/e'"
 "$VAFM" study --help >"$TMP/h" 2>&1
 check "study: --help" "[ $? -eq 0 ] && grep -q -- '--resume' '$TMP/h'"
+# -n is bounded by the memory of the per-curve results it multiplies (1e8 was accepted: a 100 GB calloc)
+check "study: --help gives -n's maximum" "grep -q -- '-n N .* 2 to 100000 ' '$TMP/h'"
+timeout 20 "$VAFM" study distribution -n 100001 --threads 1 --out "$TMP/nmax" -q >/dev/null 2>"$TMP/e"
+check "study: -n above 100000 exits 2 at once, naming -n and the maximum" \
+    "[ $? -eq 2 ] && grep -q -- '-n: .*\[2, 100000\]' '$TMP/e'" "$(head -c 300 "$TMP/e")"
 
 # ---- the studies ----------------------------------------------------------------------------------------
 # study NAME CSV... : run the quick variant into $TMP/NAME and check its outputs

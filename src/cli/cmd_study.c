@@ -30,6 +30,7 @@
 
 extern char **environ;
 
+#include "cli/cli.h"
 #include "cli/study.h"
 #include "cli/study_fit.h"
 #include "vafm/campaign.h"
@@ -49,6 +50,18 @@ extern char **environ;
 
 #define S_PI 3.14159265358979323846
 #define S_MAXP 16
+
+/* A campaign's per-curve ground truth stays in memory until its tables are written, so -n (curves per
+ * point) is bounded by that memory: at most S_TRUTH_BYTES_MAX for the largest grid a study gives -n
+ * to (distribution: five temperatures). 100000 curves per point is 50 times the distribution's N and
+ * about 40 CPU-hours of its curves, beyond any study run in one go. */
+#define S_N_MAX 100000
+#define S_STR(x) #x
+#define S_XSTR(x) S_STR(x)
+#define S_N_POINTS_MAX 5u
+#define S_TRUTH_BYTES_MAX ((size_t)256 << 20)
+_Static_assert((size_t)S_N_MAX * S_N_POINTS_MAX * sizeof(vafm_h5_truth) <= S_TRUTH_BYTES_MAX,
+               "-n's maximum must keep a campaign's ground truth within S_TRUTH_BYTES_MAX");
 
 /* ---- context and one campaign ---------------------------------------------------------------------- */
 
@@ -134,10 +147,19 @@ static int s_campaign(s_ctx *ctx, s_run *r)
 {
     vafm_campaign_spec sp;
     s_spec(r, &sp);
-    r->total = r->N * vafm_campaign_points(&sp);
-    r->truth = calloc(r->total, sizeof *r->truth);
-    if (!r->truth)
+    size_t points = vafm_campaign_points(&sp);
+    /* -n is checked against this bound up front; this guards the studies' own grids as well */
+    if (!points || r->N > S_TRUTH_BYTES_MAX / sizeof *r->truth / points) {
+        vafm_cli_error("study: %s: %" PRIu64 " curves x %zu points would hold more than %zu MiB of results in "
+                       "memory", r->file, r->N, points, S_TRUTH_BYTES_MAX >> 20);
         return 1;
+    }
+    r->total = r->N * points;
+    r->truth = calloc(r->total, sizeof *r->truth);
+    if (!r->truth) {
+        vafm_cli_error("study: %s: out of memory for %" PRIu64 " curves", r->file, r->total);
+        return 1;
+    }
     vafm_error e;
     memset(&e, 0, sizeof e);
     if (vafm_campaign_validate(&r->base, &sp, NULL, &e)) {
@@ -1055,8 +1077,8 @@ static void s_help(FILE *o)
           "  errors, theory beside every point, DIR/report.md, CSV tables and PNG figures (matplotlib).\n"
           "  --quick       small grids and N (about 10-20 s each): checks the pipeline, not the physics\n"
           "  --out DIR     output directory (default study-NAME; created)\n"
-          "  -n N          curves per point of the thermal campaigns (distribution: 2000, quick 12;\n"
-          "                velocity-thermal: 200, quick 8); the T = 0 campaigns always run one\n"
+          "  -n N          curves per point of the thermal campaigns, 2 to " S_XSTR(S_N_MAX) " (distribution: 2000,\n"
+          "                quick 12; velocity-thermal: 200, quick 8); the T = 0 campaigns always run one\n"
           "  --threads T   worker threads (default 0: all cores); results do not depend on it\n"
           "  --kernel NAME auto (default), scalar, batch, batch4, batch8: as for vafm campaign (same results)\n"
           "  --resume      keep the complete curves of existing files and run the rest (same results)\n"
@@ -1085,9 +1107,11 @@ int vafm_cmd_study(int argc, char **argv)
             ctx.out = argv[++i];
         } else if (!strcmp(a, "-n") && i + 1 < argc) {
             char *end;
+            errno = 0;
             long long n = strtoll(argv[++i], &end, 10);
-            if (*end || n < 2 || n > 100000000) {
-                fprintf(stderr, "vafm study: -n: '%s' is not a curve count in [2, 1e8]\n", argv[i]);
+            if (end == argv[i] || *end || errno == ERANGE || n < 2 || n > (long long)S_N_MAX) {
+                vafm_cli_error("study: -n: '%s' is not a curve count in [2, %d] (every curve's results are kept in "
+                               "memory: at most %d curves per point)", argv[i], S_N_MAX, S_N_MAX);
                 return 2;
             }
             ctx.n_override = (uint64_t)n;
