@@ -143,6 +143,24 @@ static int s_cb(void *user, const vafm_campaign_curve *c)
     return 0;
 }
 
+static void s_run_free(s_run *r)
+{
+    free(r->truth);
+    r->truth = NULL;
+}
+
+/* fopen(path, "w"), printing why it failed. */
+static FILE *s_open(const char *path)
+{
+    FILE *f = fopen(path, "w");
+    if (!f)
+        vafm_cli_error("study: cannot write %s: %s", path, strerror(errno));
+    return f;
+}
+
+/* Run one campaign into r->file (or continue it: --resume) and keep every curve's ground truth in
+ * r->truth. @return 0, or 1 with the error printed and r->truth freed, so that a caller's error path
+ * frees only its other runs. */
 static int s_campaign(s_ctx *ctx, s_run *r)
 {
     vafm_campaign_spec sp;
@@ -164,7 +182,7 @@ static int s_campaign(s_ctx *ctx, s_run *r)
     memset(&e, 0, sizeof e);
     if (vafm_campaign_validate(&r->base, &sp, NULL, &e)) {
         fprintf(stderr, "vafm study: %s, %s\n", r->file, e.message);
-        return 1;
+        goto fail;
     }
     vafm_recorder_opts o;
     vafm_recorder_opts_default(&o);
@@ -175,7 +193,7 @@ static int s_campaign(s_ctx *ctx, s_run *r)
     o.mode = ctx->resume && stat(r->file, &st) == 0 && !r->samples_csv ? VAFM_RECORD_RESUME : VAFM_RECORD_OVERWRITE;
     if (vafm_recorder_open(&r->rec, r->file, &o, &r->base, &sp, &e)) {
         fprintf(stderr, "vafm study: %s: %s\n", r->file, e.message);
-        return 1;
+        goto fail;
     }
     uint64_t have = vafm_recorder_count(r->rec);
     if (have > r->total)
@@ -184,7 +202,7 @@ static int s_campaign(s_ctx *ctx, s_run *r)
         if (vafm_recorder_truth(r->rec, i, &r->truth[i])) {
             fprintf(stderr, "vafm study: %s: no ground truth for curve %" PRIu64 "\n", r->file, i);
             vafm_recorder_close(&r->rec, NULL, NULL);
-            return 1;
+            goto fail;
         }
     ctx->curves_kept += have;
     int rc = 0;
@@ -200,7 +218,7 @@ static int s_campaign(s_ctx *ctx, s_run *r)
     if (r->werr || (rc && rc != VAFM_EABORT) || cr) {
         fprintf(stderr, "vafm study: %s: %s\n", r->file,
                 r->e.message[0] ? r->e.message : e.message[0] ? e.message : vafm_strerror(rc ? rc : cr));
-        return 1;
+        goto fail;
     }
     for (uint64_t i = have; i < r->total; ++i)
         ctx->steps += r->truth[i].result.steps;
@@ -208,12 +226,9 @@ static int s_campaign(s_ctx *ctx, s_run *r)
     if (!ctx->quiet)
         fprintf(stderr, "vafm study: %s: %" PRIu64 " curves (%" PRIu64 " run)\n", r->file, r->total, r->total - have);
     return 0;
-}
-
-static void s_run_free(s_run *r)
-{
-    free(r->truth);
-    r->truth = NULL;
+fail:
+    s_run_free(r);
+    return 1;
 }
 
 /* ---- statistics ---------------------------------------------------------------------------------- */
@@ -416,15 +431,22 @@ static int s_distribution(s_ctx *ctx)
     const double FJ = q.F_jkr * sc.force_N;
     char path[1100];
     snprintf(path, sizeof path, "%s/distribution_curves.csv", ctx->out);
-    FILE *c = fopen(path, "w");
+    FILE *c = s_open(path), *f = NULL;
     snprintf(path, sizeof path, "%s/distribution_fits.csv", ctx->out);
-    FILE *f = fopen(path, "w");
-    if (!c || !f) {
+    if (c)
+        f = s_open(path);
+    double *x = malloc(r.N * sizeof *x), *y = malloc(r.N * sizeof *y), *z = malloc(r.N * sizeof *z);
+    if (c && f && !(x && y && z))
+        vafm_cli_error("study: out of memory");
+    if (!c || !f || !x || !y || !z) {
         if (c)
             fclose(c);
         if (f)
             fclose(f);
-        fprintf(stderr, "vafm study: cannot write %s\n", path);
+        free(x);
+        free(y);
+        free(z);
+        s_run_free(&r);
         return 1;
     }
     fprintf(c, "T_K,kT_reduced,pulloff_sampled_nN,pulloff_spring_nN,detach_nN,F_JKR_nN\n");
@@ -449,7 +471,6 @@ static int s_distribution(s_ctx *ctx)
                "Forces in nN.\n\n");
     fprintf(o, "| T (K) | k_BT̃ | observable | n | flagged | mean ± se | sd | ξ ± se | ω ± se | α ± se | fit |\n"
                "|---|---|---|---|---|---|---|---|---|---|---|\n");
-    double *x = malloc(r.N * sizeof *x), *y = malloc(r.N * sizeof *y), *z = malloc(r.N * sizeof *z);
     int all_conv = 1;
     const char *oname[] = { "pulloff_sampled_N", "pulloff_spring_N", "detach_force_N" };
     double mean_ref = NAN, sd_ref = NAN, mT[8], sT[8], aT[8];
@@ -491,7 +512,6 @@ static int s_distribution(s_ctx *ctx)
     fclose(f);
     free(x);
     free(y);
-    free(z);
 
     /* Time-step bias of this scene, measured (full runs only): the first Nb curves of the lowest
      * temperature again at a quarter of the step, with the same (seed, index) streams. The same stream
@@ -507,9 +527,19 @@ static int s_distribution(s_ctx *ctx)
         rb.v = r.v;
         rb.N = r.N < 100 ? r.N : 100;
         snprintf(rb.file, sizeof rb.file, "%s/distribution-dt4.h5", ctx->out);
-        if (s_campaign(ctx, &rb))
+        if (s_campaign(ctx, &rb)) {
+            free(z);
+            s_run_free(&r);
             return 1;
+        }
         double *d = malloc(rb.N * sizeof *d);
+        if (!d) {
+            vafm_cli_error("study: out of memory");
+            s_run_free(&rb);
+            free(z);
+            s_run_free(&r);
+            return 1;
+        }
         size_t nd = 0;
         for (uint64_t i = 0; i < rb.N; ++i) {
             const vafm_curve_result *a = &r.truth[i].result, *b = &rb.truth[i].result;
@@ -540,10 +570,8 @@ static int s_distribution(s_ctx *ctx)
         vafm_theory_pull tp;
         double yd = vafm_theory_dhs_mean_y(&q, red.k, kT, v_red, zeta);
         int ok = vafm_theory_mfpt_pull(red.gamma, red.k, kT, zeta, red.m, 0.0, &v_red, 1, &tp) == 0;
-        double *zz = malloc(r.N * sizeof *zz);
-        size_t n = s_collect(&r, pt, VAFM_OBS_DETACH_FORCE, 1e9, zz);
-        s_stat s = s_stats(zz, n);
-        free(zz);
+        size_t n = s_collect(&r, pt, VAFM_OBS_DETACH_FORCE, 1e9, z);
+        s_stat s = s_stats(z, n);
         fprintf(o, "| %.1f | %.4f | %.4f ± %.4f | %.4f ± %.4f |\n", r.T[pt],
                 (q.F_det - red.k * yd) * sc.force_N * 1e9, ok ? tp.mean_F * sc.force_N * 1e9 : NAN,
                 ok ? tp.sd_F * sc.force_N * 1e9 : NAN, s.mean, s.se);
@@ -582,6 +610,7 @@ static int s_distribution(s_ctx *ctx)
             neg ? "negative at every temperature" : "not negative at every temperature",
             neg ? "a tail toward low forces: the asymmetric bell of Fig. 2" : "see the table; small samples resolve α poorly");
     fprintf(o, "Fits converged: %s.\n\n", all_conv ? "all" : "**not all**");
+    free(z);
     s_run_free(&r);
     return all_conv ? 0 : 4;
 }
@@ -601,7 +630,7 @@ static int s_velocity_athermal(s_ctx *ctx)
     double F0[2][4][16], Fd[2][4][16];
     char path[1100];
     snprintf(path, sizeof path, "%s/athermal.csv", ctx->out);
-    FILE *c = fopen(path, "w");
+    FILE *c = s_open(path);
     if (!c)
         return 1;
     fprintf(c, "dynamics,k,v,F0_spring_over_FJKR,F_detach_over_FJKR,Fstar_over_FJKR,Fdet_qs_over_FJKR\n");
@@ -618,8 +647,10 @@ static int s_velocity_athermal(s_ctx *ctx)
             r.v = r.base.v_retract_m_per_s;
             r.N = 1; /* T = 0: deterministic, one curve per point */
             snprintf(r.file, sizeof r.file, "%s/athermal-%s-v%g.h5", ctx->out, dyn ? "brownian" : "langevin", vl[iv]);
-            if (s_campaign(ctx, &r))
+            if (s_campaign(ctx, &r)) {
+                fclose(c);
                 return 1;
+            }
             for (size_t ik = 0; ik < nk; ++ik) {
                 vafm_quasistatic q;
                 vafm_theory_quasistatic(gamma, kl[ik], &q);
@@ -695,7 +726,7 @@ static int s_velocity_athermal(s_ctx *ctx)
     }
 
     snprintf(path, sizeof path, "%s/athermal_fits.csv", ctx->out);
-    FILE *f = fopen(path, "w");
+    FILE *f = s_open(path);
     if (!f)
         return 1;
     fprintf(f, "dynamics,k,v0,se_v0,alpha0,se_alpha0,beta0,se_beta0,c,se_c,onset_only,rms_residual,converged\n");
@@ -819,7 +850,7 @@ static int s_velocity_thermal(s_ctx *ctx)
     vafm_theory_quasistatic(gamma, k, &q);
     char path[1100];
     snprintf(path, sizeof path, "%s/thermal.csv", ctx->out);
-    FILE *c = fopen(path, "w");
+    FILE *c = s_open(path);
     if (!c)
         return 1;
     fprintf(c, "dynamics,kT,v,n,F0_spring,Fp_spring,se_Fp_spring,Ft_spring,F0_detach,Fp_detach,se_Fp_detach,Ft_detach,"
@@ -867,12 +898,26 @@ static int s_velocity_thermal(s_ctx *ctx)
             r.v = r.base.v_retract_m_per_s;
             r.N = N;
             snprintf(r.file, sizeof r.file, "%s/thermal-%s-v%g.h5", ctx->out, dyn ? "brownian" : "langevin", vl[iv]);
-            if (s_campaign(ctx, &r0) || s_campaign(ctx, &r))
+            if (s_campaign(ctx, &r0)) {
+                fclose(c);
                 return 1;
+            }
+            if (s_campaign(ctx, &r)) {
+                s_run_free(&r0);
+                fclose(c);
+                return 1;
+            }
             vafm_scale sc = vafm_units_scale(&r.base);
             double FJ = q.F_jkr * sc.force_N;
             double F0s = r0.truth[0].result.pulloff_spring_N / FJ, F0d = r0.truth[0].result.detach_force_N / FJ;
             double *x = malloc(N * sizeof *x);
+            if (!x) {
+                vafm_cli_error("study: out of memory");
+                s_run_free(&r0);
+                s_run_free(&r);
+                fclose(c);
+                return 1;
+            }
             for (size_t it = 0; it < nT; ++it) {
                 size_t n = s_collect(&r, it, VAFM_OBS_PULLOFF_SPRING, 1.0 / FJ, x);
                 s_stat s2 = s_stats(x, n);
@@ -914,7 +959,7 @@ static int s_velocity_thermal(s_ctx *ctx)
     }
     fclose(c);
     snprintf(path, sizeof path, "%s/thermal_fits.csv", ctx->out);
-    FILE *f = fopen(path, "w");
+    FILE *f = s_open(path);
     if (!f)
         return 1;
     fprintf(f, "dynamics,kT,observable,xi,se_xi,alpha_t,se_alpha_t,v_t,se_v_t,beta_t,se_beta_t,log_a,se_log_a,log_b,"
@@ -1008,7 +1053,7 @@ static int s_hysteresis(s_ctx *ctx)
     snprintf(r.file, sizeof r.file, "%s/hysteresis.h5", ctx->out);
     char path[1100];
     snprintf(path, sizeof path, "%s/hysteresis.csv", ctx->out);
-    r.samples_csv = fopen(path, "w");
+    r.samples_csv = s_open(path);
     if (!r.samples_csv)
         return 1;
     fprintf(r.samples_csv, "time_s,height_m,force_N,tip_m,segment\n");
@@ -1023,9 +1068,11 @@ static int s_hysteresis(s_ctx *ctx)
     vafm_theory_quasistatic(red.gamma, red.k, &q);
     /* the quasi-static branch, for the figure: spring force against spring position u_spr ≥ u_spr* */
     snprintf(path, sizeof path, "%s/hysteresis_theory.csv", ctx->out);
-    FILE *t = fopen(path, "w");
-    if (!t)
+    FILE *t = s_open(path);
+    if (!t) {
+        s_run_free(&r);
         return 1;
+    }
     fprintf(t, "u_spr_over_u0,F_over_FJKR\n");
     double u0 = -q.u_spr_star; /* the paper's ũ₀: spring displacement at the athermal pull-off */
     double top = -r.base.trigger_height_m / sc.length_m;
@@ -1037,8 +1084,10 @@ static int s_hysteresis(s_ctx *ctx)
     }
     fclose(t);
     snprintf(path, sizeof path, "%s/hysteresis_meta.csv", ctx->out);
-    if (!(t = fopen(path, "w")))
+    if (!(t = s_open(path))) {
+        s_run_free(&r);
         return 1;
+    }
     fprintf(t, "u0_m,F_JKR_N\n%.9g,%.9g\n", u0 * sc.length_m, q.F_jkr * sc.force_N);
     fclose(t);
     const vafm_curve_result *res = &r.truth[0].result;
