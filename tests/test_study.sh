@@ -70,6 +70,21 @@ for spec in hysteresis:hysteresis.h5 distribution:distribution.h5 velocity-ather
         "[ $? -eq 1 ] && grep -q '/$file: .*not a regular file' '$TMP/e' && ! grep -q Sanitizer '$TMP/e'" \
         "$(grep -m1 -A4 Sanitizer "$TMP/e" || tail -c 300 "$TMP/e")"
 done
+# --out: every file's path is built in full (a 1024-byte buffer cut DIR/hysteresis.h5 to DIR/hysteresis.h
+# once DIR passed ~1010 bytes, and the error text with it), and a DIR whose files' paths cannot fit in
+# PATH_MAX is refused before anything is done, naming --out and its maximum
+check "study: --help gives --out's maximum" "grep -q -- '--out DIR .*at most 4000 bytes' '$TMP/h'"
+"$VAFM" study hysteresis --quick --out "$TMP/$(printf '%04001d' 0)" -q >/dev/null 2>"$TMP/e"
+check "study: an --out longer than 4000 bytes exits 2 naming --out and the maximum" \
+    "[ $? -eq 2 ] && grep -q -- '--out: .*at most 4000' '$TMP/e'" "$(head -c 300 "$TMP/e")"
+long="$TMP/long"
+while [ ${#long} -lt 900 ]; do long="$long/$(printf '%0100d' 0)"; done
+long="$long/$(printf "%0$((1030 - ${#long} - 1))d" 0)" # 1030 bytes, each name within NAME_MAX
+mkdir -p "$long"
+timeout 120 "$VAFM" study hysteresis --quick --threads 1 --out "$long" -q >/dev/null 2>"$TMP/e"
+check "study: a ${#long}-byte --out gets its files under their full names" \
+    "[ $? -eq 0 ] && [ -s '$long/hysteresis.h5' ] && [ -s '$long/hysteresis.csv' ] && [ -s '$long/report.md' ] &&
+     [ -s '$long/hysteresis_theory.csv' ] && ! [ -e '$long/hysteresis.h' ]" "$(tail -c 300 "$TMP/e")"
 
 # ---- the studies ----------------------------------------------------------------------------------------
 # study NAME CSV... : run the quick variant into $TMP/NAME and check its outputs

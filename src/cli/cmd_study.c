@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <fcntl.h>
+#include <limits.h>
 #include <spawn.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -63,6 +64,14 @@ extern char **environ;
 _Static_assert((size_t)S_N_MAX * S_N_POINTS_MAX * sizeof(vafm_h5_truth) <= S_TRUTH_BYTES_MAX,
                "-n's maximum must keep a campaign's ground truth within S_TRUTH_BYTES_MAX");
 
+/* Every file of a study is DIR/NAME with NAME at most S_NAME_MAX bytes (the longest:
+ * athermal-brownian-labframe-v0.05.h5, 35), so an --out of at most S_OUT_MAX bytes keeps every path
+ * within PATH_MAX; a longer one is refused before anything is written, never cut short. */
+#define S_PATH_LEN PATH_MAX
+#define S_NAME_MAX 64
+#define S_OUT_MAX 4000
+_Static_assert(S_OUT_MAX + 1 + S_NAME_MAX < S_PATH_LEN, "--out's maximum must leave room for the file names");
+
 /* ---- context and one campaign ---------------------------------------------------------------------- */
 
 typedef struct s_ctx {
@@ -77,7 +86,7 @@ typedef struct s_ctx {
 } s_ctx;
 
 typedef struct s_run {
-    char file[1024];
+    char file[S_PATH_LEN];
     vafm_params base;
     double T[S_MAXP], k[S_MAXP], v;
     size_t nT, nk;
@@ -147,6 +156,27 @@ static void s_run_free(s_run *r)
 {
     free(r->truth);
     r->truth = NULL;
+}
+
+/* buf = DIR/NAME, NAME from fmt. The --out length is checked up front, so this does not truncate; the
+ * check stays so that a longer name added later is refused instead of cut short. @return 0, or 1 with
+ * the error printed. */
+static int s_path(char buf[S_PATH_LEN], const char *out, const char *fmt, ...) VAFM_CLI_PRINTF(3, 4);
+static int s_path(char buf[S_PATH_LEN], const char *out, const char *fmt, ...)
+{
+    int n = snprintf(buf, S_PATH_LEN, "%s/", out), m = -1;
+    if (n > 0 && n < S_PATH_LEN) {
+        va_list ap;
+        va_start(ap, fmt);
+        m = vsnprintf(buf + n, (size_t)(S_PATH_LEN - n), fmt, ap);
+        va_end(ap);
+    }
+    if (m < 0 || m >= S_PATH_LEN - n) {
+        vafm_cli_error("study: --out: a file name in the %zu-byte directory name would make a path longer than %d "
+                       "bytes", strlen(out), S_PATH_LEN - 1);
+        return 1;
+    }
+    return 0;
 }
 
 /* fopen(path, "w"), printing why it failed. */
@@ -422,18 +452,17 @@ static int s_distribution(s_ctx *ctx)
     r.nT = nT;
     r.v = r.base.v_retract_m_per_s;
     r.N = ctx->n_override ? ctx->n_override : ctx->quick ? 12 : 2000;
-    snprintf(r.file, sizeof r.file, "%s/distribution.h5", ctx->out);
-    if (s_campaign(ctx, &r))
+    if (s_path(r.file, ctx->out, "distribution.h5") || s_campaign(ctx, &r))
         return 1;
 
     vafm_quasistatic q;
     vafm_theory_quasistatic(red.gamma, red.k, &q);
     const double FJ = q.F_jkr * sc.force_N;
-    char path[1100];
-    snprintf(path, sizeof path, "%s/distribution_curves.csv", ctx->out);
-    FILE *c = s_open(path), *f = NULL;
-    snprintf(path, sizeof path, "%s/distribution_fits.csv", ctx->out);
-    if (c)
+    char path[S_PATH_LEN];
+    FILE *c = NULL, *f = NULL;
+    if (!s_path(path, ctx->out, "distribution_curves.csv"))
+        c = s_open(path);
+    if (c && !s_path(path, ctx->out, "distribution_fits.csv"))
         f = s_open(path);
     double *x = malloc(r.N * sizeof *x), *y = malloc(r.N * sizeof *y), *z = malloc(r.N * sizeof *z);
     if (c && f && !(x && y && z))
@@ -526,8 +555,7 @@ static int s_distribution(s_ctx *ctx)
         rb.nT = 1;
         rb.v = r.v;
         rb.N = r.N < 100 ? r.N : 100;
-        snprintf(rb.file, sizeof rb.file, "%s/distribution-dt4.h5", ctx->out);
-        if (s_campaign(ctx, &rb)) {
+        if (s_path(rb.file, ctx->out, "distribution-dt4.h5") || s_campaign(ctx, &rb)) {
             free(z);
             s_run_free(&r);
             return 1;
@@ -628,10 +656,9 @@ static int s_velocity_athermal(s_ctx *ctx)
     size_t nk = ctx->quick ? 2 : 4, nv = ctx->quick ? 6 : 11;
     const double gamma = 0.229;
     double F0[2][4][16], Fd[2][4][16];
-    char path[1100];
-    snprintf(path, sizeof path, "%s/athermal.csv", ctx->out);
-    FILE *c = s_open(path);
-    if (!c)
+    char path[S_PATH_LEN];
+    FILE *c = NULL;
+    if (s_path(path, ctx->out, "athermal.csv") || !(c = s_open(path)))
         return 1;
     fprintf(c, "dynamics,k,v,F0_spring_over_FJKR,F_detach_over_FJKR,Fstar_over_FJKR,Fdet_qs_over_FJKR\n");
     for (int dyn = 0; dyn < 2; ++dyn)
@@ -646,8 +673,8 @@ static int s_velocity_athermal(s_ctx *ctx)
             r.nk = nk;
             r.v = r.base.v_retract_m_per_s;
             r.N = 1; /* T = 0: deterministic, one curve per point */
-            snprintf(r.file, sizeof r.file, "%s/athermal-%s-v%g.h5", ctx->out, dyn ? "brownian" : "langevin", vl[iv]);
-            if (s_campaign(ctx, &r)) {
+            if (s_path(r.file, ctx->out, "athermal-%s-v%g.h5", dyn ? "brownian" : "langevin", vl[iv]) ||
+                s_campaign(ctx, &r)) {
                 fclose(c);
                 return 1;
             }
@@ -680,8 +707,8 @@ static int s_velocity_athermal(s_ctx *ctx)
             r.nk = 1;
             r.v = r.base.v_retract_m_per_s;
             r.N = 1;
-            snprintf(r.file, sizeof r.file, "%s/athermal-%s-v%g-dt4.h5", ctx->out, dyn ? "brownian" : "langevin", vb[j]);
-            if (s_campaign(ctx, &r))
+            if (s_path(r.file, ctx->out, "athermal-%s-v%g-dt4.h5", dyn ? "brownian" : "langevin", vb[j]) ||
+                s_campaign(ctx, &r))
                 return 1;
             vafm_quasistatic q;
             vafm_theory_quasistatic(gamma, kl[0], &q);
@@ -714,8 +741,7 @@ static int s_velocity_athermal(s_ctx *ctx)
         r.nk = 2;
         r.v = r.base.v_retract_m_per_s;
         r.N = 1;
-        snprintf(r.file, sizeof r.file, "%s/athermal-brownian-labframe-v%g.h5", ctx->out, vf[j]);
-        if (s_campaign(ctx, &r))
+        if (s_path(r.file, ctx->out, "athermal-brownian-labframe-v%g.h5", vf[j]) || s_campaign(ctx, &r))
             return 1;
         for (int ik = 0; ik < 2; ++ik) {
             vafm_quasistatic q;
@@ -725,9 +751,8 @@ static int s_velocity_athermal(s_ctx *ctx)
         s_run_free(&r);
     }
 
-    snprintf(path, sizeof path, "%s/athermal_fits.csv", ctx->out);
-    FILE *f = s_open(path);
-    if (!f)
+    FILE *f = NULL;
+    if (s_path(path, ctx->out, "athermal_fits.csv") || !(f = s_open(path)))
         return 1;
     fprintf(f, "dynamics,k,v0,se_v0,alpha0,se_alpha0,beta0,se_beta0,c,se_c,onset_only,rms_residual,converged\n");
     FILE *o = ctx->rep;
@@ -848,10 +873,9 @@ static int s_velocity_thermal(s_ctx *ctx)
     uint64_t N = ctx->n_override ? ctx->n_override : ctx->quick ? 8 : 200;
     vafm_quasistatic q;
     vafm_theory_quasistatic(gamma, k, &q);
-    char path[1100];
-    snprintf(path, sizeof path, "%s/thermal.csv", ctx->out);
-    FILE *c = s_open(path);
-    if (!c)
+    char path[S_PATH_LEN];
+    FILE *c = NULL;
+    if (s_path(path, ctx->out, "thermal.csv") || !(c = s_open(path)))
         return 1;
     fprintf(c, "dynamics,kT,v,n,F0_spring,Fp_spring,se_Fp_spring,Ft_spring,F0_detach,Fp_detach,se_Fp_detach,Ft_detach,"
                "y_mean,se_y,mfpt_y,mfpt_sd_y,mfpt_F_detach,dhs_y\n");
@@ -890,15 +914,15 @@ static int s_velocity_thermal(s_ctx *ctx)
             r0.base.T_K = 0.0;
             r0.v = r0.base.v_retract_m_per_s;
             r0.N = 1;
-            snprintf(r0.file, sizeof r0.file, "%s/thermal-%s-v%g-T0.h5", ctx->out, dyn ? "brownian" : "langevin", vl[iv]);
             s_fig4_scene(&r.base, dyn, vl[iv]);
             for (size_t i = 0; i < nT; ++i)
                 r.T[i] = s_kT_to_K(&r.base, kTl[i]);
             r.nT = nT;
             r.v = r.base.v_retract_m_per_s;
             r.N = N;
-            snprintf(r.file, sizeof r.file, "%s/thermal-%s-v%g.h5", ctx->out, dyn ? "brownian" : "langevin", vl[iv]);
-            if (s_campaign(ctx, &r0)) {
+            if (s_path(r0.file, ctx->out, "thermal-%s-v%g-T0.h5", dyn ? "brownian" : "langevin", vl[iv]) ||
+                s_path(r.file, ctx->out, "thermal-%s-v%g.h5", dyn ? "brownian" : "langevin", vl[iv]) ||
+                s_campaign(ctx, &r0)) {
                 fclose(c);
                 return 1;
             }
@@ -958,9 +982,8 @@ static int s_velocity_thermal(s_ctx *ctx)
         }
     }
     fclose(c);
-    snprintf(path, sizeof path, "%s/thermal_fits.csv", ctx->out);
-    FILE *f = s_open(path);
-    if (!f)
+    FILE *f = NULL;
+    if (s_path(path, ctx->out, "thermal_fits.csv") || !(f = s_open(path)))
         return 1;
     fprintf(f, "dynamics,kT,observable,xi,se_xi,alpha_t,se_alpha_t,v_t,se_v_t,beta_t,se_beta_t,log_a,se_log_a,log_b,"
                "se_log_b,log_only,chi2_dof,converged\n");
@@ -1050,11 +1073,9 @@ static int s_hysteresis(s_ctx *ctx)
     r.base.omega_dt = 0.6;
     r.v = r.base.v_retract_m_per_s;
     r.N = 1;
-    snprintf(r.file, sizeof r.file, "%s/hysteresis.h5", ctx->out);
-    char path[1100];
-    snprintf(path, sizeof path, "%s/hysteresis.csv", ctx->out);
-    r.samples_csv = s_open(path);
-    if (!r.samples_csv)
+    char path[S_PATH_LEN];
+    if (s_path(r.file, ctx->out, "hysteresis.h5") || s_path(path, ctx->out, "hysteresis.csv") ||
+        !(r.samples_csv = s_open(path)))
         return 1;
     fprintf(r.samples_csv, "time_s,height_m,force_N,tip_m,segment\n");
     int rc = s_campaign(ctx, &r);
@@ -1067,9 +1088,8 @@ static int s_hysteresis(s_ctx *ctx)
     vafm_quasistatic q;
     vafm_theory_quasistatic(red.gamma, red.k, &q);
     /* the quasi-static branch, for the figure: spring force against spring position u_spr ≥ u_spr* */
-    snprintf(path, sizeof path, "%s/hysteresis_theory.csv", ctx->out);
-    FILE *t = s_open(path);
-    if (!t) {
+    FILE *t = NULL;
+    if (s_path(path, ctx->out, "hysteresis_theory.csv") || !(t = s_open(path))) {
         s_run_free(&r);
         return 1;
     }
@@ -1083,8 +1103,7 @@ static int s_hysteresis(s_ctx *ctx)
             fprintf(t, "%.9g,%.9g\n", -us / u0, -F / q.F_jkr);
     }
     fclose(t);
-    snprintf(path, sizeof path, "%s/hysteresis_meta.csv", ctx->out);
-    if (!(t = s_open(path))) {
+    if (s_path(path, ctx->out, "hysteresis_meta.csv") || !(t = s_open(path))) {
         s_run_free(&r);
         return 1;
     }
@@ -1125,7 +1144,7 @@ static void s_help(FILE *o)
           "  Reproduce one of the paper's results: campaigns (HDF5, one file per campaign), fits with\n"
           "  errors, theory beside every point, DIR/report.md, CSV tables and PNG figures (matplotlib).\n"
           "  --quick       small grids and N (about 10-20 s each): checks the pipeline, not the physics\n"
-          "  --out DIR     output directory (default study-NAME; created)\n"
+          "  --out DIR     output directory (default study-NAME; created), at most " S_XSTR(S_OUT_MAX) " bytes\n"
           "  -n N          curves per point of the thermal campaigns, 2 to " S_XSTR(S_N_MAX) " (distribution: 2000,\n"
           "                quick 12; velocity-thermal: 200, quick 8); the T = 0 campaigns always run one\n"
           "  --threads T   worker threads (default 0: all cores); results do not depend on it\n"
@@ -1209,12 +1228,18 @@ int vafm_cmd_study(int argc, char **argv)
         snprintf(defout, sizeof defout, "study-%s", ctx.name);
         ctx.out = defout;
     }
+    if (strlen(ctx.out) > S_OUT_MAX) { /* its files' paths would not fit (S_OUT_MAX) */
+        vafm_cli_error("study: --out: the directory name is %zu bytes; at most %d (the paths of the files in it "
+                       "must fit in %d bytes)", strlen(ctx.out), S_OUT_MAX, S_PATH_LEN - 1);
+        return 2;
+    }
     if (mkdir(ctx.out, 0777) && errno != EEXIST) {
         fprintf(stderr, "vafm study: cannot create %s: %s\n", ctx.out, strerror(errno));
         return 1;
     }
-    char path[1100];
-    snprintf(path, sizeof path, "%s/report.md", ctx.out);
+    char path[S_PATH_LEN];
+    if (s_path(path, ctx.out, "report.md"))
+        return 1;
     ctx.rep = fopen(path, "w");
     if (!ctx.rep) {
         fprintf(stderr, "vafm study: cannot write %s: %s\n", path, strerror(errno));
