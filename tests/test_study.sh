@@ -46,6 +46,37 @@ check "theory: --v in m/s equals --v-reduced in R*eta" "cmp -s '$TMP/thsi' '$TMP
     "$(diff "$TMP/thsi" "$TMP/thred" | head -5)"
 "$VAFM" theory --bogus >/dev/null 2>&1
 check "theory: unknown option exits 2" "[ $? -eq 2 ]"
+# --v and --v-reduced go through the CLI's list parser (units as for vafm curves) and every entry must lie
+# in the retract speed's range [1e-12, 1000] m/s (inf and 1e400 were accepted, then failed after a partial
+# table; 1e300 printed a row of nan), at most 64 entries (more were dropped, unchecked)
+for v in inf 1e400 0 -1e-6 1e-6,,2e-6; do
+    "$VAFM" theory --v "$v" >"$TMP/thv" 2>"$TMP/e"
+    check "theory: --v $v exits 2 naming --v, nothing printed" \
+        "[ $? -eq 2 ] && grep -q -- '--v: ' '$TMP/e' && ! [ -s '$TMP/thv' ]" "$(head -c 300 "$TMP/e")"
+done
+"$VAFM" theory --v 1e300 >/dev/null 2>"$TMP/e"
+check "theory: --v 1e300 exits 2 naming --v and its range" \
+    "[ $? -eq 2 ] && grep -q -- '--v: .*\[1e-12, 1000\] m/s' '$TMP/e'" "$(head -c 300 "$TMP/e")"
+"$VAFM" theory --preset paper-fig4 --v-reduced 1e300 >/dev/null 2>"$TMP/e"
+check "theory: --v-reduced 1e300 exits 2 naming --v-reduced and the range" \
+    "[ $? -eq 2 ] && grep -q -- '--v-reduced: .*\[1e-12, 1000\] m/s' '$TMP/e'" "$(head -c 300 "$TMP/e")"
+"$VAFM" theory --v "$(printf '1e-6,%.0s' $(seq 70))inf" >/dev/null 2>"$TMP/e"
+check "theory: 71 speeds exit 2 naming the maximum of 64" "[ $? -eq 2 ] && grep -q -- '--v: 71 speeds; at most 64' '$TMP/e'" \
+    "$(head -c 300 "$TMP/e")"
+"$VAFM" theory --v "$(printf '1e-6,%.0s' $(seq 63))1e-6" >"$TMP/thv" 2>&1
+check "theory: 64 speeds give 64 rows" "[ $? -eq 0 ] && [ \$(grep -c '^ *0.03673 ' '$TMP/thv') -eq 64 ]"
+"$VAFM" theory --v 1um/s >"$TMP/thu" 2>&1
+check "theory: --v 1um/s (units as for vafm curves) equals --v 1e-6" \
+    "[ $? -eq 0 ] && '$VAFM' theory --v 1e-6 2>&1 | cmp -s - '$TMP/thu'" "$(head -c 300 "$TMP/thu")"
+# a reference the theory cannot give is n/a with the reason, never nan: DHS at Lambda <= 1 (1 mK), and the
+# MFPT integral at 1e-30 K, inside T_K's range, whose pull never escapes
+"$VAFM" theory --T_K 1e-3 >"$TMP/thn" 2>&1
+check "theory: DHS at Lambda <= 1 is n/a, not nan" \
+    "[ $? -eq 0 ] && grep -q 'DHS n/a: Lambda <= 1' '$TMP/thn' && ! grep -qiw nan '$TMP/thn'" "$(tail -6 "$TMP/thn")"
+"$VAFM" theory --T_K 1e-30 >"$TMP/thn" 2>&1
+check "theory: --T_K 1e-30: the MFPT columns are n/a, saying kT is too small, and no nan" \
+    "[ $? -eq 0 ] && grep -q 'MFPT n/a: .*kT' '$TMP/thn' && grep -q 'too small for the MFPT integral' '$TMP/thn' &&
+     ! grep -qiw nan '$TMP/thn'" "$(tail -6 "$TMP/thn")"
 "$VAFM" study >/dev/null 2>&1
 check "study: missing name exits 2" "[ $? -eq 2 ]"
 "$VAFM" study nonsense >/dev/null 2>"$TMP/e"
