@@ -5,6 +5,6 @@
 /* Read by meson (cc.get_define) to set the shared-library soversion. */
 #define VAFM_API_VERSION_MAJOR 0
 #define VAFM_API_VERSION_MINOR 6
-#define VAFM_API_VERSION_PATCH 0
+#define VAFM_API_VERSION_PATCH 2
 
 #endif
