@@ -820,7 +820,7 @@ enum {
     B_NONE, B_K_STRING, B_UNIT_INT, B_POINT_COUNT, B_EXTRA_DSET, B_SUBGROUP, B_ROOT_OBJ, B_UNKNOWN_ATTR, B_LENGTHS,
     B_2D, B_SEG_FLOAT, B_NO_SWVERSION, B_FIXED_STR, B_SEG_VALUE, B_CREEP, B_SW_INT, B_UNIT_NN, B_F32, B_NAME_01,
     B_SOFTLINK, B_NO_FORCE, B_TIME_BACK, B_TIP_WRONG, B_DATE, B_FORMAT2, B_SEG_NEG, B_EMPTY, B_HUGE, B_EXTERNAL,
-    B_VIRTUAL, B_COUNT
+    B_VIRTUAL, B_FORMAT_NEG, B_COUNT
 };
 
 typedef struct bad_case {
@@ -867,6 +867,8 @@ static const bad_case s_bad[] = {
     { B_EXTERNAL, VAFM_EFORMAT, "/0/force is stored in an external file (not read)", "[L2]",
       "/0/force: is stored in an external file" },
     { B_VIRTUAL, VAFM_EFORMAT, "/0/force is a virtual dataset", "[L2]", "/0/force: is a virtual dataset" },
+    /* 0.6.1 read "1.-0" as 1.0 (sscanf's %d takes a sign) */
+    { B_FORMAT_NEG, VAFM_EFORMAT, "is not \"MAJOR.MINOR\"", "[V1]", "vafm format version" },
 };
 
 #define S_FIFO "t_h5_bad.fifo" /* a FIFO without a writer: opening it to read blocks */
@@ -883,6 +885,8 @@ static void write_bad(const char *path, int kind)
         h_str(f, "software version", "1", 0);
     if (kind == B_FORMAT2)
         h_str(f, "vafm format version", "2.0", 0);
+    if (kind == B_FORMAT_NEG)
+        h_str(f, "vafm format version", "1.-0", 0);
     hid_t g = H5Gcreate2(f, kind == B_NAME_01 ? "01" : "0", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
     enum { N = 64 };
     const hsize_t nn = kind == B_EMPTY ? 0 : N;

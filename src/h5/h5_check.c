@@ -504,8 +504,7 @@ static int s_check(s_ctx *x)
         if ((rc = s_vlen_str(x, "V1", x->file, "/", VAFM_H5I_A_FORMAT, &s)))
             return rc;
         int ma = -1, mi = -1;
-        char tail = 0;
-        int ok = sscanf(s, "%d.%d%c", &ma, &mi, &tail) == 2 && ma == VAFM_H5_FORMAT_MAJOR && mi >= 0;
+        int ok = !vafm_h5i_format_parse(s, &ma, &mi) && ma == VAFM_H5_FORMAT_MAJOR;
         char v[32];
         snprintf(v, sizeof v, "%.24s", s);
         free(s);

@@ -978,3 +978,22 @@ int vafm_h5i_check_path(const char *path, int for_write, vafm_error *err)
     close(fd);
     return rc;
 }
+
+static int s_version_part(const char *s, const char **end, int *v)
+{
+    int n = 0;
+    long x = 0;
+    while (s[n] >= '0' && s[n] <= '9' && n < 6)
+        x = 10 * x + (s[n++] - '0');
+    *end = s + n;
+    *v = (int)x;
+    return n > 0 && !(s[n] >= '0' && s[n] <= '9') ? 0 : -1;
+}
+
+int vafm_h5i_format_parse(const char *s, int *major, int *minor)
+{
+    const char *p;
+    if (!s || s_version_part(s, &p, major) || *p != '.' || s_version_part(p + 1, &p, minor) || *p)
+        return -1;
+    return 0;
+}

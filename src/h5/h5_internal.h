@@ -224,6 +224,10 @@ int vafm_h5i_gheap_check(hid_t file, const char *path, char *why, size_t len);
  */
 int vafm_h5i_storage_complete(hid_t d, hsize_t n);
 
+/* "MAJOR.MINOR" of "vafm format version": decimal digits only, each at most 6 (sscanf's %d took "1.-0", " 1.+0").
+ * @return 0 with *major, *minor, or -1. */
+int vafm_h5i_format_parse(const char *s, int *major, int *minor);
+
 /**
  * Why dataset d's raw data are not read, when they do not lie in the file itself: raw data in an external
  * file (H5Pset_external) or a virtual dataset's source files can name any path, a FIFO or a device among

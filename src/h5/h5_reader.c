@@ -660,8 +660,7 @@ static int s_reader_open(vafm_h5_reader *r, const char *path, vafm_error *err)
         return rc;
     if (fmt) {
         int ma = -1, mi = -1;
-        char tail = 0;
-        int ok = sscanf(fmt, "%d.%d%c", &ma, &mi, &tail) == 2 && ma >= 0 && mi >= 0;
+        int ok = !vafm_h5i_format_parse(fmt, &ma, &mi);
         free(fmt);
         if (!ok) {
             vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: root attribute '" VAFM_H5I_A_FORMAT "' is not \"MAJOR.MINOR\"", path);
