@@ -79,6 +79,10 @@ def test_plan_validation(fig4):
            ({"script": [{"kind": "drop", "block": 1, "time_s": 0.1}]}, "out_of_range", "script[0].time_s", "not both"),
            ({"script": [{"kind": "busy", "block": 1}]}, "unknown_field", "script[0].block", "cmd, nth"),
            ({"script": [{"kind": "no_reply", "cmd": "frobnicate"}]}, "out_of_range", "script[0].cmd", "no command"),
+           # 0.6.1 took a fault of `faults` itself (never fired) and refused one of `map`
+           ({"script": [{"kind": "busy", "cmd": "faults"}]}, "out_of_range", "script[0].cmd", "never faulted"),
+           ({"random": {"busy": {"per_command": 0.5, "cmd": "faults"}}}, "out_of_range", "random.busy.cmd",
+            "never faulted"),
            ({"random": {"drop": {"per_block": 2}}}, "out_of_range", "random.drop.per_block", "[0, 1]"),
            ({"random": {"drop": {}}}, "missing_field", "random.drop", "per_block or per_run"),
            ({"random": {"busy": {"per_block": 0.1}}}, "unknown_field", "random.busy.per_block", "per_command"),
@@ -101,6 +105,8 @@ def test_plan_validation(fig4):
     r = c.faults(plan)
     assert r["plan"] == plan and r["count"] == 0 and r["last"] == []
     assert c.status()["faults"]["plan"] == plan and "faults" in c.hello()["capabilities"]
+    assert c.faults(clear=True)["plan"] is None
+    assert c.faults({"script": [{"kind": "busy", "cmd": "map"}]})["plan"]["script"][0]["cmd"] == "map"
     assert c.faults(clear=True)["plan"] is None
 
 

@@ -820,7 +820,7 @@ enum {
     B_NONE, B_K_STRING, B_UNIT_INT, B_POINT_COUNT, B_EXTRA_DSET, B_SUBGROUP, B_ROOT_OBJ, B_UNKNOWN_ATTR, B_LENGTHS,
     B_2D, B_SEG_FLOAT, B_NO_SWVERSION, B_FIXED_STR, B_SEG_VALUE, B_CREEP, B_SW_INT, B_UNIT_NN, B_F32, B_NAME_01,
     B_SOFTLINK, B_NO_FORCE, B_TIME_BACK, B_TIP_WRONG, B_DATE, B_FORMAT2, B_SEG_NEG, B_EMPTY, B_HUGE, B_EXTERNAL,
-    B_VIRTUAL, B_FORMAT_NEG, B_COUNT
+    B_VIRTUAL, B_FORMAT_NEG, B_POINT_NEG, B_COUNT
 };
 
 typedef struct bad_case {
@@ -869,6 +869,7 @@ static const bad_case s_bad[] = {
     { B_VIRTUAL, VAFM_EFORMAT, "/0/force is a virtual dataset", "[L2]", "/0/force: is a virtual dataset" },
     /* 0.6.1 read "1.-0" as 1.0 (sscanf's %d takes a sign) */
     { B_FORMAT_NEG, VAFM_EFORMAT, "is not \"MAJOR.MINOR\"", "[V1]", "vafm format version" },
+    { B_POINT_NEG, VAFM_EFORMAT, "'point count' is negative", "[L9]", "'point count' is negative" }, /* 0.6.1: "is an integer" */
 };
 
 #define S_FIFO "t_h5_bad.fifo" /* a FIFO without a writer: opening it to read blocks */
@@ -966,7 +967,7 @@ static void write_bad(const char *path, int kind)
         h_str(g, "spring constant", "0.1", 0);
     else
         h_f64(g, "spring constant", k);
-    h_i64(g, "point count", kind == B_POINT_COUNT ? N + 1 : (int64_t)nn);
+    h_i64(g, "point count", kind == B_POINT_COUNT ? N + 1 : kind == B_POINT_NEG ? -5 : (int64_t)nn);
     if (kind == B_UNKNOWN_ATTR)
         h_f64(g, "temperature", 300);
     h_str(g, "date", kind == B_DATE ? "04/03/2021" : "2021-03-04", 0);

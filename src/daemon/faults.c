@@ -169,7 +169,13 @@ static int s_cmd_name(json_t *o, const char *where, char out[16], vafmd_err *e)
         return -1;
     }
     const char *s = json_string_value(x);
-    for (int i = 0; i <= VAFMD_CMD_FAULTS; i++)
+    /* every command but `faults`, which is never faulted (so a plan can always be cleared): 0.6.1 took
+     * `faults` (an entry that never fires) and refused `map` (after it in the table) */
+    if (!strcmp(s, vafmd_cmd_name(VAFMD_CMD_FAULTS))) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, field, "%s = 'faults': the faults command is never faulted", field);
+        return -1;
+    }
+    for (int i = 0; i <= VAFMD_CMD_MAP; i++)
         if (!strcmp(s, vafmd_cmd_name(i))) {
             snprintf(out, 16, "%s", s);
             return 0;

@@ -447,7 +447,8 @@ static int s_read_attr(hid_t g, const char *path, const char *gname, const char 
         if (!(v.cls == H5T_INTEGER || (v.cls == H5T_FLOAT && v.integral)) || v.i < 0) {
             vafm_h5i_err(err, rc, obj,
                          "%s: curve group '%s': attribute '%s' is %s (afmformats wants a non-negative integer)", path,
-                         gname, name, v.cls == H5T_FLOAT ? "a fractional or negative number" : s_class_name(v.cls));
+                         gname, name, v.i < 0 && (v.cls == H5T_INTEGER || v.integral) ? "negative"
+                                      : v.cls == H5T_FLOAT ? "a fractional number" : s_class_name(v.cls));
             goto done;
         }
         *(int64_t *)f = v.i;
