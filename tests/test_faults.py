@@ -6,6 +6,7 @@ several kinds at random rates. Runs: paper-fig4 in free_run (~0.1 s per curve).
 """
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -204,6 +205,26 @@ def test_restart_and_stall_reported(fig4):
     assert "stalled" in err, err
     last = c.faults()["last"]
     assert [f["kind"] for f in last] == ["restart", "stall"] and last[0]["session"] == s1
+
+
+@pytest.mark.parametrize("how", ["signal", "command"])
+def test_shutdown_cuts_a_stall_short(how):
+    """A stall holds the stream, not the daemon's end: SIGTERM or `shutdown` during a 30 s stall ends
+    vafmd within seconds, status 0 (0.6.1 waited the stall out)."""
+    d = Daemon("--preset", "paper-fig4", "--free-run")
+    c = d.client
+    c.faults({"script": [{"kind": "stall", "block": 1, "duration_s": 30}]})
+    c.curve(index=0)
+    time.sleep(0.5)  # the run has reached its block 1: the stream is silent now
+    t0 = time.monotonic()
+    if how == "signal":
+        d.proc.send_signal(signal.SIGTERM)
+    else:
+        c.shutdown()
+    rc = d.proc.wait(timeout=20)
+    took = time.monotonic() - t0
+    d.stop()
+    assert rc == 0 and took < 5, (rc, took)
 
 
 def test_late_and_jitter_no_false_alarm(fig4):

@@ -274,6 +274,7 @@ typedef struct vafmd {
                                                               grid and first run id (status) */
     uint64_t next_run_id;  /* control thread only */
     volatile sig_atomic_t *stop; /* set by SIGINT/SIGTERM */
+    atomic_int quitting;         /* set by main before it pushes QUIT: a stall fault ends at once */
     vafmd_log log;
     vafmd_auth auth;
     /* fault injection (faults.h): the control thread's copy of the plan, the plan as given (for the

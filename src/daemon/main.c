@@ -430,6 +430,7 @@ int main(int argc, char **argv)
     vafmd_sim_cmd q;
     memset(&q, 0, sizeof q);
     q.type = VAFMD_SIM_QUIT;
+    atomic_store_explicit(&d.quitting, 1, memory_order_release);
     while (!vafmd_ring_push(&d.ring, &q))
         nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
     pthread_join(th, NULL);

@@ -1489,7 +1489,10 @@ void *vafmd_sim_main(void *arg)
         int quit = 0;
         if (__builtin_expect(x->stall_until != 0, 0)) { /* a stall: no message at all, heartbeats included */
             int64_t now = s_now();
-            if (now < x->stall_until) {
+            /* a shutdown (command or signal) ends the stall: shutdown flushes within its 0.5 s, a stall
+             * of up to 60 s made SIGTERM wait it out (0.6.1) */
+            const int quitting = atomic_load_explicit(&x->d->quitting, memory_order_acquire) || *x->d->stop;
+            if (now < x->stall_until && !quitting) {
                 s_sleep_until(x->stall_until < now + 1000000 ? x->stall_until : now + 1000000);
                 continue;
             }
