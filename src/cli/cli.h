@@ -50,6 +50,8 @@ enum { VAFM_CLI_EXIT_OK = 0, VAFM_CLI_EXIT_RUNTIME = 1, VAFM_CLI_EXIT_USAGE = 2 
 #define VAFM_CLI_PROGRESS_PERIOD_S 0.5
 #define VAFM_CLI_CHUNK_SAMPLES 64 /* samples per vafm_sim_advance call: progress granularity of one curve */
 #define VAFM_CLI_MAX_TOTAL_CURVES 1000000000000000ULL
+#define VAFM_CLI_STR_(x) #x
+#define VAFM_CLI_XSTR(x) VAFM_CLI_STR_(x) /* a numeric macro's value as a string literal (help texts) */
 #define VAFM_CLI_MAX_POINTS 65536 /* grid points of curves and campaign (--T x --v x --k) */
 #define VAFM_CLI_MAX_CURVE_ERRORS 20 /* vafm info names at most this many unreadable curves */
 
@@ -158,6 +160,9 @@ int vafm_cli_parse_u64(const char *opt, const char *text, uint64_t lo, uint64_t 
 /** --kernel NAME into spec (vafm_campaign_kernel_parse); NULL text: leave spec as it is. @return 0 or a usage exit code. */
 int vafm_cli_parse_kernel(const char *text, vafm_campaign_spec *spec);
 int vafm_cli_parse_list(const char *opt, const char *field, const char *text, double **out, size_t *n);
+/* The points of a T x v x k grid, in double: the product of three list lengths read from input (options, a
+ * file's grid) may not fit a size_t; compare it with VAFM_CLI_MAX_POINTS before sizing anything by it. */
+double vafm_cli_grid_points(const vafm_campaign_spec *spec);
 int vafm_cli_report(const vafm_error *err, int code);
 int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int validate);
 void vafm_cli_print_provenance(FILE *o, const vafm_cli_scene *sc);

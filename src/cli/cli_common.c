@@ -60,6 +60,12 @@ int vafm_cli_parse_kernel(const char *text, vafm_campaign_spec *spec)
     return 0;
 }
 
+double vafm_cli_grid_points(const vafm_campaign_spec *spec)
+{
+    return (double)(spec->n_T ? spec->n_T : 1) * (double)(spec->n_v ? spec->n_v : 1) *
+           (double)(spec->n_k ? spec->n_k : 1);
+}
+
 /* A comma-separated list of values of one field, each with its unit if typed ("25C,35C", "1um/s,2um/s"). Ranges
  * are the library's business (campaign validation). */
 int vafm_cli_parse_list(const char *opt, const char *field, const char *text, double **out, size_t *n)

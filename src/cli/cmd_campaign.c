@@ -92,10 +92,9 @@ static int s_grid_parse(const vafm_cli_args *a, s_grid *g)
     g->spec.curves_per_point = N;
     g->spec.threads = (int)threads;
     g->spec.first_curve = first;
-    /* the lists' product, in double (three long lists overflow a size_t): each point has its statistics
-     * and is validated before the first curve (0.6.1 tried to allocate 1e9 points' statistics) */
-    const double npd = (double)(g->spec.n_T ? g->spec.n_T : 1) * (double)(g->spec.n_v ? g->spec.n_v : 1) *
-                       (double)(g->spec.n_k ? g->spec.n_k : 1);
+    /* each point has its statistics and is validated before the first curve (0.6.1 tried to allocate 1e9
+     * points' statistics) */
+    const double npd = vafm_cli_grid_points(&g->spec);
     if (npd > VAFM_CLI_MAX_POINTS) {
         vafm_cli_error("vafm %s: the grid --T x --v x --k has %.6g points (%zu x %zu x %zu values); at most %d",
                        a->cmd->name, npd, g->spec.n_T ? g->spec.n_T : 1, g->spec.n_v ? g->spec.n_v : 1,

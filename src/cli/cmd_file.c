@@ -2,7 +2,6 @@
 /* `vafm info` and `vafm export`: HDF5 force-curve files, vafm's or another program's. */
 #include "cli/cli.h"
 
-
 /* ---- vafm info ------------------------------------------------------------------------------------ */
 
 static int s_need_file(const vafm_cli_args *a)
@@ -190,9 +189,8 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
     if (pv.is_vafm && ip.scene_ok && ip.grid_ok && !ip.is_map && n) {
         size_t np = vafm_campaign_points(&ip.spec);
         /* the grid comes from the file: its lists size the table (0.6.1 allocated 3000³ points for a 0.5 MB
-         * file); counted in double, as the product of three list lengths may not fit a size_t */
-        const double npd = (double)(ip.spec.n_T ? ip.spec.n_T : 1) * (double)(ip.spec.n_v ? ip.spec.n_v : 1) *
-                           (double)(ip.spec.n_k ? ip.spec.n_k : 1);
+         * file) */
+        const double npd = vafm_cli_grid_points(&ip.spec);
         vafm_point_stats *stats = npd <= VAFM_CLI_MAX_POINTS ? calloc(np, sizeof *stats) : NULL;
         if (npd > VAFM_CLI_MAX_POINTS)
             printf("statistics   not summed up: the grid has %.6g points (info sums up at most %d)\n", npd,

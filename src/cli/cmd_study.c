@@ -57,8 +57,6 @@ extern char **environ;
  * to (distribution: five temperatures). 100000 curves per point is 50 times the distribution's N and
  * about 40 CPU-hours of its curves, beyond any study run in one go. */
 #define S_N_MAX 100000
-#define S_STR(x) #x
-#define S_XSTR(x) S_STR(x)
 #define S_N_POINTS_MAX 5u
 #define S_TRUTH_BYTES_MAX ((size_t)256 << 20)
 _Static_assert((size_t)S_N_MAX * S_N_POINTS_MAX * sizeof(vafm_h5_truth) <= S_TRUTH_BYTES_MAX,
@@ -1144,8 +1142,8 @@ static void s_help(FILE *o)
           "  Reproduce one of the paper's results: campaigns (HDF5, one file per campaign), fits with\n"
           "  errors, theory beside every point, DIR/report.md, CSV tables and PNG figures (matplotlib).\n"
           "  --quick       small grids and N (about 10-20 s each): checks the pipeline, not the physics\n"
-          "  --out DIR     output directory (default study-NAME; created), at most " S_XSTR(S_OUT_MAX) " bytes\n"
-          "  -n N          curves per point of the thermal campaigns, 2 to " S_XSTR(S_N_MAX) " (distribution: 2000,\n"
+          "  --out DIR     output directory (default study-NAME; created), at most " VAFM_CLI_XSTR(S_OUT_MAX) " bytes\n"
+          "  -n N          curves per point of the thermal campaigns, 2 to " VAFM_CLI_XSTR(S_N_MAX) " (distribution: 2000,\n"
           "                quick 12; velocity-thermal: 200, quick 8); the T = 0 campaigns always run one\n"
           "  --threads T   worker threads (default 0: all cores); results do not depend on it\n"
           "  --kernel NAME auto (default), scalar, batch, batch4, batch8: as for vafm campaign (same results)\n"

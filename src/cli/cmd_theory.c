@@ -69,8 +69,6 @@ int vafm_study_scene_arg(int argc, char **argv, int *i, vafm_params *p, char *de
 
 /* The most speeds one call tabulates (each is a row of the table). */
 #define S_V_MAX 64
-#define S_STR(x) #x
-#define S_XSTR(x) S_STR(x)
 
 /* The speeds to tabulate, reduced, into *out (owned by the caller): --v LIST (m/s, with units as for vafm
  * curves and campaign), --v-reduced LIST (R*eta), or, with no list (opt NULL), v_default (reduced).
@@ -143,7 +141,7 @@ static void s_help(FILE *o)
           "  prediction and the exact 1D mean-first-passage rate integrated along the pull.\n"
           "  SCENE: --preset NAME, --scene FILE.json, --NAME=VALUE overrides (as vafm run).\n"
           "  --v LIST             pulling speeds to tabulate, m/s (or with a unit: 1um/s), as for vafm curves\n"
-          "                       and campaign: at most " S_XSTR(S_V_MAX) ", each in [1e-12, 1000] m/s (default: the scene's\n"
+          "                       and campaign: at most " VAFM_CLI_XSTR(S_V_MAX) ", each in [1e-12, 1000] m/s (default: the scene's\n"
           "                       retract speed)\n"
           "  --v-reduced LIST     the same in reduced units (R*eta), as the paper quotes them\n"
           "  A reference the theory cannot give (DHS at Lambda <= 1, an MFPT pull that never escapes) is n/a.\n",

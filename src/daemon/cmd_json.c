@@ -432,9 +432,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     if (kind < 0) {
         char known[256] = ""; /* from the table, so the list cannot miss one (0.6.1's lacked map) */
         for (size_t i = 0; i < sizeof s_cmd_names / sizeof *s_cmd_names; i++)
-            if (s_cmd_names[i])
-                snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s", known[0] ? " " : "",
-                         s_cmd_names[i]);
+            snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s", known[0] ? " " : "", s_cmd_names[i]);
         vafmd_err_set(e, VAFMD_E_UNKNOWN_COMMAND, "cmd", "unknown command '%.64s' (known: %s)",
                       json_string_value(cmd), known);
         return -1;

@@ -213,6 +213,12 @@ static void s_set_nodrop(s_ctx *x, int on)
     }
 }
 
+/* The channels a run streams (bits of its channel mask). */
+static size_t s_channels(unsigned chmask)
+{
+    return (size_t)__builtin_popcount(chmask & ((1u << VAFMD_CH_COUNT) - 1u));
+}
+
 /* Bound each subscriber's queue in bytes as well as in messages: the setting hwm counts messages, and
  * a data message of a run carries up to VAFMD_MAX_BLOCK_SAMPLES samples of each channel (≈ 10 MB), so
  * a subscriber that stops reading could make the daemon queue hwm × 10 MB (GB at the default 1000).
@@ -220,9 +226,7 @@ static void s_set_nodrop(s_ctx *x, int on)
  * message), at least 2; libzmq applies a changed ZMQ_SNDHWM to the pipes already connected too. */
 static void s_stream_bound(s_ctx *x, unsigned chmask, size_t block_n, int hwm_set)
 {
-    size_t nch = 0;
-    for (int i = 0; i < VAFMD_CH_COUNT; i++)
-        nch += chmask >> i & 1;
+    const size_t nch = s_channels(chmask);
     const double msg = 256.0 + (double)(nch * block_n * sizeof(double)); /* header and topic: < 256 B */
     double h = floor((double)VAFMD_STREAM_MAX_BYTES / msg);
     if (h > hwm_set)
@@ -1058,9 +1062,7 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
 static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs)
 {
     s_run *r = &x->run;
-    size_t nch = 0;
-    for (int i = 0; i < VAFMD_CH_COUNT; i++)
-        nch += chmask >> i & 1;
+    const size_t nch = s_channels(chmask);
     size_t nlog = r->log ? 1 : 0; /* a logged run stages its samples' times (a double) and segments (a byte) */
     double per = (double)sizeof(s_block) + (double)(nch * r->block_n * sizeof(double)) +
                  (double)(nlog * r->block_n * (sizeof(double) + 1));

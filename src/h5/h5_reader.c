@@ -332,7 +332,7 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
     *n = (size_t)dims[0];
     *have_n = 1;
     if (read_data) {
-        size_t need = *n ? *n : 1;
+        size_t need = *n; /* ≥ 1: an empty channel is refused above */
         if (c->is_segment) {
             uint8_t *p = realloc(buf->seg, need);
             if (!p) {
@@ -366,7 +366,7 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
             vafm_h5i_err_hdf5(err, rc, obj, "%s: %s: cannot be read", path, obj);
             goto done;
         }
-        herr_t rrc = *n ? H5Dread(o, c->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, dx, dst) : 0;
+        herr_t rrc = H5Dread(o, c->is_segment ? H5T_NATIVE_UINT8 : H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, dx, dst);
         if (dx != H5P_DEFAULT)
             H5Pclose(dx);
         if (rrc < 0 && conv.hit) {

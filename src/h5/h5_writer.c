@@ -284,7 +284,7 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
                           "file header)", w->path);
         return VAFM_EFORMAT;
     }
-    if (!fmt || sscanf(fmt, "%d.%d", &ma, &mi) != 2 || ma != VAFM_H5_FORMAT_MAJOR) {
+    if (!fmt || vafm_h5i_format_parse(fmt, &ma, &mi) || ma != VAFM_H5_FORMAT_MAJOR) {
         vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x (root attribute '"
                      VAFM_H5I_A_FORMAT "' is %s)", w->path, VAFM_H5_FORMAT_MAJOR, fmt ? fmt : "missing");
         free(fmt);
