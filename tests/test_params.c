@@ -548,11 +548,11 @@ static void test_paper_fig1(void)
 static void test_strerror(void)
 {
     const int codes[] = {VAFM_OK, VAFM_EINVAL, VAFM_ENOMEM, VAFM_EUNSTABLE, VAFM_EIO, VAFM_EFORMAT,
-                         VAFM_ENOTSUP, VAFM_EABORT, VAFM_ESTATE, VAFM_ENOTFOUND};
+                         VAFM_ENOTSUP, VAFM_EABORT, VAFM_ESTATE, VAFM_ENOTFOUND, VAFM_EACCES};
     const int n = (int)(sizeof codes / sizeof codes[0]);
     const char *unknown = vafm_strerror(12345);
     ENSURE(unknown != NULL && unknown[0]);
-    ENSURE(vafm_strerror(-10) != NULL && !strcmp(vafm_strerror(-10), unknown));
+    ENSURE(vafm_strerror(-11) != NULL && !strcmp(vafm_strerror(-11), unknown)); /* the first code past the last */
     for (int i = 0; i < n; i++) {
         const char *s = vafm_strerror(codes[i]);
         ENSURE(s != NULL && s[0]);

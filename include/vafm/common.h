@@ -35,6 +35,8 @@ enum vafm_status {
     VAFM_EABORT = -7,     /**< stopped by the caller (a sink or progress callback asked to stop) */
     VAFM_ESTATE = -8,     /**< the call does not fit the object's current state */
     VAFM_ENOTFOUND = -9,  /**< a named item (preset, parameter, integrator...) does not exist */
+    VAFM_EACCES = -10,    /**< a file cannot be written: permission denied or a read-only file system (the file
+                               itself may be intact) */
 };
 
 /** Detail of the last validation failure: which field, and why. */

@@ -660,7 +660,13 @@ int vafm_cli_rec_size_check(const vafm_cli_args *a, const vafm_cli_rec_opts *co,
     else
         snprintf(dir, sizeof dir, ".");
     struct statvfs vs;
-    double avail = statvfs(dir, &vs) == 0 ? (double)vs.f_bavail * (double)vs.f_frsize : INFINITY;
+    int vs_ok = statvfs(dir, &vs) == 0;
+    if (vs_ok && (vs.f_flag & ST_RDONLY)) { /* its free space reads 0: say what it is (0.6.2: "0 GB free") */
+        vafm_cli_error("--out: %s: the file system of %s is mounted read-only (%s); nothing was written", co->out, dir,
+                       vafm_strerror(VAFM_EACCES));
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
+    double avail = vs_ok ? (double)vs.f_bavail * (double)vs.f_frsize : INFINITY;
     if (!a->on[O_QUIET])
         fprintf(stderr, "vafm: %s: %.0f curve(s) to run, ~%.3g GB uncompressed (%.3g GB free there)\n",
                 co->out, curves, bytes / 1e9, avail / 1e9);

@@ -18,6 +18,7 @@ const char *vafm_strerror(int code)
     case VAFM_EABORT: return "stopped by the caller";
     case VAFM_ESTATE: return "call does not fit the current state";
     case VAFM_ENOTFOUND: return "no such item";
+    case VAFM_EACCES: return "permission denied or read-only file system (not damage)";
     default: return "unknown error code";
     }
 }

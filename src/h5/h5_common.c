@@ -933,6 +933,35 @@ static long s_lock_holder(dev_t dev, ino_t ino)
     return pid;
 }
 
+int vafm_h5i_errno_denied(int en)
+{
+    return en == EACCES || en == EPERM || en == EROFS;
+}
+
+const char *vafm_h5i_denied_why(int en)
+{
+    return en == EROFS ? "the file system is mounted read-only"
+           : en == EPERM ? "permission denied (operation not permitted: an immutable file or directory?)"
+                         : "permission denied";
+}
+
+int vafm_h5i_check_dir_writable(const char *path, vafm_error *err)
+{
+    char dir[4096];
+    if (snprintf(dir, sizeof dir, "%s", path) >= (int)sizeof dir)
+        return 0; /* too long to check here: the create names it */
+    char *slash = strrchr(dir, '/');
+    if (slash)
+        *(slash == dir ? slash + 1 : slash) = '\0';
+    else
+        snprintf(dir, sizeof dir, ".");
+    if (access(dir, W_OK | X_OK) == 0 || !vafm_h5i_errno_denied(errno))
+        return 0; /* any other failure: the create says what it is */
+    int en = errno;
+    vafm_h5i_err(err, VAFM_EACCES, "", "%s: cannot be created in %s: %s", path, dir, vafm_h5i_denied_why(en));
+    return VAFM_EACCES;
+}
+
 int vafm_h5i_check_path(const char *path, int for_write, vafm_error *err)
 {
     struct stat st;
@@ -947,9 +976,17 @@ int vafm_h5i_check_path(const char *path, int for_write, vafm_error *err)
     /* HDF5 (and vafm's journal driver) hold a flock while a file is open: exclusive for a writer, shared
      * for readers. Probe it before HDF5 touches the file, so that a file another process writes is named
      * as such (not "damaged") and is never truncated or resumed under it. */
-    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    /* a writer opens it for writing here: a file it may not write (mode, read-only mount, immutable) is
+     * named as such, never called damaged (a reader would say "conformance ok") */
+    int fd = open(path, (for_write ? O_RDWR : O_RDONLY) | O_NONBLOCK | O_CLOEXEC);
     if (fd < 0) {
-        vafm_h5i_err(err, VAFM_EIO, "", "%s: cannot open: %s", path, strerror(errno));
+        int en = errno;
+        if (vafm_h5i_errno_denied(en)) {
+            vafm_h5i_err(err, VAFM_EACCES, "", "%s: cannot be opened for writing: %s; the file was not examined "
+                         "and is left untouched", path, vafm_h5i_denied_why(en));
+            return VAFM_EACCES;
+        }
+        vafm_h5i_err(err, VAFM_EIO, "", "%s: cannot open: %s", path, strerror(en));
         return VAFM_EIO;
     }
     int rc = 0;

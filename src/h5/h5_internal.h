@@ -130,6 +130,13 @@ void vafm_h5i_err(vafm_error *err, int code, const char *object, const char *fmt
  *  with VAFM_EIO, and a file another process (or this one) has open — for writing, or at all when
  *  for_write — with VAFM_ESTATE naming the holder from /proc/locks. An absent path passes. */
 int vafm_h5i_check_path(const char *path, int for_write, vafm_error *err);
+/* 1 when errno en means "may not write" (EACCES, EPERM: mode or immutable; EROFS: read-only mount). */
+int vafm_h5i_errno_denied(int en);
+/* The words for such an errno: "the file system is mounted read-only" or "permission denied ...". */
+const char *vafm_h5i_denied_why(int en);
+/* A new file at path: VAFM_EACCES (naming the directory and "read-only"/"permission denied") when its directory
+ * cannot be written, else 0 (other failures are left to the create). */
+int vafm_h5i_check_dir_writable(const char *path, vafm_error *err);
 
 /** The innermost message on HDF5's error stack into buf (unchanged when the stack is empty). Take it right
  *  after the failing call: every later HDF5 call (a close on the way out) clears the stack. */

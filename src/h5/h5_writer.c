@@ -161,8 +161,10 @@ static int s_create(vafm_h5_writer *w, vafm_error *err)
     int rc = 0;
     if (!w->o.overwrite && !stat(w->path, &st))
         vafm_h5i_err(err, rc = VAFM_EIO, "", "%s: exists already (resume it, or allow overwriting)", w->path);
-    else if (w->o.overwrite)
+    else if (w->o.overwrite && !stat(w->path, &st))
         rc = vafm_h5i_check_path(w->path, 1, err); /* never truncate a file in use (the driver locks first too) */
+    else
+        rc = vafm_h5i_check_dir_writable(w->path, err); /* a read-only place is named so, not "cannot be created" */
     if (rc) {
         H5Pclose(fcpl);
         H5Pclose(fapl);
