@@ -455,6 +455,44 @@ def test_log_file_equals_stream(fig4, tmp_path):
     vafm_info_ok(path)
 
 
+def test_log_resume_never_drops_intact_curves(fig4, tmp_path):
+    """Issue #29: a curve damaged in the middle of a log made resume delete every later intact curve (80-curve
+    log, /30/force removed: 49 intact curves gone). A daemon cannot recompute live curves: resume refuses,
+    naming the damaged curve, and changes nothing; a damaged last curve (what a kill leaves) still goes."""
+    import h5py  # required: a missing dependency fails the test
+
+    path = tmp_path / "log.h5"
+    assert fig4.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    n = 6
+    for index in range(n):
+        assert fig4.cmd({"cmd": "curve", "index": index})["status"] == "ok"
+        fig4.wait_idle()
+    assert fig4.cmd({"cmd": "log", "stop": True})["log"]["curves"] == n
+    with h5py.File(path, "r+") as f:
+        del f["2"]["force"]
+    before = path.read_bytes()
+    r = fig4.cmd({"cmd": "log", "path": str(path), "resume": True})
+    error_ok(r, "io_error", "path")
+    assert "curve 2 " in r["message"] and "3 intact curve(s)" in r["message"] and "up to curve 5" in r["message"], r
+    assert fig4.cmd({"cmd": "status"})["log"]["state"] == "off"
+    assert path.read_bytes() == before  # not a byte changed
+    with h5py.File(path, "r") as f:
+        assert sorted(f.keys(), key=int) == [str(i) for i in range(n)]
+        assert all("force" in f[str(i)] for i in range(n) if i != 2)
+    # the damaged curve is the last one: it alone goes, the log continues after the intact ones
+    tail = tmp_path / "tail.h5"
+    assert fig4.cmd({"cmd": "log", "path": str(tail)})["status"] == "ok"
+    for index in range(3):
+        assert fig4.cmd({"cmd": "curve", "index": index})["status"] == "ok"
+        fig4.wait_idle()
+    assert fig4.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 3
+    with h5py.File(tail, "r+") as f:
+        del f["2"]["force"]
+    r = fig4.cmd({"cmd": "log", "path": str(tail), "resume": True})
+    assert r["status"] == "ok" and r["curves_in_file"] == 2, r
+    assert fig4.cmd({"cmd": "log", "stop": True})["status"] == "ok"
+
+
 def test_log_bad_path_names_path(fig4, tmp_path):
     error_ok(fig4.cmd({"cmd": "log", "path": str(tmp_path / "no" / "such" / "dir.h5")}), "io_error", "path")
     error_ok(fig4.cmd({"cmd": "log", "path": str(tmp_path / "x.txt")}), "out_of_range", "path")  # not .h5

@@ -132,7 +132,10 @@ typedef struct vafm_h5_writer_opts {
     int gzip_level;  /**< 0: no compression (default); 1–9: shuffle + deflate at that level */
     int fletcher32;  /**< 1: checksum every channel so damaged data is refused on read (default 1) */
     int stamp_time;  /**< 1: curves without date/time get the current UTC date and time (default 1) */
-    uint8_t reserved[32];
+    int keep_intact; /**< resume: 1 refuses (VAFM_EFORMAT, naming the damaged curve) a file in which intact curves
+                          follow a damaged or missing one, rather than drop them with it: for curves that cannot
+                          be recomputed (a daemon's log). 0 (default): they are dropped, to be recomputed */
+    uint8_t reserved[28];
 } vafm_h5_writer_opts;
 
 /** Fill o with the defaults. */
@@ -148,8 +151,10 @@ VAFM_API void vafm_h5_meta_default(vafm_h5_meta *m);
  * @param path  file name
  * @param opts  options, NULL for the defaults
  * @param err   optional error detail
- * @return 0, VAFM_EINVAL (bad path or options), VAFM_EIO (cannot create/open), VAFM_EFORMAT (resume of
- *         a file that is not a vafm file of a known format version), VAFM_ENOMEM.
+ * @return 0, VAFM_EINVAL (bad path or options), VAFM_EIO (cannot create/open), VAFM_EACCES (the file or its
+ *         directory may not be written: permission denied, read-only file system), VAFM_EFORMAT (resume of
+ *         a file that is not a vafm file of a known format version; with keep_intact, intact curves follow
+ *         a damaged one), VAFM_ENOMEM.
  * @note On resume, vafm_h5_writer_count() tells how many complete curves were kept; a trailing curve
  *       that was not flushed, or whose data do not read back, is removed.
  */

@@ -51,7 +51,8 @@ typedef struct vafm_recorder_opts {
      *  curves now durable in the file (NULL: none). Must not call back into the recorder. */
     void (*on_durable)(void *user, uint64_t curves);
     void *user;              /**< for on_durable */
-    uint8_t reserved[32];
+    int keep_intact;         /**< resume: vafm_h5_writer_opts.keep_intact (default 0) */
+    uint8_t reserved[28];
 } vafm_recorder_opts;
 
 /** Fill o with the defaults. */
@@ -62,7 +63,8 @@ VAFM_API void vafm_recorder_opts_default(vafm_recorder_opts *o);
  * @param scene the base scene, or NULL to take the first appended curve's scene as the file's
  * @param grid  the campaign grid, or NULL for single curves
  * @return 0, VAFM_EINVAL (options, or on resume a scene or grid other than the file's), VAFM_EIO,
- *         VAFM_EFORMAT, VAFM_ESTATE (the file is in use by another writer), VAFM_ENOMEM.
+ *         VAFM_EACCES (may not be written), VAFM_EFORMAT, VAFM_ESTATE (the file is in use by another
+ *         writer), VAFM_ENOMEM.
  */
 VAFM_API int vafm_recorder_open(vafm_recorder **out, const char *path, const vafm_recorder_opts *opts,
                                 const vafm_params *scene, const vafm_campaign_spec *grid, vafm_error *err);

@@ -150,6 +150,7 @@ static json_t *s_log(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     }
     vafm_recorder_opts o;
     vafm_recorder_opts_default(&o); /* durable after every curve */
+    o.keep_intact = 1;               /* live curves cannot be recomputed: a resume never drops an intact one */
     o.mode = c->log_resume ? VAFM_RECORD_RESUME : c->log_overwrite ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE;
     vafm_error verr;
     memset(&verr, 0, sizeof verr);

@@ -252,6 +252,37 @@ static void s_linklist_free(s_linklist *l)
     memset(l, 0, sizeof *l);
 }
 
+/* Resume with keep_intact: the groups from c on would be deleted; refuse (nothing changed) when one after the
+ * first bad curve c still reads (structure and attributes), naming c, why it is bad, and the intact ones. */
+static int s_keep_intact(vafm_h5_writer *w, const s_linklist *l, const uint8_t *present, const vafm_h5i_row *rows,
+                         size_t nrows, uint64_t c, uint64_t file_size, vafm_h5i_curvebuf *buf, vafm_error *err)
+{
+    uint64_t intact = 0, last = 0;
+    vafm_h5_curve cv;
+    for (size_t i = 0; i < l->n; i++)
+        if (l->num[i] > c && !vafm_h5i_curve_read(w->file, w->path, l->num[i], 0, file_size, buf, &cv, NULL)) {
+            intact++;
+            last = l->num[i] > last ? l->num[i] : last;
+        }
+    if (!intact)
+        return 0; /* only a damaged tail goes: what a kill can leave */
+    char why[200];
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    if (c >= l->n || !present[c])
+        snprintf(why, sizeof why, "is missing");
+    else if (w->has_prov && !(c < nrows && rows[c].curve == c))
+        snprintf(why, sizeof why, "has no ground-truth row");
+    else if (vafm_h5i_curve_read(w->file, w->path, c, 1, file_size, buf, &cv, &e))
+        snprintf(why, sizeof why, "is damaged (%.150s)", e.message);
+    else
+        snprintf(why, sizeof why, "is followed by a damaged one"); /* c read back; a later one of the two did not */
+    vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: cannot be resumed: curve %" PRIu64 " %s, and %" PRIu64 " intact curve(s) "
+                 "follow it (up to curve %" PRIu64 "), which resume would drop; nothing was changed: log to a new file "
+                 "(the intact curves stay readable here)", w->path, c, why, intact, last);
+    return VAFM_EFORMAT;
+}
+
 static int s_resume(vafm_h5_writer *w, vafm_error *err)
 {
     struct stat st;
@@ -347,6 +378,11 @@ static int s_resume(vafm_h5_writer *w, vafm_error *err)
         } else {
             ok++;
         }
+    }
+    if (w->o.keep_intact && (rc = s_keep_intact(w, &l, present, rows, nrows, c, file_size, &buf, err))) {
+        vafm_h5i_curvebuf_free(&buf);
+        free(present);
+        goto done;
     }
     vafm_h5i_curvebuf_free(&buf);
     free(present);

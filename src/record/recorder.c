@@ -184,6 +184,7 @@ int vafm_recorder_open(vafm_recorder **out, const char *path, const vafm_recorde
     wo.resume = o.mode == VAFM_RECORD_RESUME;
     wo.overwrite = o.mode == VAFM_RECORD_OVERWRITE;
     wo.gzip_level = o.gzip_level;
+    wo.keep_intact = o.keep_intact;
     double t0 = s_now();
     /* a resume that would be refused (another scene or grid) is refused before a byte of the file changes */
     int rc = scene ? vafm_h5_provenance_check(scene, grid, err) : 0; /* before any file is touched */
