@@ -147,6 +147,14 @@ with h5py.File(d + "/virtual.h5", "w") as f:
     f.create_virtual_dataset("height_m", lay, fillvalue=0)
     for k, v in (("x0_m", -5e-6), ("y0_m", -5e-6), ("dx_m", 1e-6), ("dy_m", 1e-6)):
         f.attrs[k] = v
+# links are not followed (issue #29): external to the FIFO or to a good grid file, soft to a dataset of the file
+for name, link in (("extfifo", h5py.ExternalLink(d + "/fifo", "/E_star_Pa")),
+                   ("extfile", h5py.ExternalLink(d + "/grid.h5", "/E_star_Pa")), ("soft", h5py.SoftLink("/data"))):
+    with h5py.File(d + "/" + name + ".h5", "w") as f:
+        f["data"] = np.full((3, 4), 6e3)
+        f["E_star_Pa"] = link
+        for k, v in (("x0_m", -3e-6), ("y0_m", -2e-6), ("dx_m", 2e-6), ("dy_m", 2e-6)):
+            f.attrs[k] = v
 EOF
     run map --preset cell-liquid --nx 5 --ny 4 --size 8e-6,6e-6 --sample "$TMP/grid.h5" --out "$TMP/grid_map.h5" -q
     if [ "$rc" -eq 0 ] && "$PY" - "$TMP/grid_map.h5" >"$TMP/gout" 2>&1 <<'EOF'
@@ -189,6 +197,15 @@ EOF
         if [ "$rc" -eq 2 ] && grep -qF "'$dset' is $why" "$TMP/err" && [ ! -e "$TMP/g6.h5" ]; then
             ok "--sample: a dataset with $kind storage (a FIFO) is refused naming it, without opening it"
         else bad "--sample: a dataset with $kind storage" "exit $rc: $(head -c 300 "$TMP/err")"; fi
+    done
+    for k in extfifo:"an external link" extfile:"an external link" soft:"a soft link"; do
+        IFS=: read -r kind why <<<"$k"
+        timeout 20 "$VAFM" map --preset cell-liquid --nx 2 --ny 2 --threads 1 --sample "$TMP/$kind.h5" \
+            --out "$TMP/g7.h5" >"$TMP/out" 2>"$TMP/err"
+        rc=$?
+        if [ "$rc" -eq 2 ] && grep -qF "'E_star_Pa' is $why" "$TMP/err" && [ ! -e "$TMP/g7.h5" ]; then
+            ok "--sample: a dataset behind $why ($kind) is refused naming it, not followed"
+        else bad "--sample: a dataset behind $why ($kind)" "exit $rc: $(head -c 300 "$TMP/err")"; fi
     done
     if [ ! -e "$TMP/g1.h5" ] && [ ! -e "$TMP/g2.h5" ] && [ ! -e "$TMP/g3.h5" ] && [ ! -e "$TMP/g5.h5" ]; then
         ok "--sample: refused grids leave no file"

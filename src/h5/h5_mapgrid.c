@@ -47,6 +47,17 @@ static int s_dataset(hid_t f, const char *path, const char *name, int *ny, int *
     htri_t ex = H5Lexists(f, name, H5P_DEFAULT);
     if (ex <= 0)
         return 0;
+    /* the link's type before it is followed, as the curve reader does: a soft or external link would be opened
+     * elsewhere (an external link to a FIFO blocks forever) */
+    H5L_info_t li;
+    if (H5Lget_info(f, name, &li, H5P_DEFAULT) < 0 || li.type != H5L_TYPE_HARD) {
+        vafm_h5i_err(err, VAFM_EFORMAT, name, "%s: '%s' is %s; a map grid's datasets are stored in the file itself "
+                     "(hard links, protocol/hdf5.md)", path, name,
+                     li.type == H5L_TYPE_EXTERNAL ? "an external link (to another file), not followed"
+                     : li.type == H5L_TYPE_SOFT   ? "a soft link, not followed"
+                                                  : "a link that cannot be read");
+        return VAFM_EFORMAT;
+    }
     hid_t d = H5Dopen2(f, name, H5P_DEFAULT);
     if (d < 0) {
         vafm_h5i_err_hdf5(err, VAFM_EFORMAT, name, "%s: '%s' is not a readable dataset", path, name);
