@@ -207,7 +207,12 @@ EOF
             ok "--sample: a dataset behind $why ($kind) is refused naming it, not followed"
         else bad "--sample: a dataset behind $why ($kind)" "exit $rc: $(head -c 300 "$TMP/err")"; fi
     done
-    if [ ! -e "$TMP/g1.h5" ] && [ ! -e "$TMP/g2.h5" ] && [ ! -e "$TMP/g3.h5" ] && [ ! -e "$TMP/g5.h5" ]; then
+    # a grid that the pixels do not overlap (grid x [-3, 3] um, y [-2, 2] um) is refused naming both extents
+    expect_fail "--sample: a grid beside the map is refused naming both extents" 2 "do not overlap" \
+        "x [9.6e-05, 0.000104] m" "x [-3e-06, 3e-06] m" -- map --preset cell-liquid --nx 2 --ny 2 --size 16e-6 \
+        --pattern-param center_x_m=100e-6 --sample "$TMP/grid.h5" --out "$TMP/g8.h5"
+    if [ ! -e "$TMP/g1.h5" ] && [ ! -e "$TMP/g2.h5" ] && [ ! -e "$TMP/g3.h5" ] && [ ! -e "$TMP/g5.h5" ] &&
+        [ ! -e "$TMP/g8.h5" ]; then
         ok "--sample: refused grids leave no file"
     else bad "--sample: refused grids leave no file"; fi
 else

@@ -49,7 +49,8 @@ enum vafm_map_pattern {
                                domain_seed, material 1 where it is below `fraction` (about that area fraction); flat */
     VAFM_MAP_GRID = 5,    /**< a measured map (vafm_map_spec.grid, e.g. from vafm_h5_map_grid_load): E*, γ and the
                                surface height interpolated bilinearly at each pixel (clamped at the grid's edges), on
-                               material 0's contact model; a value the grid lacks is material 0's (height: 0) */
+                               material 0's contact model; a value the grid lacks is material 0's (height: 0). Pixel
+                               centres that miss the grid's points in x or y are refused (VAFM_EINVAL, field grid) */
 };
 
 /** A measured map to sample from (pattern "grid"): values on a regular grid of points. */

@@ -191,6 +191,19 @@ static int s_check_spec(const vafm_map_spec *s, vafm_error *err)
                          "2^24), positive spacings and a finite origin (vafm_h5_map_grid_load reads one)");
             return VAFM_EINVAL;
         }
+        /* the pixels' centres against the grid's points: without overlap every pixel would take the nearest
+         * edge's value (clamped), a uniform map that says nothing of the grid */
+        double wx = s->size_x_m / s->nx, wy = s->size_y_m / s->ny; /* a pixel's width and height */
+        double px0 = s->center_x_m - 0.5 * s->size_x_m + 0.5 * wx, px1 = px0 + (s->nx - 1) * wx;
+        double py0 = s->center_y_m - 0.5 * s->size_y_m + 0.5 * wy, py1 = py0 + (s->ny - 1) * wy;
+        double gx1 = g->x0_m + (g->nx - 1) * g->dx_m, gy1 = g->y0_m + (g->ny - 1) * g->dy_m;
+        if (px1 < g->x0_m || px0 > gx1 || py1 < g->y0_m || py0 > gy1) {
+            vafm_err_set(err, VAFM_EINVAL, "grid", "the map's pixels (centres x [%.6g, %.6g] m, y [%.6g, %.6g] m) do not "
+                         "overlap the sample grid (x [%.6g, %.6g] m, y [%.6g, %.6g] m): every pixel would take an edge's "
+                         "value; move the map (center_x_m, center_y_m) or the grid (x0_m, y0_m)", px0, px1, py0, py1,
+                         g->x0_m, gx1, g->y0_m, gy1);
+            return VAFM_EINVAL;
+        }
     }
     if (s->pattern == VAFM_MAP_DOME && s->height_m > s->radius_m) {
         vafm_err_set(err, VAFM_EINVAL, "height_m",
