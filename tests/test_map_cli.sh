@@ -155,6 +155,12 @@ for name, link in (("extfifo", h5py.ExternalLink(d + "/fifo", "/E_star_Pa")),
         f["E_star_Pa"] = link
         for k, v in (("x0_m", -3e-6), ("y0_m", -2e-6), ("dx_m", 2e-6), ("dy_m", 2e-6)):
             f.attrs[k] = v
+# grid.h5's geometry with other values (a resume with it is another sample)
+with h5py.File(d + "/grid_b.h5", "w") as f:
+    f["E_star_Pa"] = 9e3 + 1e3 * x
+    f["height_m"] = 1e-7 * (x + y) ** 2 / 25
+    for k, v in (("x0_m", -3e-6), ("y0_m", -2e-6), ("dx_m", 2e-6), ("dy_m", 2e-6)):
+        f.attrs[k] = v
 EOF
     run map --preset cell-liquid --nx 5 --ny 4 --size 8e-6,6e-6 --sample "$TMP/grid.h5" --out "$TMP/grid_map.h5" -q
     if [ "$rc" -eq 0 ] && "$PY" - "$TMP/grid_map.h5" >"$TMP/gout" 2>&1 <<'EOF'
@@ -211,6 +217,16 @@ EOF
     expect_fail "--sample: a grid beside the map is refused naming both extents" 2 "do not overlap" \
         "x [9.6e-05, 0.000104] m" "x [-3e-06, 3e-06] m" -- map --preset cell-liquid --nx 2 --ny 2 --size 16e-6 \
         --pattern-param center_x_m=100e-6 --sample "$TMP/grid.h5" --out "$TMP/g8.h5"
+    # a resume with the same file name and geometry but other values: refused (0.6.2 mixed the two samples)
+    mkdir -p "$TMP/rs" && cp "$TMP/grid.h5" "$TMP/rs/s.h5"
+    RS=(map --preset cell-liquid --nx 5 --ny 4 --size 8e-6,6e-6 --threads 1 --sample "$TMP/rs/s.h5" --out "$TMP/rs/m.h5" -q)
+    run "${RS[@]}"
+    cp "$TMP/grid_b.h5" "$TMP/rs/s.h5"
+    expect_fail "--resume with another sample grid of the same geometry is refused naming it" 2 "sample grid" \
+        "values_hash" -- "${RS[@]}" --resume
+    cp "$TMP/grid.h5" "$TMP/rs/s.h5"
+    run "${RS[@]}" --resume
+    [ "$rc" -eq 0 ] && ok "--resume with the same sample grid goes on" || bad "--resume, same grid" "exit $rc: $(head -c 300 "$TMP/err")"
     if [ ! -e "$TMP/g1.h5" ] && [ ! -e "$TMP/g2.h5" ] && [ ! -e "$TMP/g3.h5" ] && [ ! -e "$TMP/g5.h5" ] &&
         [ ! -e "$TMP/g8.h5" ]; then
         ok "--sample: refused grids leave no file"

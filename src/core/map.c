@@ -515,6 +515,32 @@ int vafm_map_set(vafm_map_spec *s, const char *name, const char *value, vafm_err
     }
 }
 
+/* A 64-bit hash of a measured grid's shape and values (their bit patterns, NULL arrays marked as absent): the map's
+ * JSON records it, so a resume with other values in the same geometry (and file name) is refused. Each step is
+ * a bijection of the state (splitmix64's finaliser of state ^ word), so one changed value always changes it. */
+static uint64_t s_mix(uint64_t z)
+{
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+static uint64_t s_grid_hash(const vafm_map_grid *g)
+{
+    const double *a[3] = { g->E_star_Pa, g->gamma_J_per_m2, g->height_m };
+    size_t np = (size_t)g->nx * (size_t)g->ny;
+    uint64_t h = s_mix(0x9E3779B97F4A7C15ULL ^ ((uint64_t)(uint32_t)g->nx << 32 | (uint32_t)g->ny));
+    for (int k = 0; k < 3; k++) {
+        h = s_mix(h ^ (a[k] ? 0x5A17ULL + (uint64_t)k : 0xAB5E27ULL + (uint64_t)k));
+        for (size_t i = 0; a[k] && i < np; i++) {
+            uint64_t w;
+            memcpy(&w, &a[k][i], sizeof w);
+            h = s_mix(h ^ w);
+        }
+    }
+    return h;
+}
+
 int vafm_map_to_json(const vafm_map_spec *s, char *buf, size_t len)
 {
     if (!s || !buf || len < 3)
@@ -583,9 +609,10 @@ int vafm_map_to_json(const vafm_map_spec *s, char *buf, size_t len)
             src[k] = '\0';
         }
         w = snprintf(buf + n, len - n, ", \"grid\": {\"nx\": %d, \"ny\": %d, \"x0_m\": %.17g, \"y0_m\": %.17g, \"dx_m\": %.17g, "
-                     "\"dy_m\": %.17g, \"E_star_Pa\": %s, \"gamma_J_per_m2\": %s, \"height_m\": %s, \"source\": %s}", g->nx,
-                     g->ny, g->x0_m, g->y0_m, g->dx_m, g->dy_m, g->E_star_Pa ? "true" : "false",
-                     g->gamma_J_per_m2 ? "true" : "false", g->height_m ? "true" : "false", src);
+                     "\"dy_m\": %.17g, \"E_star_Pa\": %s, \"gamma_J_per_m2\": %s, \"height_m\": %s, \"values_hash\": "
+                     "\"%016" PRIx64 "\", \"source\": %s}", g->nx, g->ny, g->x0_m, g->y0_m, g->dx_m, g->dy_m,
+                     g->E_star_Pa ? "true" : "false", g->gamma_J_per_m2 ? "true" : "false", g->height_m ? "true" : "false",
+                     s_grid_hash(g), src);
         if (w < 0 || (size_t)w >= len - n)
             return VAFM_EINVAL;
         n += (size_t)w;
