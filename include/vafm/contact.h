@@ -39,6 +39,26 @@ typedef struct vafm_contact_eval {
     double dFdu; /**< contact stiffness dF/du (unit E*R); −inf at u_min for JKR */
 } vafm_contact_eval;
 
+/** @name Capability flags of a contact model (vafm_contact_type.flags)
+ *  The simulation asks these, never which model it holds: a model without a flag never enters the path
+ *  that needs it. @{ */
+/** It has a surface: the tip can touch it (every model but `none`). */
+#define VAFM_CONTACT_SURFACE 0x1u
+/** It takes a work of adhesion γ > 0 (the scene's gamma_J_per_m2 is passed to its init hook; a model
+ *  with a surface and without this flag requires gamma_J_per_m2 = 0). */
+#define VAFM_CONTACT_ADHESIVE 0x2u
+/** Its branch is JKR's, u = s⁴ − c·s with c = √(2πγ): the closed-form references (theory.h: the
+ *  quasi-static pull-off, the equilibrium), the tabulated force (contact_table) and the inlined solver
+ *  apply. */
+#define VAFM_CONTACT_JKR_BRANCH 0x4u
+/** The exact well step (well_exact) may propagate its deep well: the step linearises the branch in the
+ *  JKR t-form (s_m, c; Hertz is c = 0), so only a model of that family may set it. */
+#define VAFM_CONTACT_WELL 0x8u
+/** Its stiffness dF/du grows strictly along the branch: the runtime stiffness guard may then skip
+ *  indentations below a threshold it computes once (guard.h). */
+#define VAFM_CONTACT_MONOTONE 0x10u
+/** @} */
+
 struct vafm_contact_type {
     const char *name;        /**< "jkr", "hertz", "none" */
     const char *description; /**< one line for --help */
@@ -47,14 +67,22 @@ struct vafm_contact_type {
     double (*force)(const vafm_contact *c, double u, double *s_io, double *dFdu);
     /** Contact energy U(u) on the branch (reduced, unit E*R³), U = 0 when detached. */
     double (*energy)(const vafm_contact *c, double u);
+    unsigned flags; /**< VAFM_CONTACT_* capabilities */
+    /** Fill the model's fields of *c (type already set, the rest 0) for a reduced work of adhesion
+     *  gamma (finite, ≥ 0; 0 unless VAFM_CONTACT_ADHESIVE). @return 0 or VAFM_EINVAL. */
+    int (*init)(vafm_contact *c, double gamma);
+    /** Where the stable branch carries a repulsive force F ≥ 0: the indentation *u and the stiffness
+     *  *dFdu (the time step is chosen from it). Required with VAFM_CONTACT_SURFACE, else NULL. */
+    void (*at_force)(const vafm_contact *c, double F, double *u, double *dFdu);
 };
 
 VAFM_API extern const vafm_contact_type *const vafm_contact_jkr;   /**< JKR, robust t-form solver */
 VAFM_API extern const vafm_contact_type *const vafm_contact_hertz; /**< Hertz (γ = 0), closed form */
 VAFM_API extern const vafm_contact_type *const vafm_contact_none;  /**< no sample: free cantilever */
 
-/** Bind a model to a reduced work of adhesion gamma (≥ 0; Hertz and none require / ignore it).
- *  @return 0 or VAFM_EINVAL. */
+/** Bind a model to a reduced work of adhesion gamma (≥ 0; Hertz and none require / ignore it) through
+ *  its init hook; any type object with force, energy and init hooks (and at_force with a surface) may be
+ *  bound, listed in the registry or not. @return 0 or VAFM_EINVAL. */
 VAFM_API int vafm_contact_init(vafm_contact *c, const vafm_contact_type *type, double gamma);
 
 /** Evaluate a, F, dF/du on the contact branch (u ≥ u_detach); VAFM_EINVAL below u_detach. */
@@ -62,6 +90,9 @@ VAFM_API int vafm_contact_eval_at(const vafm_contact *c, double u, vafm_contact_
 
 /** @return the contact type named `name`, or NULL. */
 VAFM_API const vafm_contact_type *vafm_contact_type_find(const char *name);
+/** Number of contact models and access by index (for listings); NULL outside [0, count). */
+VAFM_API int vafm_contact_type_count(void);
+VAFM_API const vafm_contact_type *vafm_contact_type_at(int i);
 
 #ifdef __cplusplus
 }

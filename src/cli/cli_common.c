@@ -325,7 +325,7 @@ void vafm_cli_print_quasistatic(FILE *o, const vafm_params *p, const vafm_curve_
     vafm_reduced r;
     vafm_units_reduce(p, &r);
     vafm_quasistatic q;
-    if (p->contact != vafm_contact_jkr || p->gamma_J_per_m2 <= 0 || vafm_theory_quasistatic(r.gamma, r.k, &q) != 0) {
+    if (!(p->contact->flags & VAFM_CONTACT_JKR_BRANCH) || p->gamma_J_per_m2 <= 0 || vafm_theory_quasistatic(r.gamma, r.k, &q) != 0) {
         fprintf(o, "quasi-static n/a (no adhesion)\n");
         return;
     }

@@ -180,7 +180,7 @@ int vafm_cmd_theory(int argc, char **argv)
         vafm_cli_error("theory: %s", err.message);
         return 2;
     }
-    if (p.contact != vafm_contact_jkr || !(p.gamma_J_per_m2 > 0.0)) {
+    if (!(p.contact->flags & VAFM_CONTACT_JKR_BRANCH) || !(p.gamma_J_per_m2 > 0.0)) {
         vafm_cli_error("theory: the references need the JKR contact with gamma_J_per_m2 > 0");
         return 2;
     }

@@ -13,13 +13,10 @@
  * monotonically to it. t₀ = min[Δu^{1/4}, √(Δu/6)/s_m] is such a start: each term of P alone is ≤ Δu at
  * the root, so each bound is ≥ the root. Working in t keeps the branch end (t = 0) exact and gives
  * dF/du through 4s³ − c = 4t(s² + s·s_m + s_m²) without cancellation, hence exactly −∞ at u_min.
- *
- * The end of this file also holds the generic contact functions (init, eval_at, type_find).
  */
 #include "vafm/contact.h"
 
 #include <math.h>
-#include <string.h>
 
 #include "core/jkr_inline.h"
 #include "core/internal.h"
@@ -49,71 +46,32 @@ static double s_jkr_energy(const vafm_contact *ct, double u)
     return s4 * (s3 * ((8.0 / 15.0) * s3 - (4.0 / 3.0) * c) + 0.5 * c * c);
 }
 
+static int s_jkr_init(vafm_contact *out, double gamma)
+{
+    out->gamma = gamma;
+    out->c = sqrt(2.0 * VAFM_JKR_PI * gamma);
+    out->s_m = cbrt(out->c / 4.0);
+    out->u_touch = 0.0;
+    out->u_detach = vafm_jkr_u_min(out->s_m);
+    out->a0 = cbrt(2.0 * VAFM_JKR_PI * gamma);
+    out->F_jkr = 1.5 * VAFM_JKR_PI * gamma;
+    return VAFM_OK;
+}
+
+static void s_jkr_at_force(const vafm_contact *ct, double F, double *u, double *dFdu)
+{
+    vafm_jkr_at_force(ct->c, F, u, dFdu);
+}
+
 static const vafm_contact_type s_jkr_type = {
     .name = "jkr",
     .description = "JKR adhesive contact (Johnson-Kendall-Roberts), hysteretic",
     .force = s_jkr_force,
     .energy = s_jkr_energy,
+    .flags = VAFM_CONTACT_SURFACE | VAFM_CONTACT_ADHESIVE | VAFM_CONTACT_JKR_BRANCH | VAFM_CONTACT_WELL |
+             VAFM_CONTACT_MONOTONE,
+    .init = s_jkr_init,
+    .at_force = s_jkr_at_force,
 };
 
 VAFM_API const vafm_contact_type *const vafm_contact_jkr = &s_jkr_type;
-
-/* ---------------------------------------------------------------------------------------------- */
-/* generic contact functions                                                                      */
-/* ---------------------------------------------------------------------------------------------- */
-
-VAFM_API int vafm_contact_init(vafm_contact *c, const vafm_contact_type *type, double gamma)
-{
-    if (!c || !type)
-        return VAFM_EINVAL;
-    if (!(gamma >= 0.0) || !isfinite(gamma))
-        return VAFM_EINVAL;
-    vafm_contact out = {.type = type};
-    if (type == vafm_contact_jkr) {
-        out.gamma = gamma;
-        out.c = sqrt(2.0 * VAFM_JKR_PI * gamma);
-        out.s_m = cbrt(out.c / 4.0);
-        out.u_touch = 0.0;
-        out.u_detach = vafm_jkr_u_min(out.s_m);
-        out.a0 = cbrt(2.0 * VAFM_JKR_PI * gamma);
-        out.F_jkr = 1.5 * VAFM_JKR_PI * gamma;
-    } else if (type == vafm_contact_hertz) {
-        if (gamma != 0.0)
-            return VAFM_EINVAL;
-        out.u_touch = 0.0;
-        out.u_detach = 0.0;
-    } else if (type == vafm_contact_none) {
-        /* gamma is ignored: no sample, no adhesion */
-        out.u_touch = INFINITY;
-        out.u_detach = INFINITY;
-    } else {
-        return VAFM_EINVAL; /* unknown model: its touch/detach points are not known here */
-    }
-    *c = out;
-    return VAFM_OK;
-}
-
-VAFM_API int vafm_contact_eval_at(const vafm_contact *c, double u, vafm_contact_eval *out)
-{
-    if (!c || !c->type || !c->type->force || !out)
-        return VAFM_EINVAL;
-    if (!isfinite(u) || !(u >= c->u_detach))
-        return VAFM_EINVAL;
-    double s = 0.0, dFdu = 0.0;
-    double F = c->type->force(c, u, &s, &dFdu);
-    out->a = s * s;
-    out->F = F;
-    out->dFdu = dFdu;
-    return VAFM_OK;
-}
-
-VAFM_API const vafm_contact_type *vafm_contact_type_find(const char *name)
-{
-    if (!name)
-        return NULL;
-    const vafm_contact_type *const all[] = {vafm_contact_jkr, vafm_contact_hertz, vafm_contact_none};
-    for (size_t i = 0; i < sizeof all / sizeof all[0]; ++i)
-        if (strcmp(all[i]->name, name) == 0)
-            return all[i];
-    return NULL;
-}

@@ -4,6 +4,8 @@
  */
 #include "vafm/contact.h"
 
+#include <math.h>
+
 static double s_none_force(const vafm_contact *ct, double u, double *s_io, double *dFdu)
 {
     (void)ct;
@@ -22,11 +24,22 @@ static double s_none_energy(const vafm_contact *ct, double u)
     return 0.0;
 }
 
+static int s_none_init(vafm_contact *c, double gamma)
+{
+    (void)gamma; /* ignored: no sample, no adhesion */
+    c->u_touch = INFINITY;
+    c->u_detach = INFINITY;
+    return VAFM_OK;
+}
+
 static const vafm_contact_type s_none_type = {
     .name = "none",
     .description = "no sample: free cantilever, never in contact",
     .force = s_none_force,
     .energy = s_none_energy,
+    .flags = 0,
+    .init = s_none_init,
+    .at_force = NULL,
 };
 
 VAFM_API const vafm_contact_type *const vafm_contact_none = &s_none_type;

@@ -17,14 +17,14 @@ double vafm_guard_measure(const vafm_kernel *K, const vafm_integrator_type *it, 
     return it->overdamped ? k_loc * dt / K->co[1].zeta : sqrt(k_loc / K->m) * dt;
 }
 
-/* Why a threshold is exact: Hertz has dF/du = 2a, growing with u. On the JKR branch (contact_jkr.c's
+/* Only for a model that declares VAFM_CONTACT_MONOTONE. Why a threshold is exact for JKR and Hertz: Hertz has dF/du = 2a, growing with u. On the JKR branch (contact_jkr.c's
  * s-form, c = 4s_m³) d²F/du² = (N′D − N·D′)/D³ (jkr_inline.h) with N′D − N·D′ = 4s(16s⁶ − 4cs³ + 3c²),
  * a quadratic in s³ whose discriminant 16c² − 192c² is negative: positive for every s > 0, so dF/du is
  * strictly increasing along the branch. The margin of 1e-6 in the measure covers the solver's round-off
  * (≲ 1e-15 relative) many times over: the computed measure of any u ≤ u_ok stays below the limit. */
 double vafm_guard_threshold(const vafm_kernel *K, const vafm_integrator_type *it, double dt)
 {
-    if (!(dt > 0) || (K->contact.type != vafm_contact_jkr && K->contact.type != vafm_contact_hertz))
+    if (!(dt > 0) || !(K->contact.type->flags & VAFM_CONTACT_MONOTONE))
         return -INFINITY;
     const double thr = (1.0 - 1e-6) * it->stability_limit;
     double lo = K->contact.u_detach, sq = 0.0;

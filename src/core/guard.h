@@ -20,8 +20,9 @@
 double vafm_guard_measure(const vafm_kernel *K, const vafm_integrator_type *it, double dt, double u, double *sq,
                           double *Kl);
 
-/** A u_ok such that every u ≤ u_ok gives a measure below it->stability_limit·(1 − 1e-6), for the JKR and
- *  Hertz contacts; −∞ (always evaluate) for any other contact or dt ≤ 0. Bisection: ~100 contact solves. */
+/** A u_ok such that every u ≤ u_ok gives a measure below it->stability_limit·(1 − 1e-6), for a contact
+ *  whose stiffness grows along its branch (VAFM_CONTACT_MONOTONE: JKR, Hertz); −∞ (always evaluate) for
+ *  any other contact or dt ≤ 0. Bisection: ~100 contact solves. */
 double vafm_guard_threshold(const vafm_kernel *K, const vafm_integrator_type *it, double dt);
 
 #endif

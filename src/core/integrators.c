@@ -4,21 +4,16 @@
 #include <string.h>
 
 #include "core/kernel.h"
+#include "core/models.h"
 
 int vafm_kernel_baseline = 0;
 
-#define S_NINTEGRATORS 4
-
-static const vafm_integrator_type *s_get(int i)
-{
-    switch (i) {
-    case 0: return vafm_integrator_gjf;
-    case 1: return vafm_integrator_baoab;
-    case 2: return vafm_integrator_paper_vv;
-    case 3: return vafm_integrator_brownian;
-    default: return NULL;
-    }
-}
+#define S_ROW(id, name, help) &vafm_integrator_##id
+#define S_COMMA ,
+static const vafm_integrator_type *const *const s_all[] = {VAFM_INTEGRATORS(S_ROW, S_COMMA)};
+#undef S_ROW
+#undef S_COMMA
+#define S_NINTEGRATORS ((int)(sizeof s_all / sizeof s_all[0]))
 
 int vafm_integrator_count(void)
 {
@@ -27,14 +22,14 @@ int vafm_integrator_count(void)
 
 const vafm_integrator_type *vafm_integrator_at(int i)
 {
-    return s_get(i);
+    return i >= 0 && i < S_NINTEGRATORS ? *s_all[i] : NULL;
 }
 
 const vafm_integrator_type *vafm_integrator_find(const char *name)
 {
     for (int i = 0; name && i < S_NINTEGRATORS; i++)
-        if (!strcmp(s_get(i)->name, name))
-            return s_get(i);
+        if (!strcmp((*s_all[i])->name, name))
+            return *s_all[i];
     return NULL;
 }
 

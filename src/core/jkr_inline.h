@@ -138,4 +138,16 @@ static inline double vafm_jkr_force_inline(const vafm_contact *ct, double u, dou
     return s3 * ((4.0 / 3.0) * s3 - 2.0 * c);
 }
 
+/* Where the stable branch carries force F ≥ 0 (JKR, and Hertz as c = 0): F = (4/3)x² − 2c·x with
+ * x = s³ gives x = (3/4)(c + √(c² + 4F/3)), then u = s⁴ − c·s and dF/du = 2s²(4x − 3c)/(4x − c). The
+ * contact models' at_force hook (numerics.c chooses the time step from it). */
+static inline void vafm_jkr_at_force(double c, double F, double *u, double *dFdu)
+{
+    const double x = 0.75 * (c + sqrt(c * c + 4.0 * F / 3.0)), s = cbrt(x);
+    if (u)
+        *u = s * s * s * s - c * s;
+    if (dFdu)
+        *dFdu = 2.0 * s * s * (4.0 * x - 3.0 * c) / (4.0 * x - c);
+}
+
 #endif

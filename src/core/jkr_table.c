@@ -44,7 +44,7 @@ int vafm_jkr_table_init(vafm_jkr_table *T, const vafm_contact *c, double u_max)
 {
     T->node = NULL;
     T->n = 0;
-    if (!c || c->type != vafm_contact_jkr || !(c->s_m > 0.0) || !(u_max > c->u_detach))
+    if (!c || !c->type || !(c->type->flags & VAFM_CONTACT_JKR_BRANCH) || !(c->s_m > 0.0) || !(u_max > c->u_detach))
         return VAFM_EINVAL;
     T->xi_max = sqrt(u_max - c->u_detach);
     for (int n = 256; n <= (1 << 17); n *= 2) {

@@ -13,6 +13,7 @@
 
 #include "vafm/map.h"
 #include "core/internal.h"
+#include "core/models.h"
 
 enum { S_INT, S_REAL, S_SEED, S_PATTERN, S_START, S_CONTACT };
 
@@ -320,11 +321,12 @@ int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int 
     const vafm_map_material *m = &s->material[mat];
     const vafm_contact_type *ct = m->contact ? m->contact : base->contact;
     double E = isnan(m->E_star_Pa) ? base->E_star_Pa : m->E_star_Pa;
-    double g = ct == vafm_contact_jkr ? (isnan(m->gamma_J_per_m2) ? base->gamma_J_per_m2 : m->gamma_J_per_m2) : 0.0;
+    const int adhesive = ct && (ct->flags & VAFM_CONTACT_ADHESIVE);
+    double g = adhesive ? (isnan(m->gamma_J_per_m2) ? base->gamma_J_per_m2 : m->gamma_J_per_m2) : 0.0;
     if (s->pattern == VAFM_MAP_GRID && s->grid) { /* the measured map's values where it has them */
         if (s->grid->E_star_Pa)
             E = s_grid_at(s->grid, s->grid->E_star_Pa, x, y);
-        if (s->grid->gamma_J_per_m2 && ct == vafm_contact_jkr)
+        if (s->grid->gamma_J_per_m2 && adhesive)
             g = s_grid_at(s->grid, s->grid->gamma_J_per_m2, x, y);
     }
     if (out) {
@@ -504,7 +506,7 @@ int vafm_map_set(vafm_map_spec *s, const char *name, const char *value, vafm_err
     case S_CONTACT: {
         const vafm_contact_type *t = vafm_contact_type_find(value);
         if (!t) {
-            vafm_err_set(err, VAFM_EINVAL, f->name, "%s = '%s' is not one of jkr|hertz|none", f->name, value);
+            vafm_err_set(err, VAFM_EINVAL, f->name, "%s = '%s' is not one of " VAFM_CONTACT_CHOICES, f->name, value);
             return VAFM_EINVAL;
         }
         *(const vafm_contact_type **)base = t;

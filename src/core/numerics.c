@@ -11,12 +11,6 @@
 #include "vafm/theory.h"
 #include "core/internal.h"
 
-/* Stable-branch contact radius root: F = (4/3)x² − 2c·x with x = s³ ⇒ x = (3/4)(c + √(c² + 4F/3)). */
-static double s_x_at_force(double c, double F)
-{
-    return 0.75 * (c + sqrt(c * c + 4.0 * F / 3.0));
-}
-
 void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out)
 {
     const vafm_reduced *r = &nm->r;
@@ -121,13 +115,14 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     vafm_units_reduce(p, &nm->r);
     nm->sc = vafm_units_scale(p);
     const vafm_reduced *r = &nm->r;
-    if (vafm_contact_init(&nm->contact, p->contact, p->contact == vafm_contact_jkr ? r->gamma : 0.0)) {
+    const unsigned cf = p->contact ? p->contact->flags : 0u;
+    if (vafm_contact_init(&nm->contact, p->contact, (cf & VAFM_CONTACT_ADHESIVE) ? r->gamma : 0.0)) {
         vafm_err_set(err, VAFM_EINVAL, "gamma_J_per_m2", "gamma_J_per_m2 = %.6g J/m^2 is not valid for contact %s",
                      p->gamma_J_per_m2, p->contact->name);
         return VAFM_EINVAL;
     }
     const vafm_contact *c = &nm->contact;
-    const int has_contact = p->contact != vafm_contact_none;
+    const int has_contact = (cf & VAFM_CONTACT_SURFACE) != 0;
     nm->Ts = 1.0 / p->sample_rate_Hz / nm->sc.time_s;
 
     /* The stiffest contact: at the largest repulsive force expected, with room for the overshoot of
@@ -143,20 +138,20 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     }
     nm->K_max = r->k;
     nm->u_deep = 0.0;
-    if (has_contact) {
-        double xd = s_x_at_force(c->c, 4.0 * nm->F_max + c->F_jkr), sd = cbrt(xd);
-        nm->u_deep = sd * sd * sd * sd - c->c * sd;
-        double x = s_x_at_force(c->c, nm->F_max);
-        double s = cbrt(x);
-        nm->K_max += 2.0 * s * s * (4.0 * x - 3.0 * c->c) / (4.0 * x - c->c);
+    if (has_contact) { /* the model's own branch (its at_force hook) */
+        double dFdu, u_set;
+        c->type->at_force(c, 4.0 * nm->F_max + c->F_jkr, &nm->u_deep, NULL);
+        c->type->at_force(c, nm->F_max, NULL, &dFdu);
+        nm->K_max += dFdu;
         if (p->trigger == VAFM_TRIGGER_FORCE) {
-            double xs = s_x_at_force(c->c, F_set), ss = cbrt(xs);
-            u_spr_turn += ss * ss * ss * ss - c->c * ss;
+            c->type->at_force(c, F_set, &u_set, NULL);
+            u_spr_turn += u_set;
         }
     }
     nm->u_spr_star = NAN;
     double u_end = has_contact ? fmin(0.0, c->u_detach) : 0.0;
-    if (p->contact == vafm_contact_jkr && r->gamma > 0) {
+    const int jkr_theory = (cf & VAFM_CONTACT_JKR_BRANCH) && r->gamma > 0; /* theory.h's references apply */
+    if (jkr_theory) {
         vafm_quasistatic q;
         if (vafm_theory_quasistatic(r->gamma, r->k, &q) == 0) {
             nm->u_spr_star = q.u_spr_star;
@@ -225,7 +220,7 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
      * within 10% of F*. Without adhesion there is no instability: never near. */
     nm->y_near = -INFINITY;
     nm->u_soft = has_contact ? fmin(0.0, c->u_detach) : 0.0;
-    if (p->contact == vafm_contact_jkr && r->gamma > 0) {
+    if (jkr_theory) {
         vafm_quasistatic q;
         if (vafm_theory_quasistatic(r->gamma, r->k, &q) == 0) {
             /* ΔV(y) = (4√2/3)(ky)^{3/2}/√F″ = B·kT  ⇒  k·y_B = [3B·kT√F″/(4√2)]^{2/3} */

@@ -18,6 +18,7 @@
 #include "vafm/params.h"
 #include "vafm/units.h"
 #include "core/internal.h"
+#include "core/models.h"
 
 enum s_choice { S_NONE = 0, S_CONTACT, S_INTEGRATOR, S_TRIGGER, S_NOISE, S_ANTIALIAS, S_RAMP_START, S_SETPOINT_MODE,
                 S_DWELL_MODE };
@@ -35,8 +36,7 @@ static const s_field s_fields[] = {
     REAL(E_star_Pa, "Pa", 1e3, 1e13, "contact modulus E* of tip and sample"),
     REAL(R_m, "m", 1e-10, 1e-3, "tip radius R"),
     REAL(gamma_J_per_m2, "J/m^2", 0, 100, "surface energy gamma of the JKR model (0 with contact=hertz)"),
-    { { "contact", VAFM_PARAM_CHOICE, "", 0, 0, "jkr|hertz|none",
-        "contact model: jkr (adhesive), hertz (no adhesion), none (free cantilever)" }, 0, S_CONTACT },
+    { { "contact", VAFM_PARAM_CHOICE, "", 0, 0, VAFM_CONTACT_CHOICES, VAFM_CONTACT_DOC }, 0, S_CONTACT },
     REAL(k_N_per_m, "N/m", 1e-6, 1e4, "cantilever spring constant k"),
     REAL(m_kg, "kg", 1e-20, 1e-3, "effective mass m of the cantilever"),
     REAL(eta_per_s, "1/s", 1e-3, 1e13, "friction rate eta of the cantilever in its medium (damping m*eta)"),
@@ -92,9 +92,7 @@ static const s_field s_fields[] = {
     REAL(tune_rate_Hz, "Hz", 0, 1e10,
          "thermal tune: sample rate (0: automatic: sample_rate_Hz, raised to the first 1-2-5 value >= 4 f0 so the "
          "resonance shows)"),
-    { { "integrator", VAFM_PARAM_CHOICE, "", 0, 0, "gjf|baoab|paper-vv|brownian",
-        "time integrator: gjf (default), baoab, paper-vv (the paper's Eq. 7 method), brownian (overdamped)" },
-      0, S_INTEGRATOR },
+    { { "integrator", VAFM_PARAM_CHOICE, "", 0, 0, VAFM_INTEGRATOR_CHOICES, VAFM_INTEGRATOR_DOC }, 0, S_INTEGRATOR },
     { { "noise", VAFM_PARAM_CHOICE, "", 0, 0, "gaussian|uniform",
         "random force distribution: gaussian, or uniform of matched variance (the paper's Eq. 7)" },
       offsetof(vafm_params, noise), S_NOISE },
@@ -821,10 +819,11 @@ int vafm_params_validate_scene(const vafm_params *p, int tune_scene, vafm_error 
             }
         }
     }
-    if (p->contact == vafm_contact_hertz && p->gamma_J_per_m2 != 0) {
+    if (p->contact && (p->contact->flags & (VAFM_CONTACT_SURFACE | VAFM_CONTACT_ADHESIVE)) == VAFM_CONTACT_SURFACE &&
+        p->gamma_J_per_m2 != 0) {
         vafm_err_set(err, VAFM_EINVAL, "gamma_J_per_m2",
-                     "gamma_J_per_m2 = %.6g J/m^2 must be 0 with contact = hertz (use jkr for adhesion)",
-                     p->gamma_J_per_m2);
+                     "gamma_J_per_m2 = %.6g J/m^2 must be 0 with contact = %s (use jkr for adhesion)",
+                     p->gamma_J_per_m2, p->contact->name);
         return VAFM_EINVAL;
     }
     /* f0 and Q set the mass and the friction: those must lie in m_kg's and eta_per_s's ranges */
@@ -859,7 +858,7 @@ int vafm_params_validate_scene(const vafm_params *p, int tune_scene, vafm_error 
         return VAFM_EINVAL;
     }
     if (p->ramp_size_m > 0 && p->ramp_start == VAFM_RAMP_START_TRIGGER &&
-        (p->start_in_contact || p->contact == vafm_contact_none)) {
+        (p->start_in_contact || !(p->contact->flags & VAFM_CONTACT_SURFACE))) {
         vafm_err_set(err, VAFM_EINVAL, "ramp_start",
                      "ramp_start = trigger needs a surface to find (contact jkr or hertz) and a free start "
                      "(start_in_contact = false)");

@@ -151,7 +151,7 @@ static int s_sim_new(vafm_sim **out, const vafm_params *p, int tune_only, vafm_e
     K->eta_c = rd->eta_cont;
     K->contact = s->nm.contact;
     K->cforce = K->contact.type->force;
-    K->is_jkr = K->contact.type == vafm_contact_jkr;
+    K->is_jkr = (K->contact.type->flags & VAFM_CONTACT_JKR_BRANCH) != 0;
     K->jtab = NULL;
     if (p->contact_table && K->is_jkr && K->contact.gamma > 0) {
         int rt = vafm_jkr_table_init(&s->jtab, &K->contact, s->nm.u_deep);
@@ -180,7 +180,7 @@ static int s_sim_new(vafm_sim **out, const vafm_params *p, int tune_only, vafm_e
     s->adaptive = s->nm.n_sub_far != s->nm.n_sub;
     /* The exact well step costs about as much as a few integrator steps: it is used only where an output
      * sample spans more steps than that. */
-    s->well_ok = p->well_exact && !s->it->overdamped && K->contact.type != vafm_contact_none &&
+    s->well_ok = p->well_exact && !s->it->overdamped && (K->contact.type->flags & VAFM_CONTACT_WELL) &&
                  s->nm.n_sub >= S_WELL_MIN_STEPS;
     *out = s;
     return 0;
@@ -231,7 +231,8 @@ static double s_contact_equilibrium(const vafm_sim *s, double uspr, double *K_lo
     const vafm_kernel *K = &s->K;
     double lo = fmin(K->contact.u_detach, 0.0), hi = uspr;
     double ueq = uspr, F_eq;
-    if (K->contact.gamma > 0 && vafm_theory_equilibrium(K->contact.gamma, K->k, uspr, &ueq, &F_eq) == 0) {
+    if ((K->contact.type->flags & VAFM_CONTACT_JKR_BRANCH) && K->contact.gamma > 0 &&
+        vafm_theory_equilibrium(K->contact.gamma, K->k, uspr, &ueq, &F_eq) == 0) {
         /* done */
     } else {
         for (int i = 0; i < 200 && hi - lo > 1e-15 * fmax(1.0, fabs(hi)); i++) {
@@ -385,7 +386,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     K->fs_min = INFINITY;
     K->in_contact = 0;
     K->s = 0.0;
-    const int has_contact = K->contact.type != vafm_contact_none;
+    const int has_contact = (K->contact.type->flags & VAFM_CONTACT_SURFACE) != 0;
     /* Start in contact at equilibrium (pressed in, or start_in_contact), else free at the support; a
      * thermal draw of position then velocity either way. */
     const int start_pressed = has_contact && (s->uspr_start >= K->contact.u_touch || s->p.start_in_contact);
@@ -463,7 +464,7 @@ static int s_free_safe(const vafm_sim *s)
     const vafm_kernel *K = &s->K;
     if (!s->p.free_exact || K->in_contact)
         return 0;
-    if (K->contact.type == vafm_contact_none)
+    if (!(K->contact.type->flags & VAFM_CONTACT_SURFACE))
         return 1;
     double y = K->u - K->u_spr, z = s->it->overdamped ? 0.0 : K->w - K->v_spr;
     double A = sqrt(y * y + K->m * z * z / K->k); /* energy bound of the deterministic excursion */
@@ -993,7 +994,7 @@ int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)
         out->detach_height_m = s_height(s, -s->uspr_detach * sc->length_m, (s->t_detach + s->t_retract0) * sc->time_s);
         out->detach_time_s = s->t_detach * sc->time_s;
         double ueq, Feq;
-        if (K->contact.type == vafm_contact_jkr && K->contact.gamma > 0 &&
+        if ((K->contact.type->flags & VAFM_CONTACT_JKR_BRANCH) && K->contact.gamma > 0 &&
             vafm_theory_equilibrium(K->contact.gamma, K->k, s->uspr_detach, &ueq, &Feq) == 0)
             out->detach_eq_force_N = -Feq * sc->force_N;
         else
