@@ -6,7 +6,8 @@
  * - a dummy contact model defined here only (Hertz's hooks, its flags cleared) is bound and simulated
  *   like any model: without VAFM_CONTACT_WELL it is stepped by the integrator, never by the exact well
  *   step, sample for sample as Hertz without the well step; with the flag it is well-stepped like Hertz;
- * - the stiffness guard's threshold asks VAFM_CONTACT_MONOTONE, not which model it holds.
+ * - the stiffness guard's threshold asks VAFM_CONTACT_MONOTONE, not which model it holds;
+ * - the batch kernel is offered an integrator's steps by its batch_lanes, not by its being gjf.
  */
 #include "harness.h"
 
@@ -14,6 +15,7 @@
 #include "vafm/integrator.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
+#include "core/batch.h"
 #include "core/guard.h"
 #include "core/internal.h"
 #include "core/kernel.h"
@@ -70,9 +72,12 @@ static void test_registry(void)
     ENSURE(vafm_integrator_at(-1) == NULL && vafm_integrator_at(ni) == NULL);
     for (int i = 0; i < ni; i++) {
         const vafm_integrator_type *t = vafm_integrator_at(i);
-        ENSURE(t && t->name && t->run && t->prepare);
+        ENSURE(t && t->name && t->run && t->prepare && t->set_dt);
         ENSURE_MSG(vafm_integrator_find(t->name) == t, "%s", t->name);
+        ENSURE(t->batch_lanes >= 0);
     }
+    ENSURE(vafm_integrator_gjf->batch_lanes > 1);
+    ENSURE(vafm_integrator_baoab->batch_lanes == 0 && vafm_integrator_brownian->batch_lanes == 0);
 
     /* the parameters' choices are the registry's names, in its order; the doc names each model */
     char buf[512];
@@ -232,11 +237,61 @@ static void test_bind_needs_hooks(void)
     ENSURE(vafm_contact_init(&c, &t, 0.1) == VAFM_EINVAL); /* its init hook refuses adhesion */
 }
 
+/* paper-fig4's default curve, stepped through vafm_sim_advance_batch (the campaign's path): how often
+ * the simulation handed its steps to the batch kernel (run here at width 1), and the samples */
+static long t_batch_run(const vafm_integrator_type *it, t_acc *a)
+{
+    vafm_params p;
+    ENSURE(vafm_preset_apply(&p, "paper-fig4", NULL) == 0);
+    p.integrator = it;
+    vafm_sim *s = NULL;
+    a->hash = 1469598103934665603ull;
+    a->n = 0;
+    ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+    if (!s)
+        return -1;
+    ENSURE(vafm_sim_curve_begin(s, 5) == 0);
+    long waits = 0;
+    for (;;) {
+        int r = vafm_sim_advance_batch(s, 1u << 20, t_collect, a);
+        if (r == VAFM_SIM_BATCH_WAIT) {
+            long want, done;
+            vafm_kernel *K = vafm_sim_batch_kernel(s, &want);
+            vafm_batch_steps(&K, &want, &done, 1, 1);
+            vafm_sim_batch_done(s, done);
+            waits++;
+        } else if (r != 1) {
+            ENSURE(r == 0);
+            break;
+        }
+    }
+    vafm_sim_destroy(&s);
+    return waits;
+}
+
+static void test_batch_by_lanes(void)
+{
+    vafm_integrator_type with = *vafm_integrator_gjf, without = *vafm_integrator_gjf;
+    with.name = "gjf-copy";
+    without.name = "gjf-scalar";
+    without.batch_lanes = 0;
+    t_acc a_ref, a_with, a_without;
+    const long w_ref = t_batch_run(vafm_integrator_gjf, &a_ref);
+    const long w_with = t_batch_run(&with, &a_with);
+    const long w_without = t_batch_run(&without, &a_without);
+    ENSURE_MSG(w_ref > 0 && w_with == w_ref, "gjf handed out %ld runs, its copy %ld", w_ref, w_with);
+    ENSURE_MSG(w_without == 0, "batch_lanes = 0 handed out %ld runs", w_without);
+    /* either way the same curve: the batch kernel at width 1 is the scalar loop */
+    ENSURE(a_ref.n > 100 && a_with.n == a_ref.n && a_without.n == a_ref.n);
+    ENSURE(a_with.hash == a_ref.hash && a_without.hash == a_ref.hash);
+}
+
 int main(void)
 {
     RUN_TEST(test_registry);
     RUN_TEST(test_dummy_never_well_steps);
     RUN_TEST(test_guard_asks_flags);
     RUN_TEST(test_bind_needs_hooks);
+    RUN_TEST(test_batch_by_lanes);
     return harness_done();
 }

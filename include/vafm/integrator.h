@@ -27,6 +27,12 @@ struct vafm_integrator_type {
     /** Internal: advance up to n steps; stops early after a step that changed the contact state.
      *  Never allocates, locks or does I/O. @return the number of steps done. */
     long (*run)(struct vafm_kernel *K, long n);
+    /** Internal: fill this integrator's own step coefficients of both contact states for the step
+     *  K->dt (the shared ones, the friction rate and ζ, are set before). */
+    void (*set_dt)(struct vafm_kernel *K);
+    /** The widest batch of curves the batch kernel (SIMD lanes) steps with this integrator side by
+     *  side; 0: none, it runs in its scalar loop only. */
+    int batch_lanes;
 };
 
 VAFM_API extern const vafm_integrator_type *const vafm_integrator_gjf;      /**< Grønbech-Jensen–Farago 2013 */

@@ -193,7 +193,7 @@ int vafm_cmd_theory(int argc, char **argv)
     if (rc)
         return rc;
     const double zeta = r.m; /* ζ = mη in reduced units (η = 1) */
-    const double mass = p.integrator == vafm_integrator_brownian ? 0.0 : r.m; /* 0: overdamped */
+    const double mass = p.integrator->overdamped ? 0.0 : r.m; /* 0: overdamped */
     vafm_quasistatic q;
     if (vafm_theory_quasistatic(r.gamma, r.k, &q)) {
         vafm_cli_error("theory: no quasi-static solution for this scene");

@@ -8,6 +8,16 @@
  */
 #include "core/kernel.h"
 
+static void s_set_dt(vafm_kernel *K)
+{
+    const double dt = K->dt;
+    for (int i = 0; i < 2; i++) {
+        vafm_kcoef *c = &K->co[i];
+        c->ou_c1 = exp(-c->eta_tot * dt);
+        c->ou_c3 = sqrt(K->kT / K->m * -expm1(-2.0 * c->eta_tot * dt));
+    }
+}
+
 static void s_prepare(vafm_kernel *K)
 {
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
@@ -51,6 +61,8 @@ static const vafm_integrator_type s_type = {
     .stability_limit = 2.0,
     .prepare = s_prepare,
     .run = s_run,
+    .set_dt = s_set_dt,
+    .batch_lanes = 0,
 };
 
 const vafm_integrator_type *const vafm_integrator_baoab = &s_type;

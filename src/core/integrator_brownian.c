@@ -7,6 +7,14 @@
  */
 #include "core/kernel.h"
 
+static void s_set_dt(vafm_kernel *K)
+{
+    for (int i = 0; i < 2; i++) {
+        vafm_kcoef *c = &K->co[i];
+        c->bd_sig = sqrt(2.0 * K->kT * K->dt / c->zeta);
+    }
+}
+
 static void s_prepare(vafm_kernel *K)
 {
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
@@ -47,6 +55,8 @@ static const vafm_integrator_type s_type = {
     .stability_limit = 2.0,
     .prepare = s_prepare,
     .run = s_run,
+    .set_dt = s_set_dt,
+    .batch_lanes = 0,
 };
 
 const vafm_integrator_type *const vafm_integrator_brownian = &s_type;

@@ -19,6 +19,14 @@ static inline double s_total(vafm_kernel *K, const vafm_kcoef *c, double f, doub
     return ft;
 }
 
+static void s_set_dt(vafm_kernel *K)
+{
+    for (int i = 0; i < 2; i++) {
+        vafm_kcoef *c = &K->co[i];
+        c->vv_sig = sqrt(2.0 * c->zeta * K->kT / K->dt);
+    }
+}
+
 static void s_prepare(vafm_kernel *K)
 {
     double f = K->k * (K->u_spr - K->u) - K->Fc;
@@ -69,6 +77,8 @@ static const vafm_integrator_type s_type = {
     .stability_limit = 2.0,
     .prepare = s_prepare,
     .run = s_run,
+    .set_dt = s_set_dt,
+    .batch_lanes = 0,
 };
 
 const vafm_integrator_type *const vafm_integrator_paper_vv = &s_type;

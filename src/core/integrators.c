@@ -33,6 +33,8 @@ const vafm_integrator_type *vafm_integrator_find(const char *name)
     return NULL;
 }
 
+/* Every registered integrator's coefficients are filled, so that a kernel may be handed to any of them
+ * (the tests step one kernel with several); each integrator owns its own (its set_dt hook). */
 void vafm_kernel_set_dt(vafm_kernel *K, double dt)
 {
     K->dt = dt;
@@ -40,15 +42,9 @@ void vafm_kernel_set_dt(vafm_kernel *K, double dt)
         vafm_kcoef *c = &K->co[i];
         c->eta_tot = 1.0 + (i ? K->eta_c : 0.0);
         c->zeta = K->m * c->eta_tot;
-        double h = 0.5 * c->eta_tot * dt;
-        c->gjf_b = 1.0 / (1.0 + h);
-        c->gjf_a = (1.0 - h) * c->gjf_b;
-        c->gjf_sig = sqrt(2.0 * c->zeta * K->kT * dt);
-        c->ou_c1 = exp(-c->eta_tot * dt);
-        c->ou_c3 = sqrt(K->kT / K->m * -expm1(-2.0 * c->eta_tot * dt));
-        c->vv_sig = sqrt(2.0 * c->zeta * K->kT / dt);
-        c->bd_sig = sqrt(2.0 * K->kT * dt / c->zeta);
     }
+    for (int j = 0; j < S_NINTEGRATORS; j++)
+        (*s_all[j])->set_dt(K);
 }
 
 VAFM_KCOLD vafm_kfs vafm_kernel_contact_eval(const vafm_kernel *K, double u, double s)

@@ -668,7 +668,7 @@ static int s_integrate(vafm_sim *s, uint64_t *budget)
                 return 1;
             if ((uint64_t)want > *budget)
                 want = (long)*budget;
-        } else if (s->batch_yield && s->it == vafm_integrator_gjf && (!K->in_contact || K->jtab)) {
+        } else if (s->batch_yield && s->it->batch_lanes > 1 && (!K->in_contact || K->jtab)) {
             s->batch_want = want;
             return 3; /* the batch kernel runs these steps (vafm_sim_batch_done) */
         }
