@@ -1,12 +1,11 @@
 /* SPDX-License-Identifier: MIT */
-/* The integrator registry and the step-size dependent coefficients all integrators share. */
+/* The integrator registry (models.h) and the step size: the shared friction, then each integrator's own
+ * coefficients (its set_dt hook). */
 #include <math.h>
 #include <string.h>
 
 #include "core/kernel.h"
 #include "core/models.h"
-
-int vafm_kernel_baseline = 0;
 
 #define S_ROW(id, name, help) &vafm_integrator_##id
 #define S_COMMA ,
@@ -45,25 +44,4 @@ void vafm_kernel_set_dt(vafm_kernel *K, double dt)
     }
     for (int j = 0; j < S_NINTEGRATORS; j++)
         (*s_all[j])->set_dt(K);
-}
-
-VAFM_KCOLD vafm_kfs vafm_kernel_contact_eval(const vafm_kernel *K, double u, double s)
-{
-    vafm_kfs r;
-    r.s = s;
-    if (K->jtab)
-        r.F = vafm_jkr_table_force(K->jtab, &K->contact, u, &r.s);
-    else if (K->is_jkr)
-        r.F = vafm_jkr_force_inline(&K->contact, u, &r.s, NULL);
-    else
-        r.F = K->cforce(&K->contact, u, &r.s, NULL);
-    return r;
-}
-
-VAFM_KCOLD vafm_kfs vafm_kernel_table_far(const vafm_kernel *K, double u, double s)
-{
-    vafm_kfs r;
-    r.s = s;
-    r.F = vafm_jkr_force_inline(&K->contact, u, &r.s, NULL);
-    return r;
 }

@@ -657,15 +657,6 @@ int vafm_params_to_json(const vafm_params *p, char *buf, size_t len)
     return (int)(n + (size_t)w);
 }
 
-double vafm_params_mass_kg(const vafm_params *p)
-{
-    if (p->f0_Hz > 0) {
-        double w = 2.0 * M_PI * p->f0_Hz;
-        return p->k_N_per_m / (w * w);
-    }
-    return p->m_kg;
-}
-
 double vafm_params_tune_rate_Hz(const vafm_params *p)
 {
     if (p->tune_rate_Hz > 0)
@@ -687,15 +678,6 @@ void vafm_params_tune_scene(const vafm_params *p, vafm_params *out)
     q.sample_rate_Hz = vafm_params_tune_rate_Hz(p);
     q.segment_samples = 0;
     *out = q;
-}
-
-double vafm_params_eta_per_s(const vafm_params *p)
-{
-    if (p->Q > 0) {
-        double f0 = p->f0_Hz > 0 ? p->f0_Hz : sqrt(p->k_N_per_m / p->m_kg) / (2.0 * M_PI);
-        return 2.0 * M_PI * f0 / p->Q;
-    }
-    return p->eta_per_s;
 }
 
 /* ---- the instrument's settings → the fields underneath --------------------------------------- */

@@ -9,6 +9,27 @@
 #include "vafm/units.h"
 #include "core/internal.h"
 
+/* The lever's mass and friction from its resonance (f0, Q) or as given: the first step of every unit
+ * conversion, so they live here, where the reduction needs them (declared in params.h). units.c calls
+ * nothing in params.c or numerics.c: params → numerics → units is a line, not a circle. */
+double vafm_params_mass_kg(const vafm_params *p)
+{
+    if (p->f0_Hz > 0) {
+        double w = 2.0 * M_PI * p->f0_Hz;
+        return p->k_N_per_m / (w * w);
+    }
+    return p->m_kg;
+}
+
+double vafm_params_eta_per_s(const vafm_params *p)
+{
+    if (p->Q > 0) {
+        double f0 = p->f0_Hz > 0 ? p->f0_Hz : sqrt(p->k_N_per_m / p->m_kg) / (2.0 * M_PI);
+        return 2.0 * M_PI * f0 / p->Q;
+    }
+    return p->eta_per_s;
+}
+
 vafm_scale vafm_units_scale(const vafm_params *p)
 {
     vafm_scale s;
