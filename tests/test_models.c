@@ -100,7 +100,7 @@ static void test_registry(void)
         ENSURE(vafm_params_set(&p, "contact", vafm_contact_type_at(i)->name, NULL) == 0);
         ENSURE(p.contact == vafm_contact_type_at(i));
     }
-    ENSURE(vafm_params_set(&p, "contact", "dmt", NULL) != 0);
+    ENSURE(vafm_params_set(&p, "contact", "no-such-model", NULL) != 0);
 }
 
 /* ---- a dummy model: Hertz's hooks under a name of its own, with chosen flags ------------------- */
