@@ -286,6 +286,34 @@ static void test_batch_by_lanes(void)
     ENSURE(a_with.hash == a_ref.hash && a_without.hash == a_ref.hash);
 }
 
+/* The friction limit of an integrator (the paper's VV: η·dt < 2) is its own field: a copy of gjf that
+ * declares one (0.25 here) is refused beyond it, gjf itself is not. paper-fig4's lever, free, at
+ * dt = 0.3/η (ω·dt = 0.95, inside gjf's stability limit). */
+static void test_eta_dt_limit(void)
+{
+    vafm_params p;
+    ENSURE(vafm_preset_apply(&p, "paper-fig4", NULL) == 0);
+    p.contact = vafm_contact_none;
+    p.gamma_J_per_m2 = 0.0;
+    p.free_exact = 0;
+    vafm_scale sc = vafm_units_scale(&p);
+    p.sample_rate_Hz = 1.0 / (1000.0 * sc.time_s);
+    p.dt_s = 0.3 * sc.time_s;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    ENSURE_MSG(vafm_params_validate(&p, &err) == 0, "gjf at eta*dt = 0.3: %s", err.message);
+    vafm_integrator_type lim = *vafm_integrator_gjf;
+    lim.name = "gjf-limited";
+    lim.eta_dt_limit = 0.25;
+    p.integrator = &lim;
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_validate(&p, &err) == VAFM_EUNSTABLE && !strcmp(err.field, "dt_s"));
+    ENSURE(strstr(err.message, "gjf-limited") != NULL);
+    p.dt_s = 0.2 * sc.time_s;
+    ENSURE(vafm_params_validate(&p, NULL) == 0);
+    ENSURE(vafm_integrator_paper_vv->eta_dt_limit == 2.0 && vafm_integrator_gjf->eta_dt_limit == 0.0);
+}
+
 int main(void)
 {
     RUN_TEST(test_registry);
@@ -293,5 +321,6 @@ int main(void)
     RUN_TEST(test_guard_asks_flags);
     RUN_TEST(test_bind_needs_hooks);
     RUN_TEST(test_batch_by_lanes);
+    RUN_TEST(test_eta_dt_limit);
     return harness_done();
 }

@@ -33,6 +33,9 @@ struct vafm_integrator_type {
     /** The widest batch of curves the batch kernel (SIMD lanes) steps with this integrator side by
      *  side; 0: none, it runs in its scalar loop only. */
     int batch_lanes;
+    /** Friction limit: the total friction rate times the step, η·dt (with the contact friction in
+     *  contact), must stay below it; 0: none (the paper's VV: 2). */
+    double eta_dt_limit;
 };
 
 VAFM_API extern const vafm_integrator_type *const vafm_integrator_gjf;      /**< Grønbech-Jensen–Farago 2013 */

@@ -79,6 +79,7 @@ static const vafm_integrator_type s_type = {
     .run = s_run,
     .set_dt = s_set_dt,
     .batch_lanes = 0,
+    .eta_dt_limit = 2.0, /* its velocity half-kicks by (1 − η dt/2) change sign beyond */
 };
 
 const vafm_integrator_type *const vafm_integrator_paper_vv = &s_type;

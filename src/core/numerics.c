@@ -239,12 +239,12 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     /* a tune scene runs no force curve: its curve at the tune rate may be as long as it likes, its tune may not */
     if (tune_scene ? vafm_numerics_check_tune(p, nm, 1, err) : s_check_cost(p, nm, err))
         return VAFM_EINVAL;
-    if (it == vafm_integrator_paper_vv) {
+    if (it->eta_dt_limit > 0) {
         double eta_dt = (1.0 + (has_contact ? r->eta_cont : 0.0)) * dt;
-        if (!(eta_dt < 2.0)) {
+        if (!(eta_dt < it->eta_dt_limit)) {
             vafm_err_set(err, VAFM_EUNSTABLE, "dt_s",
-                         "dt_s = %.6g s gives eta*dt = %.4g: the paper's velocity Verlet is unstable for eta*dt >= 2",
-                         dt * nm->sc.time_s, eta_dt);
+                         "dt_s = %.6g s gives eta*dt = %.4g: integrator %s is unstable for eta*dt >= %g",
+                         dt * nm->sc.time_s, eta_dt, it->name, it->eta_dt_limit);
             return VAFM_EUNSTABLE;
         }
     }
