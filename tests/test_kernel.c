@@ -52,6 +52,20 @@ static void test_table_accuracy(void)
                 worst = e;
         }
         ENSURE_MSG(worst < 1e-12, "gamma %g: worst force error %g F_JKR", gammas[g], worst);
+        /* the table's last intervals and its edge: nodes run to ξ = (n−1)·h = ξ_max + h, the lookup
+         * interpolates below it and hands x ≥ n−1 to the exact solver. A sweep over (ξ_max, ξ_max + 2h],
+         * edges included, catches a lookup that accepts x in [n−1, n) (it reads node n, one past the end) */
+        worst = 0.0;
+        for (int i = 1; i <= 4000; i++) {
+            double xi = T.xi_max + 2.0 * T.h * i / 4000.0;
+            double u = c.u_detach + xi * xi;
+            double s_tab = 0.0, s_ex = 0.0;
+            double e = fabs(vafm_jkr_table_force(&T, &c, u, &s_tab) - c.type->force(&c, u, &s_ex, NULL)) / c.F_jkr;
+            if (!(e <= worst))
+                worst = e;
+        }
+        ENSURE_MSG(worst < 1e-12, "gamma %g: worst force error %g F_JKR over (xi_max, xi_max + 2h]", gammas[g],
+                   worst);
         for (int k = 1; k <= 16; k++) {
             double u = c.u_detach + pow(10.0, -k) * c.a0 * c.a0;
             double s_tab = 0.0, s_ex = 0.0;
