@@ -361,15 +361,18 @@ static void test_contact_channel_fdt(void)
 {
     const int N = LONG_OR(20000, 4000);
     const double eta_c[2] = { 0.0, 4.0 };
-    for (int j = 0; j < 2; j++) {
+    /* well_exact on: the held contact is stepped by the exact well propagator; off: by plain GJF steps
+     * with the in-contact coefficients (η_tot = η + η_cont), which the first pass never takes */
+    for (int j = 0; j < 4; j++) {
         vafm_params p;
         vafm_preset_apply(&p, "paper-fig4", NULL);
         vafm_reduced r;
         vafm_units_reduce(&p, &r);
         r.kT = 1e-4;
-        r.eta_cont = eta_c[j];
+        r.eta_cont = eta_c[j % 2];
         vafm_units_from_reduced(&p, &r);
         vafm_scale sc = vafm_units_scale(&p);
+        p.well_exact = j < 2;
         p.trigger = VAFM_TRIGGER_HEIGHT;
         p.start_height_m = -1.0 * sc.length_m;
         p.trigger_height_m = p.start_height_m - 1e-6 * sc.length_m;
@@ -390,10 +393,71 @@ static void test_contact_channel_fdt(void)
         vafm_contact_eval ev;
         ENSURE(vafm_contact_eval_at(&c, ueq, &ev) == 0);
         double expect = r.kT / (r.k + ev.dFdu) * sc.length_m * sc.length_m;
-        ENSURE_MSG(fabs(var / expect - 1.0) <= 5.0 * sqrt(2.0 / a.n), "eta_cont %g: var/expected %.4f (5 sigma %.3f)",
-                   eta_c[j], var / expect, 5.0 * sqrt(2.0 / a.n));
+        ENSURE_MSG(fabs(var / expect - 1.0) <= 5.0 * sqrt(2.0 / a.n),
+                   "eta_cont %g, well_exact %d: var/expected %.4f (5 sigma %.3f)", eta_c[j % 2], p.well_exact,
+                   var / expect, 5.0 * sqrt(2.0 / a.n));
         ENSURE_REL(-mean / sc.length_m, ueq, 1e-2);
     }
+}
+
+/* GJF's in-contact coefficients, by the kernel itself: a held JKR contact (paper-fig4's γ, k̃, m̃;
+ * k_BT̃ = 1e-4, the support fixed at u_spr = 1) stepped by vafm_integrator_gjf with the contact channel
+ * η_cont = 4 (η_tot = 5), dt = 0.02/max(ω, η_tot). The position variance is k_BT/K_tot and the velocity
+ * variance k_BT/m (GJF's on-site velocity: k_BT/m·(1 − ω²dt²/4), a 1e-4 correction here, far below
+ * σ). N = LONG_OR(20000, 4000) states 2/η apart (decorrelated within 2/η_tot), σ(var)/var = √(2/N), 5σ
+ * bounds. Coefficients that leave η_cont out of the friction (b, a) but not out of the noise would give
+ * both variances ×η_tot/η = 5; a noise without it ×1/5. */
+static void test_gjf_contact_coefficients(void)
+{
+    const int N = LONG_OR(20000, 4000);
+    vafm_params p;
+    vafm_preset_apply(&p, "paper-fig4", NULL);
+    vafm_reduced r;
+    vafm_units_reduce(&p, &r);
+    vafm_kernel K;
+    memset(&K, 0, sizeof K);
+    K.m = r.m;
+    K.k = r.k;
+    K.kT = 1e-4;
+    K.eta_c = 4.0;
+    ENSURE(vafm_contact_init(&K.contact, vafm_contact_jkr, r.gamma) == 0);
+    K.cforce = K.contact.type->force;
+    K.is_jkr = 1;
+    K.thermal = 1;
+    s_kernel_rng_init(&K, 11, 0);
+    double ueq, Feq;
+    ENSURE(vafm_theory_equilibrium(r.gamma, r.k, 1.0, &ueq, &Feq) == 0);
+    vafm_contact_eval ev;
+    ENSURE(vafm_contact_eval_at(&K.contact, ueq, &ev) == 0);
+    const double K_tot = r.k + ev.dFdu, omega = sqrt(K_tot / r.m), eta_tot = 1.0 + K.eta_c;
+    const double dt = 0.02 / fmax(omega, eta_tot);
+    vafm_kernel_set_dt(&K, dt);
+    ENSURE_REL(K.co[1].eta_tot, eta_tot, 1e-15);
+    K.uspr0 = K.u_spr = 1.0;
+    K.u = ueq;
+    K.in_contact = 1;
+    vafm_kfs fs = vafm_kernel_contact_eval(&K, ueq, 0.0);
+    K.Fc = fs.F;
+    K.s = fs.s;
+    vafm_integrator_gjf->prepare(&K);
+    const long per = (long)ceil(2.0 / dt);
+    ENSURE(vafm_integrator_gjf->run(&K, 10 * per) == 10 * per); /* equilibrate */
+    double su = 0.0, su2 = 0.0, sw = 0.0, sw2 = 0.0;
+    for (int i = 0; i < N; i++) {
+        ENSURE(vafm_integrator_gjf->run(&K, per) == per && K.in_contact == 1);
+        su += K.u;
+        su2 += K.u * K.u;
+        sw += K.w;
+        sw2 += K.w * K.w;
+    }
+    const double mu = su / N, var_u = su2 / N - mu * mu, mw = sw / N, var_w = sw2 / N - mw * mw;
+    const double tol = 5.0 * sqrt(2.0 / N);
+    fprintf(stderr, "  omega %.4g, eta_tot %g, dt %.3g: var(u) K_tot/kT %.4f, var(w) m/kT %.4f (5 sigma %.3f)\n",
+            omega, eta_tot, dt, var_u * K_tot / K.kT, var_w * r.m / K.kT, tol);
+    ENSURE_MSG(fabs(var_u * K_tot / K.kT - 1.0) <= tol, "var(u)/(kT/K_tot) %.4f (5 sigma %.3f)",
+               var_u * K_tot / K.kT, tol);
+    ENSURE_MSG(fabs(var_w * r.m / K.kT - 1.0) <= tol, "var(w)/(kT/m) %.4f (5 sigma %.3f)", var_w * r.m / K.kT, tol);
+    ENSURE_ABS(mu, ueq, 1e-2);
 }
 
 /* The exact well step at a few integrator steps per sample (paper-fig4's own 200 kHz: ~204 steps per
@@ -605,5 +669,6 @@ int main(void)
     RUN_TEST(test_well_few_steps_dwell);
     RUN_TEST(test_well_vs_plain_dwell);
     RUN_TEST(test_contact_channel_fdt);
+    RUN_TEST(test_gjf_contact_coefficients);
     return harness_done();
 }
