@@ -688,6 +688,32 @@ static void test_setpoint_modes(void)
         t_check_trigger(&c, want, rel);
         t_curve_free(&c);
     }
+    /* a real baseline: in the scenes above the force's baseline is ≈ 0 (the offset is the signal's, not the
+     * force's; the lever's drag is relative to its moving support), so both modes fire on the same sample.
+     * Here the approach starts in contact (cell-liquid, Hertz, athermal, 300 nm below the contact point:
+     * ~0.2 nN of repulsion against a 0.5 nN setpoint), so the 64 baseline samples average ~0.2 nN and the
+     * relative setpoint must fire later, where force − baseline reaches 0.5 nN */
+    vafm_preset_apply(&p, "cell-liquid", NULL);
+    p.T_K = 0;
+    p.start_height_m = -300e-9;
+    size_t turn[2] = { 0, 0 };
+    double base = 0.0, f_turn[2] = { 0.0, 0.0 };
+    for (int rel = 0; rel <= 1; rel++) {
+        p.setpoint_mode = rel;
+        if (t_run(&p, 0, &c, &r))
+            return;
+        t_check_trigger(&c, p.setpoint_N, rel);
+        turn[rel] = t_turn(&c);
+        f_turn[rel] = c.f[turn[rel]];
+        base = 0.0;
+        for (size_t j = 0; j < VAFM_BASELINE_SAMPLES && j < c.n; j++)
+            base += c.f[j] / VAFM_BASELINE_SAMPLES;
+        t_curve_free(&c);
+    }
+    fprintf(stderr, "  baseline %.4g N, setpoint %.4g N: trigger at sample %zu, %.4g N (absolute), %zu, %.4g N "
+                    "(relative)\n", base, p.setpoint_N, turn[0], f_turn[0], turn[1], f_turn[1]);
+    ENSURE_MSG(base > 0.2 * p.setpoint_N, "baseline %g N", base);
+    ENSURE_MSG(turn[1] > turn[0] + 10, "relative trigger at sample %zu, absolute at %zu", turn[1], turn[0]);
 }
 
 /* Dwell at constant force: a fast approach (10 nm per sample) overshoots the setpoint; at constant height
