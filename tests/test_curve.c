@@ -756,10 +756,49 @@ static void test_dwell_force(void)
                "constant force: the piezo moved back %g m for an overshoot of %g N", h_move[1], over);
 }
 
+/* pulloff_sampled_N is the most tensile sample of the retract alone. On ordinary curves the retract holds
+ * the curve's minimum anyway; here it cannot: contact-silica (JKR), athermal, 100 kHz, the snap-in on the
+ * approach pulls the lever down (tensile samples, −3 pN), then the retract stops after 2 nm (retract_max_m),
+ * still pressed in (compressive samples only, ≈ +4.8 nN; flagged NO_DETACH). The result must equal
+ * −min(force[retract]) exactly (≈ −4.8 nN), not the approach's snap-in. */
+static void test_pulloff_sampled_retract_only(void)
+{
+    vafm_params p;
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    p.T_K = 0;
+    p.sample_rate_Hz = 100e3;
+    p.ramp_size_m = 0; /* the adaptive ramp, which retract_max_m bounds */
+    p.retract_max_m = 2e-9;
+    t_curve c;
+    vafm_curve_result r;
+    if (t_run(&p, 0, &c, &r))
+        return;
+    double min_ret = INFINITY, min_other = INFINITY;
+    size_t n_ret = 0;
+    for (size_t i = 0; i < c.n; i++) {
+        if (c.seg[i] == VAFM_SEG_RETRACT) {
+            min_ret = fmin(min_ret, c.f[i]);
+            n_ret++;
+        } else {
+            min_other = fmin(min_other, c.f[i]);
+        }
+    }
+    fprintf(stderr, "  %zu retract samples, min %.4g N; approach and dwell min %.4g N; pulloff_sampled %.4g N, "
+                    "flags %d\n", n_ret, min_ret, min_other, r.pulloff_sampled_N, r.flags);
+    ENSURE(n_ret > 0);
+    ENSURE_MSG(r.flags & VAFM_CURVE_NO_DETACH, "flags %d", r.flags);
+    ENSURE_MSG(min_other < 0.0 && min_other < min_ret, "approach/dwell min %g N, retract min %g N: not the scene "
+               "meant", min_other, min_ret);
+    ENSURE_MSG(r.pulloff_sampled_N == -min_ret, "pulloff_sampled_N %.17g, -min(force[retract]) %.17g",
+               r.pulloff_sampled_N, -min_ret);
+    t_curve_free(&c);
+}
+
 int main(void)
 {
     RUN_TEST(test_fixed_ramp);
     RUN_TEST(test_setpoint_modes);
+    RUN_TEST(test_pulloff_sampled_retract_only);
     RUN_TEST(test_dwell_force);
     RUN_TEST(test_instrument_presets);
     RUN_TEST(test_mechanics);
