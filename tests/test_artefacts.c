@@ -448,8 +448,73 @@ static void test_zsensor(void)
     ENSURE_MSG(fabs(sd / 0.3e-9 - 1.0) < 4.0 * sqrt(0.5 / N), "z sensor noise sd %g m", sd);
 }
 
+/* vafm_detector_apply, the public function, bit for bit against its contract (detector.h). Off (every
+ * setting at its default): volts = deflection / sensitivity, deflection and force left as they were.
+ * On, offset only: volts = deflection / sensitivity + offset, deflection = volts·sensitivity, force =
+ * k·deflection. On with white noise and a 12-bit ADC: the noise is the detector's own stream (Philox stream
+ * `index` of seed ^ VAFM_DETECTOR_KEY), the code floor(v/q + 0.5) clipped to ±2^11, and a sample beyond the
+ * range saturates and sets `clipped`. Deflections span ±50 nm over 101 samples
+ * (contact-silica: 60 nm/V, so ±0.83 V; with the offset the top few clip). */
+static void test_detector_apply_contract(void)
+{
+    vafm_params p = t_base();
+    ENSURE(vafm_detector_on(&p) == 0);
+    const double sens = p.sensitivity_m_per_V, k = p.k_N_per_m;
+    vafm_detector d;
+    vafm_detector_begin(&d, &p, 3);
+    ENSURE(d.on == 0);
+    int bad = 0;
+    for (int i = 0; i <= 100; i++) {
+        const double x = (i - 50) * 1e-9, t = i * 1e-3;
+        double v = NAN, defl = -7.0, f = -9.0;
+        vafm_detector_apply(&d, t, 1e-7, x, &v, &defl, &f);
+        bad += !(v == x / sens) || defl != -7.0 || f != -9.0;
+        vafm_detector_apply(&d, t, 1e-7, x, NULL, NULL, NULL); /* NULL outputs are allowed */
+    }
+    ENSURE_MSG(bad == 0, "off: %d samples differ from volts = deflection / sensitivity, outputs untouched", bad);
+
+    p.baseline_offset_V = 0.25;
+    ENSURE(vafm_detector_on(&p) == 1);
+    vafm_detector_begin(&d, &p, 3);
+    bad = 0;
+    for (int i = 0; i <= 100; i++) {
+        const double x = (i - 50) * 1e-9;
+        double v = NAN, defl = NAN, f = NAN;
+        vafm_detector_apply(&d, i * 1e-3, 1e-7, x, &v, &defl, &f);
+        const double ve = x / sens + 0.25;
+        bad += !(v == ve) || !(defl == ve * sens) || !(f == k * (ve * sens));
+    }
+    ENSURE_MSG(bad == 0, "offset: %d samples differ", bad);
+
+    p.noise_V_rms = 0.01;
+    p.adc_bits = 12;
+    p.adc_range_V = 2.0;
+    p.seed = 12345;
+    vafm_detector_begin(&d, &p, 3);
+    vafm_rng r;
+    vafm_rng_init(&r, p.seed ^ VAFM_DETECTOR_KEY, 3);
+    const double q = 2.0 / 4096.0;
+    bad = 0;
+    int clipped = 0;
+    for (int i = 0; i <= 100; i++) {
+        const double x = (i - 50) * 1e-9;
+        double v = NAN, defl = NAN, f = NAN;
+        vafm_detector_apply(&d, i * 1e-3, 1e-7, x, &v, &defl, &f);
+        double code = floor((x / sens + 0.25 + 0.01 * vafm_rng_normal(&r)) / q + 0.5);
+        if (code > 2047.0 || code < -2048.0) {
+            code = code > 0 ? 2047.0 : -2048.0;
+            clipped = 1;
+        }
+        const double ve = code * q;
+        bad += !(v == ve) || !(defl == ve * sens) || !(f == k * (ve * sens));
+    }
+    ENSURE_MSG(bad == 0, "noise and ADC: %d samples differ", bad);
+    ENSURE_MSG(clipped == 1 && d.clipped == 1, "clipped: expected %d, detector %d", clipped, d.clipped);
+}
+
 int main(void)
 {
+    RUN_TEST(test_detector_apply_contract);
     RUN_TEST(test_piezo_hysteresis);
     RUN_TEST(test_piezo_creep);
     RUN_TEST(test_piezo_in_curve);
