@@ -224,9 +224,51 @@ static void test_source_errors(void)
     ENSURE(got.n == T_TOTAL - 7 && got.idx[0] == 7 && got.idx[got.n - 1] == T_TOTAL - 1 && !got.bad_curve);
 }
 
+/* The grid's order (include/vafm/campaign.h, protocol/hdf5.md "vafm grid"): point = (iT·n_v + iv)·n_k + ik,
+ * k fastest, then v, then T. A 2 T × 2 v × 3 k grid makes every axis distinguishable; a point past the end
+ * is VAFM_EINVAL; an empty list leaves the scene's value. */
+static void test_grid_order(void)
+{
+    vafm_params base, q;
+    vafm_preset_apply(&base, "paper-fig4", NULL);
+    const double T[2] = { 1.0, 2.0 }, v[2] = { 1e-5, 2e-5 }, k[3] = { 0.5, 1.0, 1.5 };
+    vafm_campaign_spec spec;
+    memset(&spec, 0, sizeof spec);
+    spec.T_K = T;
+    spec.n_T = 2;
+    spec.v_m_per_s = v;
+    spec.n_v = 2;
+    spec.k_N_per_m = k;
+    spec.n_k = 3;
+    spec.curves_per_point = 1;
+    ENSURE(vafm_campaign_points(&spec) == 12);
+    int bad = 0;
+    for (size_t pt = 0; pt < 12; pt++) {
+        ENSURE(vafm_campaign_point_params(&base, &spec, pt, &q) == 0);
+        size_t iT = pt / 6, iv = (pt / 3) % 2, ik = pt % 3;
+        if (q.T_K != T[iT] || q.v_approach_m_per_s != v[iv] || q.v_retract_m_per_s != v[iv] || q.k_N_per_m != k[ik]) {
+            fprintf(stderr, "  point %zu: T %g v %g k %g, expected T %g v %g k %g\n", pt, q.T_K, q.v_approach_m_per_s,
+                    q.k_N_per_m, T[iT], v[iv], k[ik]);
+            bad++;
+        }
+        q.T_K = base.T_K;
+        q.v_approach_m_per_s = base.v_approach_m_per_s;
+        q.v_retract_m_per_s = base.v_retract_m_per_s;
+        q.k_N_per_m = base.k_N_per_m;
+        bad += memcmp(&q, &base, sizeof q) != 0; /* nothing else changes */
+    }
+    ENSURE_MSG(bad == 0, "%d grid points out of order (k fastest, then v, then T)", bad);
+    ENSURE(vafm_campaign_point_params(&base, &spec, 12, &q) == VAFM_EINVAL);
+    spec.n_v = 0; /* no v list: the scene's speed; k still fastest */
+    ENSURE(vafm_campaign_points(&spec) == 6);
+    ENSURE(vafm_campaign_point_params(&base, &spec, 4, &q) == 0);
+    ENSURE(q.T_K == T[1] && q.k_N_per_m == k[1] && q.v_approach_m_per_s == base.v_approach_m_per_s);
+}
+
 int main(void)
 {
     t_setup();
+    RUN_TEST(test_grid_order);
     RUN_TEST(test_source_order_and_identity);
     RUN_TEST(test_source_errors);
     return harness_done();

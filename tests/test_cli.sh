@@ -300,6 +300,25 @@ d2=$(export_diff "$TMP/t1.h5" "$TMP/t2.h5" 8)
 dz=$(export_diff "$TMP/t1.h5" "$TMP/t2z.h5" 8)
 if [ "$rc" -eq 0 ] && [ "$d2" -eq 0 ] && [ "$dz" -eq 0 ]; then ok "campaign: 1 and 2 threads (and gzip) give byte-identical exports of all 8 curves"; else bad "campaign thread independence" "$d2 and $dz curves differ"; fi
 
+# a grid with all three axes (2 T x 2 v x 3 k, one curve each): point p is (T[p / 6], v[p / 3 % 2], k[p % 3]),
+# k fastest, then v, then T (protocol/hdf5.md), in the file's 'vafm grid' and in every ground-truth row
+run campaign -n 1 --preset paper-fig4 --T 0,1 --v "$VA,$VB" --k 0.05,0.1,0.2 --out "$TMP/grid3.h5" -q
+if [ "$rc" -eq 0 ] && /usr/bin/python3 - "$TMP/grid3.h5" "$VA" "$VB" >"$TMP/g3" 2>&1 <<'EOF'; then ok "campaign T x v x k grid: k fastest, then v, then T, in 'vafm grid' and the ground truth"; else bad "campaign T x v x k grid order" "exit $rc $(tail -c 400 "$TMP/g3") $(head -c 200 "$TMP/err")"; fi
+import json, sys
+import h5py
+T, v, k = [0.0, 1.0], [float(sys.argv[2]), float(sys.argv[3])], [0.05, 0.1, 0.2]
+with h5py.File(sys.argv[1], "r") as f:
+    g = json.loads(f.attrs["vafm grid"])
+    gt = f.attrs["vafm ground truth"]
+assert (g["T_K"], g["v_m_per_s"], g["k_N_per_m"], g["points"], g["curves"]) == (T, v, k, 12, 12), g
+assert len(gt) == 12, len(gt)
+for row in gt:
+    p = int(row["point"])
+    want = (T[p // 6], v[p // 3 % 2], k[p % 3])
+    got = (float(row["T_K"]), float(row["v_m_per_s"]), float(row["k_N_per_m"]))
+    assert int(row["curve"]) == p and got == want, (p, got, want)
+EOF
+
 # the standard HDF5 tools read the file
 if command -v h5ls >/dev/null 2>&1 && command -v h5dump >/dev/null 2>&1; then
     if h5ls -r "$TMP/t1.h5" >"$TMP/ls" 2>&1 && grep -q '^/0/force ' "$TMP/ls" && grep -q '^/7/tip\\ position ' "$TMP/ls" &&
