@@ -325,7 +325,7 @@ if command -v h5ls >/dev/null 2>&1 && command -v h5dump >/dev/null 2>&1; then
         h5dump -H "$TMP/t2z.h5" >"$TMP/dump" 2>&1 && grep -q 'ATTRIBUTE "vafm ground truth"' "$TMP/dump" &&
         h5dump -d /3/segment "$TMP/t2.h5" >/dev/null 2>&1; then ok "h5ls and h5dump read campaign files"; else bad "h5ls/h5dump" "$(head -c 300 "$TMP/ls")"; fi
 else
-    echo "skip - h5ls/h5dump not installed"
+    bad "h5ls and h5dump read campaign files" "h5ls/h5dump missing (Debian: hdf5-tools; .ci/deps.sh installs it)"
 fi
 
 run info "$TMP/t1.h5"
@@ -455,7 +455,7 @@ if [ -x "$TH5" ] && "$TH5" --make-files "$TMP" >/dev/null 2>&1 && [ -f "$TMP/ref
         ok "export of a file without time: empty time column, deflection = force/k, tip computed"
     else bad "export reference.h5" "exit $rc, $badrows bad rows"; fi
 else
-    echo "skip - $TH5 not built: the foreign-file checks need it"
+    bad "foreign-file checks" "$TH5 not built (it is built with the tests: meson setup -Dtests=true)"
 fi
 
 harness_done

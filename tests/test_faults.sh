@@ -162,7 +162,7 @@ EOF
         info bomb.h5
     expect "... and by export" 1 "declares 33554433 samples" -- export bomb.h5 --curve 0
 else
-    ok "decompression bomb: skipped (no h5py for $PY)"
+    bad "decompression bomb" "h5py missing for $PY (Debian: python3-h5py; .ci/deps.sh installs it)"
 fi
 
 # ---- 7: group names ----------------------------------------------------------------------------
@@ -178,7 +178,7 @@ if "$PY" -c 'import h5py' 2>/dev/null; then
     if [ "$r1" -eq 0 ] && cmp -s gap2.csv full2.csv; then ok "export --curve 2 of the gapped file is group 2"
     else bad "export --curve 2 of the gapped file is group 2" "exit $r1"; fi
 else
-    ok "gapped file: skipped (no h5py for $PY)"
+    bad "gapped file" "h5py missing for $PY (Debian: python3-h5py; .ci/deps.sh installs it)"
 fi
 
 # ---- 0.6.2: a file's grid lists and map shape size nothing without bound ---------------------------
@@ -213,7 +213,7 @@ with h5py.File("unitarr.h5", "r+") as f:
     expect "a unit attribute of two strings is named as such (0.6.1: \"is ''\")" 1 "holds 2 values" -- \
         export unitarr.h5 --curve 0
 else
-    ok "hostile grids: skipped (no h5py for $PY)"
+    bad "hostile grids" "h5py or numpy missing for $PY (Debian: python3-h5py python3-numpy; .ci/deps.sh installs them)"
 fi
 
 # ---- 9: the study's plotter and the shell ----------------------------------------------------------
@@ -226,7 +226,7 @@ if "$PY" -c 'import matplotlib' 2>/dev/null; then
     if [ -f "plots/O'Brien/hysteresis.png" ]; then ok "a directory named O'Brien gets its figure"
     else bad "a directory named O'Brien gets its figure" "$(ls "plots/O'Brien" 2>&1)"; fi
 else
-    ok "O'Brien figure: skipped (no matplotlib for $PY)"
+    bad "O'Brien figure" "matplotlib missing for $PY (Debian: python3-matplotlib; .ci/deps.sh installs it)"
 fi
 
 # ---- smaller ones --------------------------------------------------------------------------------

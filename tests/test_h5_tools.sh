@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: MIT
-# The files vafm writes open in the standard HDF5 tools (h5dump, h5ls) and, when h5py is installed, pass
+# The files vafm writes open in the standard HDF5 tools (h5dump, h5ls) and pass
 # a check that follows afmformats' HDF5 reader step by step (afmformats itself is not packaged for
 # Debian): detection, metadata keys and their Python types, known columns, segment cast to bool, tip
 # position convention. The reference file (written with raw HDF5 calls, no "time") is checked alike.
@@ -55,7 +55,7 @@ for p in python3 /usr/bin/python3; do
     fi
 done
 if [ -z "$PY" ]; then
-    echo "h5py not installed: the afmformats-style check is skipped" >&2
+    bad "afmformats-style check" "h5py or numpy missing (Debian: python3-h5py python3-numpy; .ci/deps.sh installs them)"
 else
     for f in vafm.h5 reference.h5; do
         if "$PY" - "$D/$f" <<'EOF'; then ok; else bad "afmformats-style check of $f"; fi

@@ -38,7 +38,7 @@ if "$ROOT/bin/vafm" study hysteresis --quick --out study >"$TMP/study" 2>&1; the
         [ -s study/hysteresis.png ] && ok "vafm study hysteresis --quick draws its figure with the installed plotter" ||
             bad "the installed plotter drew the figure" "$(grep -i figure study/report.md | head -3)"
     else
-        ok "vafm study hysteresis --quick (no matplotlib: figures skipped)"
+        bad "vafm study hysteresis --quick draws its figure" "matplotlib missing for /usr/bin/python3 (Debian: python3-matplotlib; .ci/deps.sh installs it)"
     fi
 else
     bad "the installed vafm study" "$(tail -3 "$TMP/study")"

@@ -109,7 +109,7 @@ EOF
     then ok "python example force_map.py: PNG of true vs recovered maps; moduli within 2% ($(grep -c '^material' "$TMP/pyout") materials)"
     else bad "python example force_map.py" "exit $prc: $(head -c 600 "$TMP/pyout")"; fi
 else
-    echo "skip - python example force_map.py (h5py or matplotlib missing)"
+    bad "python example force_map.py" "h5py or matplotlib missing for $PY (Debian: python3-h5py python3-matplotlib; .ci/deps.sh installs them)"
 fi
 
 # A measured map as the sample (--sample GRID.h5, pattern grid): the file's ground truth at every pixel is the
@@ -232,7 +232,7 @@ EOF
         ok "--sample: refused grids leave no file"
     else bad "--sample: refused grids leave no file"; fi
 else
-    echo "skip - --sample grid (h5py missing)"
+    bad "--sample grid" "h5py missing for $PY (Debian: python3-h5py; .ci/deps.sh installs it)"
 fi
 
 harness_done

@@ -23,6 +23,8 @@ check() { if eval "$2"; then ok "$1"; else bad "$1" "${3:-}"; fi; }
 
 HAVE_MPL=0
 MPLBACKEND=Agg /usr/bin/python3 -c 'import matplotlib.pyplot' 2>/dev/null && HAVE_MPL=1
+# matplotlib is required (.ci/deps.sh installs it): without it the figures are not checked, so that fails
+check "matplotlib for /usr/bin/python3 (Debian: python3-matplotlib)" "[ $HAVE_MPL -eq 1 ]"
 
 # ---- vafm theory -------------------------------------------------------------------------------------
 "$VAFM" theory >"$TMP/th0" 2>&1
