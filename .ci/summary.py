@@ -3,8 +3,10 @@
 """Sum meson test results of one or more build directories and print 'N passed, N failed'.
 
 Reads each build's meson-logs/testlog.json (one JSON object per test). A test counts as passed when
-its result is OK (or SKIP, counted apart); anything else (FAIL, TIMEOUT, ERROR, UNEXPECTEDPASS)
-counts as failed. Exit status 1 when anything failed or no test ran at all.
+its result is OK; SKIP is counted apart (", N skipped", each named on stderr) and is not a pass: only a
+feature the build was told to leave out skips (README: `study` under -Dstudy=disabled); a missing dependency
+fails. Anything else (FAIL, TIMEOUT, ERROR, UNEXPECTEDPASS) counts as failed. Exit status 1 when anything
+failed or no test ran at all.
 """
 import json
 import os
@@ -28,6 +30,7 @@ for build in sys.argv[1:]:
                 passed += 1
             elif r == "SKIP":
                 skipped += 1
+                print(f"SKIPPED: {build}: {t.get('name')}", file=sys.stderr)
             else:
                 failed += 1
                 print(f"FAILED: {build}: {t.get('name')} ({r})", file=sys.stderr)
