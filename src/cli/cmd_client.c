@@ -258,7 +258,10 @@ static const char *s_ctl_usage =
     "  tune [SECONDS] [--index I]    start a thermal tune\n"
     "  --wait                        (curve, tune, replay, campaign) subscribe first and print the run.end\n"
     "                                (campaign: campaign.end) when it comes; exit 1 unless status ok\n"
-    "Commands (protocol/wire.md): hello get set presets curve tune campaign replay abort status log shutdown.\n";
+    "Commands (protocol/wire.md; vafmd --help says what each does):\n "
+#define VAFMD_COMMAND(ID, NAME, KEYS, FLAGS, HANDLER, HELP) " " NAME
+#include "daemon/commands.def"
+    "\n";
 
 /* VALUE as JSON when it parses as a number, boolean, null, array or object, else as a string. NULL when it
  * cannot be sent as it was meant: a number beyond a double (1e400: jansson refuses it, and sent as the

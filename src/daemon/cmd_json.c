@@ -230,40 +230,49 @@ static int s_decode_map(json_t *root, vafmd_cmd *c, vafmd_err *e)
     return 0;
 }
 
-static const char *const s_cmd_names[] = { "hello", "get", "set", "presets", "curve", "tune",
-                                           "abort", "status", "shutdown", "campaign", "log", "replay",
-                                           "faults", "map" };
+/* The command table (commands.def): name, argument keys, flags and help per enum vafmd_cmd_kind. */
+typedef struct s_command {
+    const char *name;
+    const char *keys; /* besides "cmd" and "id", each enclosed in spaces */
+    unsigned flags;
+    const char *help;
+} s_command;
+
+static const s_command s_commands[VAFMD_CMD_N] = {
+#define VAFMD_COMMAND(ID, NAME, KEYS, FLAGS, HANDLER, HELP) [VAFMD_CMD_##ID] = { NAME, KEYS, FLAGS, HELP },
+#include "daemon/commands.def"
+};
+
+static int s_kind_ok(int kind)
+{
+    return kind >= 0 && kind < VAFMD_CMD_N;
+}
 
 const char *vafmd_cmd_name(int kind)
 {
-    return kind >= 0 && kind < (int)(sizeof s_cmd_names / sizeof *s_cmd_names) ? s_cmd_names[kind] : "?";
+    return s_kind_ok(kind) ? s_commands[kind].name : "?";
 }
 
-/* Keys each command accepts besides "cmd" and "id" (space separated, each enclosed in spaces). */
-static const char *const s_cmd_keys[] = {
-    [VAFMD_CMD_HELLO] = " ",
-    [VAFMD_CMD_GET] = " names info ",
-    [VAFMD_CMD_SET] = " preset values ",
-    [VAFMD_CMD_PRESETS] = " ",
-    [VAFMD_CMD_CURVE] = " index client_run_id ",
-    [VAFMD_CMD_TUNE] = " index client_run_id duration_s ",
-    [VAFMD_CMD_ABORT] = " ",
-    [VAFMD_CMD_STATUS] = " ",
-    [VAFMD_CMD_SHUTDOWN] = " ",
-    [VAFMD_CMD_CAMPAIGN] = " n T_K v_m_per_s k_N_per_m first_index client_run_id ",
-    [VAFMD_CMD_LOG] = " path overwrite resume stop ",
-    [VAFMD_CMD_REPLAY] = " path curves speed loop client_run_id ",
-    [VAFMD_CMD_FAULTS] = " plan clear ",
-    [VAFMD_CMD_MAP] = " map first_index lateral_speed_m_per_s client_run_id ",
-};
+unsigned vafmd_cmd_flags(int kind)
+{
+    return s_kind_ok(kind) ? s_commands[kind].flags : 0;
+}
+
+const char *vafmd_cmd_keys(int kind)
+{
+    return s_kind_ok(kind) ? s_commands[kind].keys : NULL;
+}
+
+const char *vafmd_cmd_help(int kind)
+{
+    return s_kind_ok(kind) ? s_commands[kind].help : NULL;
+}
 
 static int s_key_allowed(int kind, const char *key)
 {
     if (!strcmp(key, "cmd") || !strcmp(key, "id"))
         return 1;
-    const char *keys = s_cmd_keys[kind];
-    if (!keys)
-        return 1;
+    const char *keys = s_commands[kind].keys;
     size_t n = strlen(key);
     if (n == 0 || n > 32 || strchr(key, ' '))
         return 0;
@@ -426,13 +435,13 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         return -1;
     }
     int kind = -1;
-    for (int i = 0; i < (int)(sizeof s_cmd_names / sizeof *s_cmd_names); i++)
-        if (!strcmp(json_string_value(cmd), s_cmd_names[i]) && strlen(s_cmd_names[i]) == json_string_length(cmd))
+    for (int i = 0; i < VAFMD_CMD_N; i++)
+        if (!strcmp(json_string_value(cmd), s_commands[i].name) && strlen(s_commands[i].name) == json_string_length(cmd))
             kind = i;
     if (kind < 0) {
         char known[256] = ""; /* from the table, so the list cannot miss one (0.6.1's lacked map) */
-        for (size_t i = 0; i < sizeof s_cmd_names / sizeof *s_cmd_names; i++)
-            snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s", known[0] ? " " : "", s_cmd_names[i]);
+        for (int i = 0; i < VAFMD_CMD_N; i++)
+            snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s", known[0] ? " " : "", s_commands[i].name);
         vafmd_err_set(e, VAFMD_E_UNKNOWN_COMMAND, "cmd", "unknown command '%.64s' (known: %s)",
                       json_string_value(cmd), known);
         return -1;
@@ -442,7 +451,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     json_object_foreach(root, key, v) {
         if (!s_key_allowed(kind, key)) {
             vafmd_err_set(e, VAFMD_E_UNKNOWN_FIELD, key, "'%s' does not take the argument '%.64s'",
-                          s_cmd_names[kind], key);
+                          s_commands[kind].name, key);
             return -1;
         }
     }
@@ -486,7 +495,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "values", "'set' needs \"values\" and/or \"preset\"");
         return -1;
     }
-    if ((v = json_object_get(root, "index")) != NULL && s_cmd_keys[kind]) {
+    if ((v = json_object_get(root, "index")) != NULL) {
         if (!json_is_integer(v) || json_integer_value(v) < 0) {
             /* the type is right for a negative integer, its value is not (wire.md §2.2) */
             vafmd_err_set(e, json_is_integer(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "index",
@@ -496,7 +505,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         c->has_index = 1;
         c->index = (uint64_t)json_integer_value(v);
     }
-    if ((v = json_object_get(root, "client_run_id")) != NULL && s_cmd_keys[kind]) {
+    if ((v = json_object_get(root, "client_run_id")) != NULL) {
         if (!json_is_string(v)) {
             vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "client_run_id", "\"client_run_id\" must be a string");
             return -1;
@@ -509,7 +518,7 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         memcpy(c->client_run_id, json_string_value(v), n + 1);
     }
-    if ((v = json_object_get(root, "duration_s")) != NULL && s_cmd_keys[kind]) {
+    if ((v = json_object_get(root, "duration_s")) != NULL) {
         if (!json_is_number(v)) {
             vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "duration_s", "\"duration_s\" must be a number (s)");
             return -1;

@@ -11,10 +11,19 @@
 #include <stdint.h>
 #include "daemon/daemon.h"
 
+/* Command flags (src/daemon/commands.def says what each means). */
+enum {
+    VAFMD_CF_IDEMPOTENT = 1 << 0, /* safe to resend after a lost reply */
+    VAFMD_CF_FAULTABLE = 1 << 1,  /* a fault plan may fault it */
+    VAFMD_CF_STARTS_RUN = 1 << 2, /* starts a run or a campaign */
+    VAFMD_CF_READ_ONLY = 1 << 3,  /* changes nothing */
+};
+
+/* VAFMD_CMD_HELLO, ... in the order of commands.def; VAFMD_CMD_N commands. */
 enum vafmd_cmd_kind {
-    VAFMD_CMD_HELLO, VAFMD_CMD_GET, VAFMD_CMD_SET, VAFMD_CMD_PRESETS, VAFMD_CMD_CURVE, VAFMD_CMD_TUNE,
-    VAFMD_CMD_ABORT, VAFMD_CMD_STATUS, VAFMD_CMD_SHUTDOWN, VAFMD_CMD_CAMPAIGN, VAFMD_CMD_LOG,
-    VAFMD_CMD_REPLAY, VAFMD_CMD_FAULTS, VAFMD_CMD_MAP,
+#define VAFMD_COMMAND(ID, NAME, KEYS, FLAGS, HANDLER, HELP) VAFMD_CMD_##ID,
+#include "daemon/commands.def"
+    VAFMD_CMD_N
 };
 
 /* Stable error codes (protocol/wire.md lists them). */
@@ -96,5 +105,11 @@ json_t *vafmd_param_value(const vafm_params *p, const vafm_param_info *f);
 json_t *vafmd_error_reply(const vafmd_err *e, json_t *id);
 void vafmd_err_set(vafmd_err *e, const char *code, const char *field, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
+/** The command's name ("?" for a kind out of range), flags (VAFMD_CF_*, 0 out of range), argument keys
+ *  (" a b ", each enclosed in spaces; NULL out of range) and one-line help (NULL out of range), from
+ *  commands.def. */
 const char *vafmd_cmd_name(int kind);
+unsigned vafmd_cmd_flags(int kind);
+const char *vafmd_cmd_keys(int kind);
+const char *vafmd_cmd_help(int kind);
 #endif

@@ -69,6 +69,8 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "daemon", json_string("vafmd"));
     json_object_set_new(r, "daemon_version", json_string(VAFMD_VERSION));
     json_object_set_new(r, "library_version", json_string(vafm_version()));
+    /* every command of commands.def, in 0.5's order (log before shutdown; tests/test_commands.py checks the
+     * list against the table): a new command goes at the end of both */
     json_object_set_new(r, "capabilities",
                         json_pack("[ssssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
                                   "status", "log", "shutdown", "campaign", "replay", "faults", "map"));
@@ -276,7 +278,7 @@ static json_t *s_faults_cmd(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 static int s_command_fault(vafmd *d, const vafmd_cmd *c, vafmd_fault_rec *fr)
 {
     const vafmd_fault_plan *p = d->fplan;
-    if (__builtin_expect(!p || !p->any_command, 1) || c->kind == VAFMD_CMD_FAULTS)
+    if (__builtin_expect(!p || !p->any_command, 1) || !(vafmd_cmd_flags(c->kind) & VAFMD_CF_FAULTABLE))
         return -1;
     const char *name = vafmd_cmd_name(c->kind);
     uint64_t nreq = ++d->fault_requests;
@@ -715,57 +717,117 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     return r;
 }
 
+/* ---- the handlers of commands.def: one signature; *quit is set by `shutdown` ---------------------- */
+
+static json_t *s_cmd_hello(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit, (void)e;
+    return s_hello(d, c);
+}
+
+static json_t *s_cmd_get(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    json_t *v = vafmd_get_values(&d->scene, &d->set, c, e);
+    if (!v)
+        return NULL;
+    json_t *r = s_ok(c);
+    json_object_update(r, v);
+    json_decref(v);
+    return r;
+}
+
+static json_t *s_cmd_set(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    if (vafmd_apply_set(&d->scene, &d->set, c, e))
+        return NULL;
+    json_t *r = s_ok(c);
+    json_object_set_new(r, "applies_to", json_string(s_busy(d) ? "next_run" : "now"));
+    return r;
+}
+
+static json_t *s_cmd_presets(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)d, (void)quit, (void)e;
+    return s_presets(c);
+}
+
+/* curve, tune and replay: one start each */
+static json_t *s_cmd_start(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    return s_start(d, c, e);
+}
+
+static json_t *s_cmd_abort(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    if (!s_busy(d)) {
+        vafmd_err_set(e, VAFMD_E_STATE, "cmd", "no run is in progress");
+        return NULL;
+    }
+    vafmd_sim_cmd sc;
+    memset(&sc, 0, sizeof sc);
+    sc.type = VAFMD_SIM_ABORT;
+    if (!vafmd_ring_push(&d->ring, &sc)) {
+        vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
+        return NULL;
+    }
+    json_t *r = s_ok(c);
+    int st = atomic_load(&d->sh.state);
+    json_object_set_new(r, "run_id", json_integer((json_int_t)(st == VAFMD_RUNNING ? atomic_load(&d->sh.run_id)
+                                                                               : d->pending_run_id)));
+    return r;
+}
+
+static json_t *s_cmd_status(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit, (void)e;
+    return s_status(d, c);
+}
+
+static json_t *s_cmd_log(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    return s_log(d, c, e);
+}
+
+static json_t *s_cmd_shutdown(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)d, (void)e;
+    *quit = 1;
+    return s_ok(c);
+}
+
+/* campaign, and map: a campaign over the map's pixels */
+static json_t *s_cmd_campaign(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    return s_campaign(d, c, e);
+}
+
+static json_t *s_cmd_faults(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    return s_faults_cmd(d, c, e);
+}
+
+typedef json_t *s_handler(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e);
+
+static s_handler *const s_handlers[VAFMD_CMD_N] = {
+#define VAFMD_COMMAND(ID, NAME, KEYS, FLAGS, HANDLER, HELP) [VAFMD_CMD_##ID] = HANDLER,
+#include "daemon/commands.def"
+};
+
 /* Execute one decoded command. *quit is set by `shutdown`. */
 static json_t *s_execute(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
-    json_t *r = NULL;
-    switch (c->kind) {
-    case VAFMD_CMD_HELLO: return s_hello(d, c);
-    case VAFMD_CMD_PRESETS: return s_presets(c);
-    case VAFMD_CMD_STATUS: return s_status(d, c);
-    case VAFMD_CMD_GET: {
-        json_t *v = vafmd_get_values(&d->scene, &d->set, c, e);
-        if (!v)
-            return NULL;
-        r = s_ok(c);
-        json_object_update(r, v);
-        json_decref(v);
-        return r;
+    if (c->kind < 0 || c->kind >= VAFMD_CMD_N || !s_handlers[c->kind]) {
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "command not handled");
+        return NULL;
     }
-    case VAFMD_CMD_SET:
-        if (vafmd_apply_set(&d->scene, &d->set, c, e))
-            return NULL;
-        r = s_ok(c);
-        json_object_set_new(r, "applies_to", json_string(s_busy(d) ? "next_run" : "now"));
-        return r;
-    case VAFMD_CMD_CURVE:
-    case VAFMD_CMD_TUNE:
-    case VAFMD_CMD_REPLAY: return s_start(d, c, e);
-    case VAFMD_CMD_ABORT: {
-        if (!s_busy(d)) {
-            vafmd_err_set(e, VAFMD_E_STATE, "cmd", "no run is in progress");
-            return NULL;
-        }
-        vafmd_sim_cmd sc;
-        memset(&sc, 0, sizeof sc);
-        sc.type = VAFMD_SIM_ABORT;
-        if (!vafmd_ring_push(&d->ring, &sc)) {
-            vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
-            return NULL;
-        }
-        r = s_ok(c);
-        int st = atomic_load(&d->sh.state);
-        json_object_set_new(r, "run_id", json_integer((json_int_t)(st == VAFMD_RUNNING ? atomic_load(&d->sh.run_id)
-                                                                                   : d->pending_run_id)));
-        return r;
-    }
-    case VAFMD_CMD_SHUTDOWN: *quit = 1; return s_ok(c);
-    case VAFMD_CMD_CAMPAIGN: return s_campaign(d, c, e);
-    case VAFMD_CMD_MAP: return s_campaign(d, c, e); /* a campaign over the map's pixels */
-    case VAFMD_CMD_LOG: return s_log(d, c, e);
-    case VAFMD_CMD_FAULTS: return s_faults_cmd(d, c, e);
-    default: vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "command not handled"); return NULL;
-    }
+    return s_handlers[c->kind](d, c, quit, e);
 }
 
 /* The command socket is a ROUTER that behaves as REP does for REQ (and DEALER) clients: a request is

@@ -169,17 +169,19 @@ static int s_cmd_name(json_t *o, const char *where, char out[16], vafmd_err *e)
         return -1;
     }
     const char *s = json_string_value(x);
-    /* every command but `faults`, which is never faulted (so a plan can always be cleared): 0.6.1 took
-     * `faults` (an entry that never fires) and refused `map` (after it in the table) */
-    if (!strcmp(s, vafmd_cmd_name(VAFMD_CMD_FAULTS))) {
-        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, field, "%s = 'faults': the faults command is never faulted", field);
-        return -1;
-    }
-    for (int i = 0; i <= VAFMD_CMD_MAP; i++)
-        if (!strcmp(s, vafmd_cmd_name(i))) {
-            snprintf(out, 16, "%s", s);
-            return 0;
+    /* every command flagged faultable in commands.def, that is all but `faults`, which is never faulted
+     * (so a plan can always be cleared): 0.6.1 took `faults` (an entry that never fires) and refused `map`
+     * (after it in the table) */
+    for (int i = 0; i < VAFMD_CMD_N; i++) {
+        if (strcmp(s, vafmd_cmd_name(i)))
+            continue;
+        if (!(vafmd_cmd_flags(i) & VAFMD_CF_FAULTABLE)) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, field, "%s = '%s': the %s command is never faulted", field, s, s);
+            return -1;
         }
+        snprintf(out, 16, "%s", s);
+        return 0;
+    }
     vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, field, "%s = '%.32s' names no command", field, s);
     return -1;
 }

@@ -52,8 +52,10 @@ static const char s_usage[] =
     "  samples computed ahead of their release, [0, 10], default 1; 0: off). The detector chain is part\n"
     "  of the scene (also in --config \"values\"): sensitivity_m_per_V (InvOLS), noise_V_rms (V rms),\n"
     "  adc_bits (0 or 4-24), adc_range_V (full span, V), baseline_offset_V (V)\n"
-    "\nCOMMANDS (JSON on the REP socket, protocol/wire.md): hello get set presets curve tune campaign\n"
-    "  replay abort status log shutdown\n"
+    "\nCOMMANDS (JSON on the REP socket, protocol/wire.md)\n";
+
+/* After the commands (printed from commands.def between the two). */
+static const char s_usage_tail[] =
     "\nSTREAM topics: data, run.start, run.end, campaign.end, event, heartbeat (1 Hz)\n"
     "\nFAULTS: a fault plan in the config file (\"faults\": {\"seed\", \"script\", \"random\"}, protocol/faults.md)\n"
     "  or the `faults` command makes the daemon misbehave on purpose, for testing acquisition software\n"
@@ -165,6 +167,9 @@ int main(int argc, char **argv)
         const char **dst = NULL;
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
             fputs(s_usage, stdout);
+            for (int k = 0; k < VAFMD_CMD_N; k++)
+                printf("  %-10s %s\n", vafmd_cmd_name(k), vafmd_cmd_help(k));
+            fputs(s_usage_tail, stdout);
             return 0;
         } else if (!strcmp(a, "--version")) {
             printf("vafmd %s (library %s)\n", VAFMD_VERSION, vafm_version());

@@ -1,0 +1,131 @@
+# SPDX-License-Identifier: MIT
+"""One list of daemon commands (issue #25): src/daemon/commands.def declares them; everything that lists
+them again must say the same. Checked against the table: protocol/commands.schema.json (names and each
+command's keys), wire.md §2.3's command table (names, arguments, resend, run), `vafmd --help`, `vafm ctl
+--help`, hello's capabilities (as a set: their order is 0.5's), the decoder's keys and "known:" list, the
+fault plan's command names (every faultable command is accepted, the others refused), and the Python
+client's idempotent set.
+
+Needs $VAFMD and $VAFM_CLI (a missing one is a failure, not a skip)."""
+import json
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+VAFMD = os.environ.get("VAFMD")
+VAFM_CLI = os.environ.get("VAFM_CLI")
+sys.path.insert(0, os.path.join(ROOT, "clients", "python"))
+
+from vafmd_harness import Daemon, reap_daemons  # noqa: E402,F401
+
+
+def read(*parts):
+    with open(os.path.join(ROOT, *parts), encoding="utf-8") as f:
+        return f.read()
+
+
+def table():
+    """[(name, keys, flags)] of commands.def, in order."""
+    text = re.sub(r"/\*.*?\*/", "", read("src", "daemon", "commands.def"), flags=re.S)
+    rows = re.findall(r'VAFMD_COMMAND\(\s*(\w+)\s*,\s*"(\w+)"\s*,\s*"([^"]*)"\s*,\s*([^,]*?)\s*,\s*(\w+)\s*,'
+                      r'\s*"([^"]*)"\s*\)', text)
+    assert len(rows) == text.count("VAFMD_COMMAND("), "a row of commands.def does not parse"
+    out = []
+    for ident, name, keys, flags, _handler, _help in rows:
+        assert ident == name.upper(), (ident, name)
+        fl = set() if flags.strip() == "0" else {f.strip().replace("VAFMD_CF_", "") for f in flags.split("|")}
+        assert fl <= {"IDEMPOTENT", "FAULTABLE", "STARTS_RUN", "READ_ONLY"}, fl
+        out.append((name, keys.split(), fl))
+    assert len(out) >= 14 and len({r[0] for r in out}) == len(out)
+    return out
+
+
+NAMES = [r[0] for r in table()]
+
+
+def test_environment():
+    assert VAFMD and os.access(VAFMD, os.X_OK), "set VAFMD to the vafmd executable"
+    assert VAFM_CLI and os.access(VAFM_CLI, os.X_OK), "set VAFM_CLI to the vafm executable"
+
+
+def test_schema():
+    s = json.loads(read("protocol", "commands.schema.json"))
+    assert s["properties"]["cmd"]["enum"] == NAMES
+    keys = {}
+    for branch in s["oneOf"]:
+        props = branch["properties"]
+        cmd = props["cmd"]
+        names = [cmd["const"]] if "const" in cmd else cmd["enum"]
+        assert branch.get("additionalProperties") is False, names
+        for n in names:
+            assert n not in keys, f"{n}: two branches"
+            keys[n] = sorted(set(props) - {"cmd", "id"})
+    assert keys == {n: sorted(k) for n, k, _ in table()}
+
+
+def wire_command_table():
+    text = read("protocol", "wire.md")
+    head = "| command | arguments besides `cmd`, `id` | resend | run | what it does |"
+    assert head in text
+    rows = []
+    for line in text.split(head, 1)[1].splitlines()[2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        rows.append((cells[0].strip("`"), re.findall(r"`(\w+)`", cells[1]), cells[2] == "yes", cells[3] == "yes"))
+    return rows
+
+
+def test_wire_md_table():
+    assert wire_command_table() == [(n, k, "IDEMPOTENT" in f, "STARTS_RUN" in f) for n, k, f in table()]
+
+
+def test_wire_md_sections():
+    """Each command has its own section (#### `name`) in §2.3."""
+    text = read("protocol", "wire.md")
+    for n in NAMES:
+        assert f"#### `{n}`" in text, n
+
+
+def test_vafmd_help():
+    out = subprocess.run([VAFMD, "--help"], capture_output=True, text=True, check=True).stdout
+    sec = out.split("\nCOMMANDS", 1)[1].split("\n\n", 1)[0].splitlines()[1:]
+    assert [line.split()[0] for line in sec] == NAMES
+    assert all(len(line.split(None, 1)) == 2 for line in sec), "a command without help"
+
+
+def test_ctl_help():
+    out = subprocess.run([VAFM_CLI, "ctl", "--help"], capture_output=True, text=True, check=True).stdout
+    lines = out.splitlines()
+    i = next(i for i, line in enumerate(lines) if line.startswith("Commands"))
+    assert lines[i + 1].split() == NAMES
+
+
+def test_python_idempotent_set():
+    from vafm_client import client
+    assert client._IDEMPOTENT == {n for n, _, f in table() if "IDEMPOTENT" in f}
+
+
+def test_hello_and_fault_plans():
+    d = Daemon()
+    caps = d.cmd({"cmd": "hello"})["capabilities"]
+    assert sorted(caps) == sorted(NAMES) and len(caps) == len(NAMES), caps  # the order is 0.5's
+    for n, _, f in table():
+        r = d.cmd({"cmd": "faults", "plan": {"script": [{"kind": "busy", "cmd": n, "nth": 1000}]}})
+        if "FAULTABLE" in f:
+            assert r["status"] == "ok", (n, r)
+        else:
+            assert r["status"] == "error" and r["field"] == "script[0].cmd" and "never faulted" in r["message"], r
+    r = d.cmd({"cmd": "nope"})
+    assert r["code"] == "unknown_command" and r["message"].endswith("(known: " + " ".join(NAMES) + ")"), r
+    # each command refuses a key it does not take, naming it
+    for n in NAMES:
+        r = d.cmd({"cmd": n, "zz_not_a_key": 1})
+        assert r["code"] == "unknown_field" and r["field"] == "zz_not_a_key", (n, r)
+    d.stop()
+
