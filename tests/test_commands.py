@@ -4,10 +4,13 @@ them again must say the same. Checked against the table: protocol/commands.schem
 command's keys), wire.md §2.3's command table (names, arguments, resend, run), `vafmd --help`, `vafm ctl
 --help`, hello's capabilities (as a set: their order is 0.5's), the decoder's keys and "known:" list, the
 fault plan's command names (every faultable command is accepted, the others refused), and the Python
-client's idempotent set.
+client's idempotent set. Also one table per fact for the
+defaults: wire.md's settings and detector tables and `vafmd --help`'s --sensitivity say what `get`
+returns (0.6.2's said 50e-9; the default preset has 6e-8).
 
 Needs $VAFMD and $VAFM_CLI (a missing one is a failure, not a skip)."""
 import json
+import math
 import os
 import re
 import subprocess
@@ -129,3 +132,48 @@ def test_hello_and_fault_plans():
         assert r["code"] == "unknown_field" and r["field"] == "zz_not_a_key", (n, r)
     d.stop()
 
+
+def defaults_table(text, head):
+    """{name: default text} of the markdown table whose header row starts with head."""
+    i = text.index(head)
+    lines = text[i:].splitlines()
+    cols = [c.strip() for c in lines[0].strip("|").split("|")]
+    k = cols.index("default")
+    out = {}
+    for line in lines[2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        out[cells[0].strip("`")] = cells[k]
+    return out
+
+
+def parse_default(cell):
+    tok = cell.replace("`", "").split()[0]
+    if tok in ("true", "false"):
+        return tok == "true"
+    try:
+        return float(tok)
+    except ValueError:
+        return tok
+
+
+def same(doc, got):
+    if isinstance(got, bool) or isinstance(doc, (bool, str)):
+        return doc == got
+    return math.isclose(doc, got, rel_tol=1e-12, abs_tol=0)
+
+
+def test_defaults_equal_get():
+    text = read("protocol", "wire.md")
+    doc = {**defaults_table(text, "| setting | type |"), **defaults_table(text, "| scene parameter | type |")}
+    assert {"speed", "free_run", "block_s", "hwm", "kernel", "lookahead_s", "sensitivity_m_per_V",
+            "noise_V_rms", "adc_bits", "adc_range_V", "baseline_offset_V"} <= set(doc)
+    d = Daemon()
+    got = d.cmd({"cmd": "get", "names": sorted(doc)})["values"]
+    d.stop()
+    wrong = {n: (doc[n], got[n]) for n in doc if not same(parse_default(doc[n]), got[n])}
+    assert not wrong, f"wire.md's default (doc, get): {wrong}"
+    out = subprocess.run([VAFMD, "--help"], capture_output=True, text=True, check=True).stdout
+    m = re.search(r"--sensitivity S .*?default[^0-9]*([0-9.e+-]+)\)", out)
+    assert m and same(float(m.group(1)), got["sensitivity_m_per_V"]), (m and m.group(0), got["sensitivity_m_per_V"])

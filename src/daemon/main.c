@@ -43,7 +43,7 @@ static const char s_usage[] =
     "  --preset NAME      scene preset (replaces the config file's; default " VAFM_TOOLS_DEFAULT_PRESET ")\n"
     "  --speed F          pacing speed factor in [0.01, 1000] (1: real time)\n"
     "  --free-run         no pacing: release blocks as fast as they are computed\n"
-    "  --sensitivity S    detector sensitivity (InvOLS), m/V (default 50e-9)\n"
+    "  --sensitivity S    detector sensitivity (InvOLS), m/V (default: the preset's; " VAFM_TOOLS_DEFAULT_PRESET ": 6e-8)\n"
     "  --hwm N            stream send high-water mark per subscriber, messages (default 1000; a run\n"
     "                     of large messages gets fewer: at most 256 MiB queued per subscriber)\n"
     "  -h, --help         this text\n"
