@@ -177,3 +177,14 @@ def test_defaults_equal_get():
     out = subprocess.run([VAFMD, "--help"], capture_output=True, text=True, check=True).stdout
     m = re.search(r"--sensitivity S .*?default[^0-9]*([0-9.e+-]+)\)", out)
     assert m and same(float(m.group(1)), got["sensitivity_m_per_V"]), (m and m.group(0), got["sensitivity_m_per_V"])
+
+
+def test_format_version_in_docs():
+    """wire.md's log and hdf5.md name the format version the writer writes (0.6.2's said 1.0, files 1.1)."""
+    h = read("include", "vafm", "h5.h")
+    v = "%s.%s" % (re.search(r"#define VAFM_H5_FORMAT_MAJOR (\d+)", h).group(1),
+                   re.search(r"#define VAFM_H5_FORMAT_MINOR (\d+)", h).group(1))
+    assert f"(afmformats' layout, vafm format {v})" in read("protocol", "wire.md")
+    hdf5 = read("protocol", "hdf5.md")
+    assert hdf5.splitlines()[0].endswith(f"vafm format version {v})")
+    assert f'| `vafm format version` | string | `"{v}"`' in hdf5
