@@ -172,7 +172,7 @@ static const char *const s_tokens[] = { "{", "}", "[", "]", ",", ":", "\"", "\\"
 static void s_wire_header(void)
 {
     vafm_wire_header h = { VAFM_WIRE_MAGIC, VAFM_WIRE_PROTOCOL_VERSION, VAFM_WIRE_HEADER_SIZE, 0x0102030405060708u,
-                           9, 10, 0x1112131415161718u, 1000, 5, 2, 200000.0, -5, 6, 0 }, g;
+                           9, 10, 0x1112131415161718u, 1000, 5, 2, 200000.0, -5, 6, { 0 } }, g;
     unsigned char b[VAFM_WIRE_HEADER_SIZE];
     vafm_wire_header_encode(&h, b);
     ENSURE(b[0] == 'V' && b[1] == 'A' && b[2] == 'F' && b[3] == 'M');
@@ -183,6 +183,11 @@ static void s_wire_header(void)
     ENSURE(b[55] == 0x41 && b[56] == 0xfb && b[63] == 0xff && b[64] == 6); /* 2e5 = 0x41086A0000000000 */
     ENSURE(vafm_wire_header_decode(b, sizeof b, &g) == 0 && !memcmp(&g, &h, sizeof h));
     ENSURE(vafm_wire_header_decode(b, sizeof b - 1, &g) == -1);
+    /* the last field is the stream session (wire.md §4 names it so; 0.6.2's header called it reserved) */
+    h.session = 0x21222324u;
+    vafm_wire_header_encode(&h, b);
+    ENSURE(b[68] == 0x24 && b[71] == 0x21);
+    ENSURE(vafm_wire_header_decode(b, sizeof b, &g) == 0 && g.session == 0x21222324u && g.reserved == g.session);
     b[0] = 'X';
     ENSURE(vafm_wire_header_decode(b, sizeof b, &g) == -1);
 }

@@ -507,10 +507,10 @@ int vafm_client_receive(vafm_client *c, vafm_client_msg *msg, int timeout_ms, va
         for (size_t i = 0; i < n; i++) /* explicit little-endian loads: right on any host */
             msg->channels[k][i] = vafm_wire_get_f64(src + 8 * i);
     }
-    if (h->reserved && (int64_t)h->reserved != c->session) { /* the header's last field: the session */
+    if (h->session && (int64_t)h->session != c->session) { /* the header's last field: the session */
         if (c->session >= 0)
             c->have_seq = 0; /* a restarted publisher (wire.md §4): no gap across it */
-        c->session = h->reserved;
+        c->session = h->session;
     }
     if (c->have_seq && h->seq > c->last_seq + 1) {
         msg->gap = h->seq - c->last_seq - 1;

@@ -50,7 +50,7 @@ typedef struct vafm_client_msg {
                                    unparsed second frame, e.g. campaign.end), else NULL */
     int64_t run_id;           /**< run id (data, run.start, run.end, event); -1 if none */
     /* data */
-    vafm_wire_header header;  /**< decoded header (data only) */
+    vafm_wire_header header;  /**< decoded header (data only); header.session is the stream session */
     size_t n_channels;        /**< decoded channel arrays (≤ VAFM_CLIENT_MAX_CHANNELS) */
     double *channels[VAFM_CLIENT_MAX_CHANNELS]; /**< header.n_samples values each, host order */
     uint64_t gap;             /**< data messages lost just before this one (seq jump − 1), or missing
@@ -67,7 +67,7 @@ typedef struct vafm_client_msg {
     int64_t samples;          /**< run.end/heartbeat: samples published; -1 if absent */
     int64_t last_seq;         /**< run.end/heartbeat: last data seq, -1 if null */
     /* event */
-    char event_kind[16];      /**< event: "segment", "detach", "overrun" */
+    char event_kind[16];      /**< event: "segment", "detach", "overrun", "curve", "logged", "log_failed" */
     int64_t event_sample;     /**< event segment: first sample of the new segment; -1 otherwise */
     int segment_to;           /**< event segment: the new segment (0 approach, 1 retract, 2 dwell, 3 tune); -1 */
 } vafm_client_msg;

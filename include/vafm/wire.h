@@ -47,7 +47,10 @@ typedef struct vafm_wire_header {
     double sample_rate_Hz;   /**< @48 output sample rate, Hz */
     int64_t t0_ns;           /**< @56 time of the first sample since the run start, ns (round(first/fs·1e9)) */
     uint32_t flags;          /**< @64 enum vafm_wire_flag, or-ed */
-    uint32_t reserved;       /**< @68 the stream session (protocol/faults.md §4; 0 from daemons before 0.5) */
+    union {
+        uint32_t session;    /**< @68 the stream session (protocol/faults.md §4; 0 from daemons before 0.5) */
+        uint32_t reserved;   /**< the same field by its name before the session (source compatibility) */
+    };
 } vafm_wire_header;
 
 #if defined(__cplusplus)
@@ -66,7 +69,7 @@ VAFM_WIRE_SA(offsetof(vafm_wire_header, segment) == 46, "segment offset");
 VAFM_WIRE_SA(offsetof(vafm_wire_header, sample_rate_Hz) == 48, "sample_rate_Hz offset");
 VAFM_WIRE_SA(offsetof(vafm_wire_header, t0_ns) == 56, "t0_ns offset");
 VAFM_WIRE_SA(offsetof(vafm_wire_header, flags) == 64, "flags offset");
-VAFM_WIRE_SA(offsetof(vafm_wire_header, reserved) == 68, "reserved offset");
+VAFM_WIRE_SA(offsetof(vafm_wire_header, session) == 68, "session offset");
 VAFM_WIRE_SA(sizeof(double) == 8, "IEEE-754 binary64 expected");
 #undef VAFM_WIRE_SA
 
@@ -135,7 +138,7 @@ static inline void vafm_wire_header_encode(const vafm_wire_header *h, unsigned c
     vafm_wire_put_f64(out + 48, h->sample_rate_Hz);
     vafm_wire_put_u64(out + 56, (uint64_t)h->t0_ns);
     vafm_wire_put_u32(out + 64, h->flags);
-    vafm_wire_put_u32(out + 68, h->reserved);
+    vafm_wire_put_u32(out + 68, h->session);
 }
 
 /** Decode len bytes into h. @return 0, or -1 if the buffer is short, the magic is wrong or the
@@ -158,7 +161,7 @@ static inline int vafm_wire_header_decode(const unsigned char *in, size_t len, v
     h->sample_rate_Hz = vafm_wire_get_f64(in + 48);
     h->t0_ns = (int64_t)vafm_wire_get_u64(in + 56);
     h->flags = vafm_wire_get_u32(in + 64);
-    h->reserved = vafm_wire_get_u32(in + 68);
+    h->session = vafm_wire_get_u32(in + 68);
     if (h->magic != VAFM_WIRE_MAGIC || h->version != VAFM_WIRE_PROTOCOL_VERSION ||
         h->header_size < VAFM_WIRE_HEADER_SIZE || h->header_size > len)
         return -1;

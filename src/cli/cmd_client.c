@@ -1036,7 +1036,7 @@ int vafm_cli_listen(int argc, char **argv)
         int64_t sess = -1;
         double up = -1;
         if (m.kind == VAFM_MSG_DATA)
-            sess = m.header.reserved ? (int64_t)m.header.reserved : -1;
+            sess = m.header.session ? (int64_t)m.header.session : -1;
         else if (m.kind == VAFM_MSG_HEARTBEAT && m.json) {
             json_t *hb = json_loads(m.json, 0, NULL);
             if (json_is_integer(json_object_get(hb, "session")))

@@ -1234,7 +1234,7 @@ static void s_release(s_ctx *x, int64_t now)
         .sample_rate_Hz = fs,
         .t0_ns = (int64_t)llround((double)r->samples / fs * 1e9),
         .flags = flags,
-        .reserved = (uint32_t)atomic_load_explicit(&sh->session, memory_order_relaxed), /* the session */
+        .session = (uint32_t)atomic_load_explicit(&sh->session, memory_order_relaxed), /* the session */
     };
     unsigned char hb[VAFM_WIRE_HEADER_SIZE];
     const void *part[2 + VAFMD_CH_COUNT] = { "data", hb };
