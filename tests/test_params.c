@@ -680,6 +680,7 @@ static void test_units_parse(void)
         { "J/m^2", "50mJ/m2", 50e-3 }, { "Pa", "1MPa", 1e6 },       { "Pa", "5kPa", 5e3 },
         { "s", "10ms", 10e-3 },     { "m/V", "60nm/V", 60e-9 },     { "", "30", 30.0 },
         { "N", "1.1nN", 1.1e-9 },   { "m/V", "1.7e2nm/V", 1.7e-7 }, { "Hz", "0.3kHz", 0.3e3 },
+        { "m/s", "2\xce\xbcm/s", 2e-6 } /* Greek mu U+03BC, as keyboards type it (0.6.2 took only µ U+00B5) */,
     };
     for (size_t i = 0; i < sizeof ok / sizeof ok[0]; i++) {
         double v = NAN;

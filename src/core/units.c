@@ -79,7 +79,8 @@ typedef struct s_prefix {
 /* The prefixes people use on an instrument's controls; no c, d, da, h (a "cN" or "dm/s" is a typo more often
  * than a wish) and no E, P (no AFM quantity needs them). */
 static const s_prefix s_prefixes[] = {
-    { "f", -15 }, { "p", -12 }, { "n", -9 }, { "u", -6 }, { "\xc2\xb5", -6 } /* µ */, { "m", -3 },
+    { "f", -15 }, { "p", -12 }, { "n", -9 }, { "u", -6 }, { "\xc2\xb5", -6 } /* µ, micro sign U+00B5 */,
+    { "\xce\xbc", -6 } /* μ, Greek mu U+03BC: what most keyboards and NFKC give */, { "m", -3 },
     { "k", 3 },   { "M", 6 },   { "G", 9 },  { "T", 12 },
 };
 
