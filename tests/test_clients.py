@@ -173,6 +173,17 @@ def test_python_stream_detects_gaps():
         assert d.stop() == 0
 
 
+def test_ctl_set_takes_units(fig4):
+    """vafm ctl set sends a value typed with its unit in SI, as the CLI's options read it (0.6.2 sent "1nN" as a
+    string: "expected a number"); a value it cannot read in the field's unit still goes to the daemon."""
+    p = fig4.ctl("set", "setpoint_N=1nN", "v_approach_m_per_s=2\u03bcm/s", "T_K=25C")
+    assert p.returncode == 0, p
+    got = fig4.client.get("setpoint_N", "v_approach_m_per_s", "T_K")
+    assert got == {"setpoint_N": 1e-9, "v_approach_m_per_s": 2e-6, "T_K": 25.0 + 273.15}, got
+    p = fig4.ctl("set", "setpoint_N=1nm")  # a length for a force: not converted, refused by the daemon
+    assert p.returncode == 1 and "wrong_type" in p.stderr and "setpoint_N" in p.stderr, p
+
+
 def test_ctl_commands(fig4, tmp_path):
     p = fig4.ctl("hello")
     assert p.returncode == 0 and '"protocol_version": 1' in p.stdout, p

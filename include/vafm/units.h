@@ -49,7 +49,7 @@ VAFM_API void vafm_units_reduce(const vafm_params *p, vafm_reduced *out);
 VAFM_API void vafm_units_from_reduced(vafm_params *p, const vafm_reduced *r);
 
 /** Read a value typed with its unit, as people type it where a field has a fixed SI unit: a number alone
- *  (already in `unit`), or a number followed by `unit` with an optional SI prefix (f p n u µ m k M G T)
+ *  (already in `unit`), or a number followed by `unit` with an optional SI prefix (f p n u µ μ m k M G T)
  *  and at most one space: "1nN" for N, "2um/s" for m/s, "70kHz" for Hz, "50mJ/m^2" (also "J/m2") for
  *  J/m^2. Temperatures (unit "K") also take Celsius: "25C" or "25degC" is 298.15 K. Strict: any other
  *  suffix is an error, so a value meant for another field (a length typed as a force) never passes.

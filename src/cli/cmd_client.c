@@ -253,7 +253,8 @@ static const char *s_ctl_usage =
     "                                e.g. vafm ctl log path=/tmp/x.h5 overwrite=true\n"
     "  '{\"cmd\": ...}'                a whole request as JSON\n"
     "  get [NAME...]                 scene parameters/settings (all without NAME)\n"
-    "  set NAME=VALUE...             set values; preset=NAME applies a preset first\n"
+    "  set NAME=VALUE...             set values; preset=NAME applies a preset first; a value with its\n"
+    "                                unit (setpoint_N=1nN, v_approach_m_per_s=2um/s) is sent in SI\n"
     "  curve [--index I]             start a force curve\n"
     "  tune [SECONDS] [--index I]    start a thermal tune\n"
     "  --wait                        (curve, tune, replay, campaign) subscribe first and print the run.end\n"
@@ -278,6 +279,23 @@ static json_t *s_value(const char *v)
         return NULL;
 #endif
     return json_string(v);
+}
+
+/* set: a scene value typed with its unit ("1nN", "2um/s") goes out as the SI number the CLI's options make of
+ * it (vafm_units_parse); anything else (a choice, "paper", a typo) goes out as the string, for the daemon to
+ * judge. 0.6.2 sent "1nN" as a string and the daemon answered "expected a number". Takes v, returns one. */
+static json_t *s_set_units(const char *key, json_t *v)
+{
+    const vafm_param_info *f = vafm_params_field_find(key);
+    double d;
+    if (f && f->kind == VAFM_PARAM_REAL && f->unit[0] && !vafm_units_parse(key, json_string_value(v), f->unit, &d, NULL)) {
+        json_t *n = json_real(d);
+        if (n) {
+            json_decref(v);
+            return n;
+        }
+    }
+    return v;
 }
 
 /* A duration in seconds as a tune takes it: finite, within tune_duration_s's range (the daemon's check,
@@ -391,6 +409,8 @@ static int s_ctl_run(s_conn *x, int argc, char **argv)
             char key[128];
             snprintf(key, sizeof key, "%.*s", (int)(eq - a), a);
             json_t *v = s_value(eq + 1);
+            if (is_set && json_is_string(v))
+                v = s_set_units(key, v);
             if (!v || json_object_set_new(is_set && strcmp(key, "preset") ? values : req, key, v)) {
                 json_t *text = json_string(eq + 1); /* NULL: not UTF-8; else a number beyond a double */
                 if (text)
