@@ -792,11 +792,12 @@ int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
         int k = 0;
         while (k < nr && !(rg[k].E == t.E_star_Pa && rg[k].gamma == t.gamma_J_per_m2))
             k++;
-        if (k == nr) {
-            if (nr == S_MAP_MAX_REGIONS) {
-                more++;
-                continue;
-            }
+        if (k == nr && nr == S_MAP_MAX_REGIONS) {
+            /* a material beyond the table: no region line and '?' in the material map, but its height and
+             * pull-off are in their maps (0.6.2 skipped the pixel, and the adhesion map showed '?' there) */
+            more++;
+            k = -1;
+        } else if (k == nr) {
             memset(&rg[nr], 0, sizeof rg[nr]);
             rg[nr].E = t.E_star_Pa;
             rg[nr].gamma = t.gamma_J_per_m2;
@@ -804,11 +805,13 @@ int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
             rg[nr].hmax = -INFINITY;
             nr++;
         }
-        rg[k].n++;
-        rg[k].hmin = fmin(rg[k].hmin, t.surface_height_m);
-        rg[k].hmax = fmax(rg[k].hmax, t.surface_height_m);
-        vafm_point_stats_add(&rg[k].st, t.status, &t.result);
-        reg[px] = k;
+        if (k >= 0) {
+            rg[k].n++;
+            rg[k].hmin = fmin(rg[k].hmin, t.surface_height_m);
+            rg[k].hmax = fmax(rg[k].hmax, t.surface_height_m);
+            vafm_point_stats_add(&rg[k].st, t.status, &t.result);
+            reg[px] = k;
+        }
         hgt[px] = t.surface_height_m;
         if (isfinite(t.surface_height_m)) {
             hlo = fmin(hlo, t.surface_height_m);
@@ -826,7 +829,9 @@ int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
         fprintf(o, "  %c  E* = %-10.6g Pa  gamma = %-8.4g J/m^2  %6" PRIu64 " curves, surface height %.4g..%.4g um, "
                    "pull-off ",
                 'a' + k, rg[k].E, rg[k].gamma, rg[k].n, rg[k].hmin * 1e6, rg[k].hmax * 1e6);
-        if (m->n)
+        if (m->n == 1) /* one curve has no sem (0.6.2 printed "+- nan") */
+            fprintf(o, "%.6g nN (n 1)\n", m->mean * 1e9);
+        else if (m->n)
             fprintf(o, "%.6g +- %.3g nN (n %" PRIu64 ")\n", m->mean * 1e9, vafm_moments_sem(m) * 1e9, m->n);
         else
             fprintf(o, "none (n 0)\n");
@@ -834,7 +839,9 @@ int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
     if (more)
         fprintf(o, "  (%d curve(s) of further materials left out)\n", more);
     if (nr > 0) {
-        s_map_render(o, "material map (one letter per pixel: its region; y up)", reg, nx, ny, "", 0, 0, s_region_char);
+        s_map_render(o, more ? "material map (one letter per pixel: its region, '?' a material left out; y up)"
+                             : "material map (one letter per pixel: its region; y up)",
+                     reg, nx, ny, "", 0, 0, s_region_char);
         if (phi > plo || isfinite(plo)) {
             char title[160];
             snprintf(title, sizeof title, "adhesion map (pull-off force, ' .:-=+*#%%@' from %.4g to %.4g nN; '?' none)",
