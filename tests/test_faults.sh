@@ -246,6 +246,18 @@ with h5py.File("empty.h5", "w") as f:
     if [ "$rc" -ne 0 ] && [ "$lines" -le 25 ] && grep -q "2980 more curve(s)" "$TMP/err"; then
         ok "vafm info of 3000 empty groups names 20 and sums up the rest ($lines lines)"
     else bad "vafm info of 3000 empty groups names 20 and sums up the rest" "exit $rc, $lines lines"; fi
+    # a root 'software' of 100 kB with an escape sequence: one line of at most ~150 bytes, no ESC byte
+    # (0.6.2 printed it all, escape included)
+    "$PY" -c '
+import h5py
+with h5py.File("software.h5", "w") as f:
+    f.attrs["software"] = "x" * 100000 + "\x1b[31m"; f.attrs["software version"] = "0\n1"
+    f.create_group("0")'
+    run info software.h5
+    line=$(grep "^software " "$TMP/out")
+    if [ "${#line}" -le 160 ] && grep -qF "... (100005 bytes) 0?1" "$TMP/out" && ! grep -q $'\x1b' "$TMP/out"; then
+        ok "vafm info clips a 100 kB 'software' to one line of ${#line} bytes, control bytes as '?'"
+    else bad "vafm info clips a huge 'software'" "exit $rc, line of ${#line} bytes"; fi
 fi
 port=$("$PY" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()')
 "$VAFMD" --preset paper-fig4 --rep "tcp://localhost:$port" --pub "tcp://localhost:$((port + 1))" 2>"$TMP/d1.err" &

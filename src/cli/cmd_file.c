@@ -54,10 +54,33 @@ typedef struct s_info_prov {
     vafm_campaign_spec spec;
 } s_info_prov;
 
+#define S_INFO_TEXT_MAX 120 /* bytes of a file's free text printed on one line */
+
+/* Text from a file, on one line: control bytes as '?' (no escape sequence reaches the terminal), at most
+ * S_INFO_TEXT_MAX bytes (cut at a UTF-8 character boundary) and then its length. 0.6.2 printed a
+ * 'software' of any size in full. */
+static void s_info_text(FILE *o, const char *s)
+{
+    size_t n = strlen(s), k = n;
+    if (n > S_INFO_TEXT_MAX) {
+        k = S_INFO_TEXT_MAX;
+        while (k > 0 && ((unsigned char)s[k] & 0xC0) == 0x80) /* s[k] continues a character: cut before it */
+            k--;
+    }
+    for (size_t i = 0; i < k; i++)
+        fputc((unsigned char)s[i] < 0x20 || s[i] == 0x7f ? '?' : s[i], o);
+    if (k < n)
+        fprintf(o, "... (%zu bytes)", n);
+}
+
 static void s_info_provenance(FILE *o, const char *path, const vafm_h5_provenance *pv, s_info_prov *ip)
 {
     memset(ip, 0, sizeof *ip);
-    fprintf(o, "software     %s %s\n", pv->software, pv->software_version);
+    fputs("software     ", o);
+    s_info_text(o, pv->software ? pv->software : "");
+    fputc(' ', o);
+    s_info_text(o, pv->software_version ? pv->software_version : "");
+    fputc('\n', o);
     if (!pv->is_vafm) {
         fprintf(o, "provenance   none (no root attribute 'vafm format version': not written by vafm)\n");
         return;
