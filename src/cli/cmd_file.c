@@ -56,7 +56,7 @@ typedef struct s_info_prov {
 
 #define S_INFO_TEXT_MAX 120 /* bytes of a file's free text printed on one line */
 
-/* Text from a file, on one line: control bytes as '?' (no escape sequence reaches the terminal), at most
+/* Text from a file, on one line: control characters (C0, DEL, C1) as '?' (no escape sequence reaches the terminal), at most
  * S_INFO_TEXT_MAX bytes (cut at a UTF-8 character boundary) and then its length. 0.6.2 printed a
  * 'software' of any size in full. */
 static void s_info_text(FILE *o, const char *s)
@@ -67,8 +67,14 @@ static void s_info_text(FILE *o, const char *s)
         while (k > 0 && ((unsigned char)s[k] & 0xC0) == 0x80) /* s[k] continues a character: cut before it */
             k--;
     }
-    for (size_t i = 0; i < k; i++)
-        fputc((unsigned char)s[i] < 0x20 || s[i] == 0x7f ? '?' : s[i], o);
+    for (size_t i = 0; i < k; i++) {
+        unsigned char b = (unsigned char)s[i];
+        if (b == 0xC2 && i + 1 < k && (unsigned char)s[i + 1] >= 0x80 && (unsigned char)s[i + 1] <= 0x9F) {
+            fputc('?', o); /* a C1 control (U+0080-U+009F: U+009B is a CSI to some terminals) */
+            i++;
+        } else
+            fputc(b < 0x20 || b == 0x7f ? '?' : b, o);
+    }
     if (k < n)
         fprintf(o, "... (%zu bytes)", n);
 }
