@@ -125,7 +125,15 @@ void vafm_h5i_quiet_end(const vafm_h5i_quiet *q);
 
 /** Fill err: code, object path (err->field) and message. */
 void vafm_h5i_err(vafm_error *err, int code, const char *object, const char *fmt, ...) VAFM_H5_PRINTF(4, 5);
-/** Same, appending " (HDF5: <innermost message of HDF5's error stack>)". */
+/** The innermost message on HDF5's error stack into buf (unchanged when the stack is empty). Take it right
+ *  after the failing call: every later HDF5 call (a close on the way out) clears the stack. */
+void vafm_h5i_reason(char *buf, size_t len);
+/** Same as vafm_h5i_err, appending " (HDF5: <innermost message of HDF5's error stack>)". */
+void vafm_h5i_err_hdf5(vafm_error *err, int code, const char *object, const char *fmt, ...)
+    VAFM_H5_PRINTF(4, 5);
+
+/* ---- the path of a file (h5_path.c) --------------------------------------------------------------- */
+
 /** Before HDF5 opens an existing file: refuse what is not a regular file (a FIFO would block forever)
  *  with VAFM_EIO, and a file another process (or this one) has open — for writing, or at all when
  *  for_write — with VAFM_ESTATE naming the holder from /proc/locks. An absent path passes. */
@@ -137,12 +145,6 @@ const char *vafm_h5i_denied_why(int en);
 /* A new file at path: VAFM_EACCES (naming the directory and "read-only"/"permission denied") when its directory
  * cannot be written, else 0 (other failures are left to the create). */
 int vafm_h5i_check_dir_writable(const char *path, vafm_error *err);
-
-/** The innermost message on HDF5's error stack into buf (unchanged when the stack is empty). Take it right
- *  after the failing call: every later HDF5 call (a close on the way out) clears the stack. */
-void vafm_h5i_reason(char *buf, size_t len);
-void vafm_h5i_err_hdf5(vafm_error *err, int code, const char *object, const char *fmt, ...)
-    VAFM_H5_PRINTF(4, 5);
 
 /* ---- attributes ----------------------------------------------------------------------------------- */
 
@@ -243,6 +245,31 @@ int vafm_h5i_format_parse(const char *s, int *major, int *minor);
  * "'name' is": "stored in an external file (not read)", ...
  */
 const char *vafm_h5i_storage_foreign(hid_t d);
+
+/* ---- the writer's state (h5_writer.c; its resume: h5_resume.c) ----------------------------------- */
+
+struct vafm_h5_writer {
+    uint32_t tag;
+    char *path;
+    hid_t file;
+    vafm_h5_writer_opts o;
+    uint64_t count;    /* curve groups in the file */
+    int has_prov;      /* "vafm scene" is in the file */
+    char *scene, *grid;
+    vafm_h5i_row *rows; /* rows of curves 0..nrows−1 */
+    size_t nrows, caprows;
+    size_t rows_in_file; /* rows [0, rows_in_file) are in the file */
+    int parts_in_file;   /* rows sit in flush parts: merge on close */
+};
+
+/** The file access properties of every file the writer opens: the 1.8 format, strong close, the journal. */
+hid_t vafm_h5i_writer_fapl(void);
+/** Room for n ground-truth rows in w->rows. @return 0, or -1 out of memory. */
+int vafm_h5i_writer_rows_reserve(vafm_h5_writer *w, size_t n);
+/** Replace every ground-truth attribute by one merged table. @return 0, or -1. */
+int vafm_h5i_writer_merge_rows(vafm_h5_writer *w);
+/** Open w->path for resume (w->o.resume): keep the complete prefix, drop the rest, merge the rows. */
+int vafm_h5i_writer_resume(vafm_h5_writer *w, vafm_error *err);
 
 /* ---- reading one curve group (reader, writer's resume) -------------------------------------------- */
 

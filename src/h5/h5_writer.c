@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * Writing force-curve files of afmformats' HDF5 layout, with vafm's provenance in root attributes,
- * durable flushes and resume after a kill (the durability argument is in h5_internal.h).
+ * durable flushes and resume after a kill (the durability argument is in h5_internal.h; the resume itself
+ * is in h5_resume.c).
  *
  * A curve is checked completely before anything is written, so a refused curve leaves no trace. The
  * ground-truth table is kept in memory: each flush adds one root attribute with the rows appended
@@ -22,20 +23,6 @@
 /* one chunk per channel: HDF5 limits a chunk to 4 GiB */
 #define S_MAX_SAMPLES ((size_t)VAFM_H5_MAX_SAMPLES)
 
-struct vafm_h5_writer {
-    uint32_t tag;
-    char *path;
-    hid_t file;
-    vafm_h5_writer_opts o;
-    uint64_t count;    /* curve groups in the file */
-    int has_prov;      /* "vafm scene" is in the file */
-    char *scene, *grid;
-    vafm_h5i_row *rows; /* rows of curves 0..nrows−1 */
-    size_t nrows, caprows;
-    size_t rows_in_file; /* rows [0, rows_in_file) are in the file */
-    int parts_in_file;   /* rows sit in flush parts: merge on close */
-};
-
 void vafm_h5_writer_opts_default(vafm_h5_writer_opts *o)
 {
     memset(o, 0, sizeof *o);
@@ -49,7 +36,7 @@ static int s_has_suffix(const char *path, const char *suf)
     return n > m && !strcmp(path + n - m, suf);
 }
 
-static hid_t s_fapl(void)
+hid_t vafm_h5i_writer_fapl(void)
 {
     hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
     if (fapl < 0)
@@ -79,7 +66,7 @@ static void s_now(char date[16], char tod[16], char iso[32])
 
 /* ---- ground-truth table --------------------------------------------------------------------------- */
 
-static int s_rows_reserve(vafm_h5_writer *w, size_t n)
+int vafm_h5i_writer_rows_reserve(vafm_h5_writer *w, size_t n)
 {
     if (n <= w->caprows)
         return 0;
@@ -120,7 +107,7 @@ done:
 }
 
 /* Replace every ground-truth attribute by one merged table. */
-static int s_merge_rows(vafm_h5_writer *w)
+int vafm_h5i_writer_merge_rows(vafm_h5_writer *w)
 {
     char **names = NULL;
     size_t nn = 0;
@@ -142,11 +129,11 @@ static int s_merge_rows(vafm_h5_writer *w)
     return rc;
 }
 
-/* ---- open, create, resume ------------------------------------------------------------------------- */
+/* ---- open, create (resume: h5_resume.c) ------------------------------------------------------------------ */
 
 static int s_create(vafm_h5_writer *w, vafm_error *err)
 {
-    hid_t fcpl = H5Pcreate(H5P_FILE_CREATE), fapl = s_fapl();
+    hid_t fcpl = H5Pcreate(H5P_FILE_CREATE), fapl = vafm_h5i_writer_fapl();
     if (fcpl < 0 || fapl < 0 || H5Pset_attr_phase_change(fcpl, 0, 0) < 0) {
         if (fcpl >= 0)
             H5Pclose(fcpl);
@@ -186,231 +173,6 @@ static int s_create(vafm_h5_writer *w, vafm_error *err)
         return VAFM_EIO;
     }
     return 0;
-}
-
-static int s_read_root_str(hid_t file, const char *name, char **out)
-{
-    *out = NULL;
-    htri_t ex = H5Aexists(file, name);
-    if (ex < 0)
-        return -1; /* cannot be looked up: a damaged header, not a missing attribute */
-    if (ex == 0)
-        return 0;
-    vafm_h5i_val v;
-    if (vafm_h5i_attr_get(file, name, &v))
-        return -1;
-    if (v.cls != H5T_STRING || v.npoints != 1) {
-        vafm_h5i_val_free(&v);
-        return -1;
-    }
-    *out = v.s;
-    return 0;
-}
-
-typedef struct s_linklist {
-    uint64_t *num;
-    char **name;
-    size_t n, cap;
-    int bad;
-    char bad_name[64];
-} s_linklist;
-
-static herr_t s_root_link_cb(hid_t g, const char *name, const H5L_info_t *info, void *data)
-{
-    s_linklist *l = data;
-    uint64_t num;
-    if (!vafm_h5i_group_name(name, &num)) {
-        if (!l->bad)
-            snprintf(l->bad_name, sizeof l->bad_name, "%s", name);
-        l->bad = 1;
-        return 0;
-    }
-    if (l->n == l->cap) {
-        size_t cap = l->cap ? 2 * l->cap : 64;
-        uint64_t *a = realloc(l->num, cap * sizeof *a);
-        if (!a)
-            return -1;
-        l->num = a;
-        char **b = realloc(l->name, cap * sizeof *b);
-        if (!b)
-            return -1;
-        l->name = b;
-        l->cap = cap;
-    }
-    if (!(l->name[l->n] = strdup(name)))
-        return -1;
-    l->num[l->n++] = num;
-    return 0;
-}
-
-static void s_linklist_free(s_linklist *l)
-{
-    for (size_t i = 0; i < l->n; i++)
-        free(l->name[i]);
-    free(l->name);
-    free(l->num);
-    memset(l, 0, sizeof *l);
-}
-
-/* Resume with keep_intact: the groups from c on would be deleted; refuse (nothing changed) when one after the
- * first bad curve c still reads (structure and attributes), naming c, why it is bad, and the intact ones. */
-static int s_keep_intact(vafm_h5_writer *w, const s_linklist *l, const uint8_t *present, const vafm_h5i_row *rows,
-                         size_t nrows, uint64_t c, uint64_t file_size, vafm_h5i_curvebuf *buf, vafm_error *err)
-{
-    uint64_t intact = 0, last = 0;
-    vafm_h5_curve cv;
-    for (size_t i = 0; i < l->n; i++)
-        if (l->num[i] > c && !vafm_h5i_curve_read(w->file, w->path, l->num[i], 0, file_size, buf, &cv, NULL)) {
-            intact++;
-            last = l->num[i] > last ? l->num[i] : last;
-        }
-    if (!intact)
-        return 0; /* only a damaged tail goes: what a kill can leave */
-    char why[200];
-    vafm_error e;
-    memset(&e, 0, sizeof e);
-    if (c >= l->n || !present[c])
-        snprintf(why, sizeof why, "is missing");
-    else if (w->has_prov && !(c < nrows && rows[c].curve == c))
-        snprintf(why, sizeof why, "has no ground-truth row");
-    else if (vafm_h5i_curve_read(w->file, w->path, c, 1, file_size, buf, &cv, &e))
-        snprintf(why, sizeof why, "is damaged (%.150s)", e.message);
-    else
-        snprintf(why, sizeof why, "is followed by a damaged one"); /* c read back; a later one of the two did not */
-    vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: cannot be resumed: curve %" PRIu64 " %s, and %" PRIu64 " intact curve(s) "
-                 "follow it (up to curve %" PRIu64 "), which resume would drop; nothing was changed: log to a new file "
-                 "(the intact curves stay readable here)", w->path, c, why, intact, last);
-    return VAFM_EFORMAT;
-}
-
-static int s_resume(vafm_h5_writer *w, vafm_error *err)
-{
-    struct stat st;
-    if (stat(w->path, &st)) {
-        vafm_h5i_err(err, VAFM_EIO, "", "%s: cannot be resumed: %s", w->path, strerror(errno));
-        return VAFM_EIO;
-    }
-    int crc = vafm_h5i_check_path(w->path, 1, err);
-    if (crc)
-        return crc;
-    if (H5Fis_hdf5(w->path) <= 0) {
-        vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: cannot be resumed: not an HDF5 file", w->path);
-        return VAFM_EFORMAT;
-    }
-    hid_t fapl = s_fapl();
-    w->file = H5Fopen(w->path, H5F_ACC_RDWR, fapl >= 0 ? fapl : H5P_DEFAULT);
-    if (fapl >= 0)
-        H5Pclose(fapl);
-    if (w->file < 0) {
-        vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "", "%s: cannot be resumed: damaged HDF5 file", w->path);
-        return VAFM_EFORMAT;
-    }
-    char why[200];
-    if (vafm_h5i_gheap_check(w->file, w->path, why, sizeof why)) {
-        vafm_h5i_err(err, VAFM_EFORMAT, "", "%s: cannot be resumed: %s", w->path, why);
-        return VAFM_EFORMAT;
-    }
-    char *fmt = NULL;
-    int ma = -1, mi = -1;
-    if (s_read_root_str(w->file, VAFM_H5I_A_FORMAT, &fmt)) {
-        vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: the root attributes cannot be read (damaged "
-                          "file header)", w->path);
-        return VAFM_EFORMAT;
-    }
-    if (!fmt || vafm_h5i_format_parse(fmt, &ma, &mi) || ma != VAFM_H5_FORMAT_MAJOR) {
-        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x (root attribute '"
-                     VAFM_H5I_A_FORMAT "' is %s)", w->path, VAFM_H5_FORMAT_MAJOR, fmt ? fmt : "missing");
-        free(fmt);
-        return VAFM_EFORMAT;
-    }
-    if (mi != VAFM_H5_FORMAT_MINOR) { /* its rows and scene lack fields this version writes */
-        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %s, this vafm writes %d.%d; "
-                     "resume it with the vafm version that wrote it", w->path, fmt, VAFM_H5_FORMAT_MAJOR,
-                     VAFM_H5_FORMAT_MINOR);
-        free(fmt);
-        return VAFM_EFORMAT;
-    }
-    free(fmt);
-    if (s_read_root_str(w->file, VAFM_H5I_A_SCENE, &w->scene) || s_read_root_str(w->file, VAFM_H5I_A_GRID, &w->grid)) {
-        vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: the stored scene cannot be read", w->path);
-        return VAFM_EFORMAT;
-    }
-    w->has_prov = w->scene != NULL;
-
-    vafm_h5i_row *rows = NULL;
-    size_t nrows = 0;
-    int rc = vafm_h5i_rows_read(w->file, w->path, 1, &rows, &nrows, err);
-    if (rc)
-        return rc;
-    s_linklist l = { 0 };
-    if (H5Literate(w->file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_root_link_cb, &l) < 0) {
-        vafm_h5i_err_hdf5(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: the root group cannot be listed", w->path);
-        goto done;
-    }
-    if (l.bad) {
-        vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: root object '%s' is not a curve group", w->path,
-                     l.bad_name);
-        goto done;
-    }
-    /* numbers → presence map over 0..n−1 (numbers ≥ n cannot be part of the complete prefix) */
-    uint8_t *present = calloc(l.n + 1, 1);
-    if (!present) {
-        vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
-        goto done;
-    }
-    for (size_t i = 0; i < l.n; i++)
-        if (l.num[i] < l.n)
-            present[l.num[i]] = 1;
-    uint64_t file_size = (uint64_t)st.st_size;
-    vafm_h5i_curvebuf buf = { 0 };
-    vafm_h5_curve cv;
-    uint64_t c = 0;
-    /* the complete prefix: structure of every group, plus a ground-truth row when the file has a scene */
-    while (c < l.n && present[c] && (!w->has_prov || (c < nrows && rows[c].curve == c)) &&
-           !vafm_h5i_curve_read(w->file, w->path, c, 0, file_size, &buf, &cv, NULL))
-        c++;
-    /* the last curves kept were written last: read their data back through their checksums */
-    for (uint64_t ok = 0; c > 0 && ok < 2 && ok < c;) {
-        uint64_t j = c - 1 - ok;
-        if (vafm_h5i_curve_read(w->file, w->path, j, 1, file_size, &buf, &cv, NULL)) {
-            c = j;
-            ok = 0;
-        } else {
-            ok++;
-        }
-    }
-    if (w->o.keep_intact && (rc = s_keep_intact(w, &l, present, rows, nrows, c, file_size, &buf, err))) {
-        vafm_h5i_curvebuf_free(&buf);
-        free(present);
-        goto done;
-    }
-    vafm_h5i_curvebuf_free(&buf);
-    free(present);
-    for (size_t i = 0; i < l.n; i++)
-        if (l.num[i] >= c && H5Ldelete(w->file, l.name[i], H5P_DEFAULT) < 0) {
-            vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: cannot be resumed: incomplete curve '%s' cannot be removed",
-                              w->path, l.name[i]);
-            goto done;
-        }
-    w->count = c;
-    w->nrows = 0;
-    if (w->has_prov) {
-        if (s_rows_reserve(w, (size_t)c + 1)) {
-            vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
-            goto done;
-        }
-        if (c) /* a file killed before its first curve has no rows (rows NULL) */
-            memcpy(w->rows, rows, (size_t)c * sizeof *rows);
-        w->nrows = (size_t)c;
-    }
-    if (s_merge_rows(w) || H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0) {
-        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: cannot be resumed: the ground truth cannot be rewritten", w->path);
-        goto done;
-    }
-done:
-    s_linklist_free(&l);
-    free(rows);
-    return rc;
 }
 
 void vafm_h5_writer_destroy(vafm_h5_writer **wp)
@@ -464,7 +226,7 @@ int vafm_h5_writer_open(vafm_h5_writer **out, const char *path, const vafm_h5_wr
     w->o = o;
     vafm_h5i_quiet q;
     vafm_h5i_quiet_begin(&q);
-    int rc = o.resume ? s_resume(w, err) : s_create(w, err);
+    int rc = o.resume ? vafm_h5i_writer_resume(w, err) : s_create(w, err);
     vafm_h5i_quiet_end(&q);
     if (rc) {
         vafm_h5_writer_destroy(&w);
@@ -877,7 +639,7 @@ int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_
     int rc = s_check_curve(w, c, truth, err);
     if (rc)
         return rc;
-    if (truth && s_rows_reserve(w, w->nrows + 1)) {
+    if (truth && vafm_h5i_writer_rows_reserve(w, w->nrows + 1)) {
         vafm_h5i_err(err, VAFM_ENOMEM, "", "%s: out of memory", w->path);
         return VAFM_ENOMEM;
     }
@@ -980,7 +742,7 @@ int vafm_h5_writer_close(vafm_h5_writer **wp, vafm_error *err)
     int rc = 0;
     vafm_h5i_quiet q;
     vafm_h5i_quiet_begin(&q);
-    if ((w->parts_in_file || w->nrows > w->rows_in_file) && s_merge_rows(w))
+    if ((w->parts_in_file || w->nrows > w->rows_in_file) && vafm_h5i_writer_merge_rows(w))
         vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: the ground-truth table cannot be written", w->path);
     if (H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0 && !rc)
         vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "", "%s: flush failed", w->path);
