@@ -31,7 +31,7 @@
 #include <unistd.h>
 
 #include "bench_util.h"
-#include "vafm/h5.h"
+#include "h5/h5.h"
 #include "vafm/params.h"
 
 #define S_REPS 3

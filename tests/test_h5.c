@@ -35,7 +35,7 @@
 
 #include "harness.h"
 #include "vafm/campaign.h"
-#include "vafm/h5.h"
+#include "h5/h5.h"
 
 /* ---- small helpers -------------------------------------------------------------------------------- */
 

@@ -15,9 +15,9 @@
 #include <unistd.h>
 #include "harness.h"
 #include "vafm/campaign.h"
-#include "vafm/h5.h"
+#include "h5/h5.h"
 #include "vafm/map.h"
-#include "vafm/record.h"
+#include "record/record.h"
 
 /* ---- bad input ----------------------------------------------------------------------------------- */
 

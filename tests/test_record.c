@@ -10,9 +10,9 @@
 #include <unistd.h>
 #include "harness.h"
 #include "vafm/campaign.h"
-#include "vafm/h5.h"
-#include "vafm/record.h"
-#include "vafm/scene.h"
+#include "h5/h5.h"
+#include "record/record.h"
+#include "record/scene.h"
 #include "vafm/stats.h"
 
 static void test_moments(void)

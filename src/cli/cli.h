@@ -31,8 +31,8 @@
 #include "vafm/detector.h"
 #include "vafm/common.h"
 #include "vafm/contact.h"
-#include "vafm/h5.h"
-#include "vafm/record.h"
+#include "h5/h5.h"
+#include "record/record.h"
 #include "vafm/stats.h"
 #include "vafm/integrator.h"
 #include "vafm/map.h"
@@ -42,7 +42,7 @@
 #include "cli/campaign_mpi.h"
 #include "vafm/units.h"
 #include "vafm/version.h"
-#include "vafm/scene.h"
+#include "record/scene.h"
 
 enum { VAFM_CLI_EXIT_OK = 0, VAFM_CLI_EXIT_RUNTIME = 1, VAFM_CLI_EXIT_USAGE = 2 };
 

@@ -489,7 +489,7 @@ void vafm_cli_progress_curves(vafm_cli_progress *pg, uint64_t done, uint64_t tot
 
 /*
  * The curves reach vafm_cli_rec_curve in index order, one at a time, from whichever worker finished the
- * next one, and go into the file at once through the recorder (vafm/record.h), which flushes on a timer
+ * next one, and go into the file at once through the recorder (record/record.h), which flushes on a timer
  * (--flush-interval) from its own thread: a kill -9 at any moment loses at most the curves of the last
  * interval; --resume recomputes exactly those.
  */

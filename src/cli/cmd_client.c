@@ -23,10 +23,10 @@
 
 #include "cli/cli.h"
 #include "cli/cmd_client.h"
-#include "vafm/scene.h"
+#include "record/scene.h"
 #include "vafm/client.h"
-#include "vafm/h5.h"
-#include "vafm/record.h"
+#include "h5/h5.h"
+#include "record/record.h"
 #include "vafm/params.h"
 
 enum { S_OK = 0, S_RUNTIME = 1, S_USAGE = 2 };

@@ -12,7 +12,7 @@
 
 #include "cli/cli.h"
 #include "cli/study.h"
-#include "vafm/scene.h"
+#include "record/scene.h"
 #include "vafm/integrator.h"
 #include "vafm/theory.h"
 #include "vafm/units.h"

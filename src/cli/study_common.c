@@ -18,8 +18,8 @@
 #include "cli/cli.h"
 #include "cli/study_common.h"
 #include "vafm/campaign.h"
-#include "vafm/h5.h"
-#include "vafm/record.h"
+#include "h5/h5.h"
+#include "record/record.h"
 #include "vafm/stats.h"
 #include "vafm/units.h"
 

@@ -16,9 +16,9 @@
 
 #include "cli/cli.h"
 #include "vafm/campaign.h"
-#include "vafm/h5.h"
+#include "h5/h5.h"
 #include "vafm/params.h"
-#include "vafm/record.h"
+#include "record/record.h"
 
 #define VAFM_STUDY_MAXP 16
 

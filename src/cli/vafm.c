@@ -6,7 +6,7 @@
  * file, --NAME=VALUE overrides, in that order), runs curves through vafm_sim / vafm_campaign_run, and
  * prints what came out. No physics here: every number shown is either a library result or a unit
  * conversion of one (F_JKR = 3πγR/2 is the force unit the physics notes use). campaign, info and
- * export write and read HDF5 force-curve files through vafm/h5.h (protocol/hdf5.md).
+ * export write and read HDF5 force-curve files through h5/h5.h (protocol/hdf5.md).
  *
  * Exit status: 0 success, 1 runtime error (a curve failed, I/O, a damaged file), 2 usage or parameter
  * error. Every parameter error repeats the library's vafm_error message, which names the field, value

@@ -5,7 +5,7 @@
  */
 #include "daemon/cmd_json.h"
 #include "record/scene_value.h"
-#include "vafm/scene.h"
+#include "record/scene.h"
 #include <inttypes.h>
 #include <math.h>
 #include <stdarg.h>

@@ -15,8 +15,8 @@
 #include <string.h>
 #include <time.h>
 #include <zmq.h>
-#include "vafm/h5.h"
-#include "vafm/record.h"
+#include "h5/h5.h"
+#include "record/record.h"
 #include "daemon/camp_feed.h"
 #include "daemon/cmd_json.h"
 #include "daemon/daemon.h"

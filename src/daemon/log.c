@@ -19,7 +19,7 @@
 #include <time.h>
 #include <unistd.h>
 #include "daemon/daemon.h"
-#include "vafm/record.h"
+#include "record/record.h"
 
 typedef struct s_curve {
     vafmd_log_begin *begin; /* NULL: no curve in progress */

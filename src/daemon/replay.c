@@ -21,7 +21,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <jansson.h>
-#include "vafm/h5.h"
+#include "h5/h5.h"
 #include "vafm/wire.h"
 
 enum { S_CH_HEIGHT, S_CH_DEFL, S_CH_FORCE, S_CH_VDEFL, S_CH_TIP, S_CH_TIME, S_NCH };

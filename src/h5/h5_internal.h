@@ -33,7 +33,7 @@
 #include <stdarg.h>
 #include <stdint.h>
 
-#include "vafm/h5.h"
+#include "h5/h5.h"
 
 #if defined(__GNUC__)
 #define VAFM_H5_PRINTF(a, b) __attribute__((format(printf, a, b)))

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * The recorder (vafm/record.h): one HDF5 writer behind a mutex, and, with a flush interval, a flusher
+ * The recorder (record/record.h): one HDF5 writer behind a mutex, and, with a flush interval, a flusher
  * thread.
  *
  * Why a flusher thread: a flush rewrites the file's metadata; flushing after every curve cost 7.7% of a
@@ -16,7 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-#include "vafm/record.h"
+#include "record/record.h"
 
 struct vafm_recorder {
     vafm_h5_writer *w;

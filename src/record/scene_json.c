@@ -17,7 +17,7 @@
 #include <jansson.h>
 
 #include "record/scene_value.h"
-#include "vafm/scene.h"
+#include "record/scene.h"
 
 void vafm_scene_param_allowed(const vafm_param_info *info, char *buf, size_t len)
 {

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Internal: one JSON value → the text vafm_params_set() takes, by the rules of vafm/scene.h. The CLI's
+ * Internal: one JSON value → the text vafm_params_set() takes, by the rules of record/scene.h. The CLI's
  * scene files (scene_json.c) and vafmd's command decoder (src/daemon/cmd_json.c) both call it, so a
  * scene means the same wherever it is written; it takes jansson's json_t, which is why it is not in the
  * public header.

@@ -30,7 +30,7 @@ REQUIRED = ("force", "height (measured)", "height (piezo)", "segment")
 TRUTH = "vafm ground truth"
 TRUTH_PART = TRUTH + " from "  # + the part's first curve: the rows of one flush (a killed writer's file)
 MAP_MAX_SIDE = 1024  # VAFM_MAP_MAX_SIDE (include/vafm/map.h): pixels a side of a map
-MAX_SAMPLES = 1 << 25  # VAFM_H5_MAX_SAMPLES (include/vafm/h5.h): samples of one curve
+MAX_SAMPLES = 1 << 25  # VAFM_H5_MAX_SAMPLES (src/h5/h5.h): samples of one curve
 
 
 def _str(v):

@@ -3,7 +3,7 @@
  * @file record.h
  * The recorder: finished force curves into an HDF5 file of protocol/hdf5.md, for every program that
  * records (`vafm campaign`, `vafm study`, `vafm listen`, vafmd's log). It opens the file (create,
- * resume or overwrite: the lock rules are the writer's, vafm/h5.h), records the provenance once,
+ * resume or overwrite: the lock rules are the writer's, h5/h5.h), records the provenance once,
  * appends each curve with its ground-truth row, ids and calibration by one rule, and makes curves
  * durable either after every curve or on a timer from its own flusher thread (a kill -9 at any moment
  * loses at most the curves of the last interval; resume recomputes exactly those).
@@ -20,7 +20,7 @@
 
 #include "vafm/campaign.h"
 #include "vafm/common.h"
-#include "vafm/h5.h"
+#include "h5/h5.h"
 #include "vafm/map.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"

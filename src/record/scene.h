@@ -18,7 +18,7 @@
 #include <stdint.h>
 
 #include "vafm/common.h"
-#include "vafm/h5.h"
+#include "h5/h5.h"
 #include "vafm/params.h"
 
 #ifdef __cplusplus
