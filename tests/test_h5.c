@@ -36,6 +36,7 @@
 #include "harness.h"
 #include "vafm/campaign.h"
 #include "h5/h5.h"
+#include "record/record.h" /* vafm_h5_curve_from_sim */
 
 /* ---- small helpers -------------------------------------------------------------------------------- */
 

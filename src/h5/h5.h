@@ -229,21 +229,6 @@ VAFM_API int vafm_h5_writer_close(vafm_h5_writer **w, vafm_error *err);
 VAFM_API void vafm_h5_writer_destroy(vafm_h5_writer **w);
 
 /**
- * Fill a curve from a simulated force curve: channels from the samples (height (measured) = height
- * (piezo) = the piezo height, tip position = vafm's true tip height = height + force/k), metadata from
- * the scene and the result (spring constant, setpoint, rates, speeds, durations, z range, segment
- * count, software). The arrays are borrowed from s; date, time, session id and curve id stay absent.
- */
-VAFM_API void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_params *p,
-                                     const vafm_curve_result *r);
-
-/** Fill a ground-truth row for a simulated curve: grid point `point`, the scene's T, retract speed,
- *  spring constant, E*, γ and surface height, the curve result (status 0). result.index stays the curve's stream index: a writer
- *  that numbers rows by group sets it afterwards. */
-VAFM_API void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params *p,
-                                     const vafm_curve_result *r);
-
-/**
  * Open a file for reading. The file must follow the layout: root attributes "software" and "software
  * version", only curve groups at the root; curve groups are checked when read.
  * @param out receives the reader; owned by the caller (vafm_h5_reader_destroy)

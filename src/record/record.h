@@ -125,6 +125,23 @@ VAFM_API int vafm_recorder_close(vafm_recorder **r, vafm_recorder_report *rep, v
 VAFM_API void vafm_record_ids(uint64_t seed, uint64_t index, uint64_t run_id, const char *client,
                               char *session, size_t session_len, char *curve, size_t curve_len);
 
+/* ---- a simulated curve as a file's curve and row (from_sim.c) ---------------------------------- */
+
+/**
+ * Fill a curve from a simulated force curve: channels from the samples (height (measured) = height
+ * (piezo) = the piezo height, tip position = vafm's true tip height = height + force/k), metadata from
+ * the scene and the result (spring constant, setpoint, rates, speeds, durations, z range, segment
+ * count, software). The arrays are borrowed from s; date, time, session id and curve id stay absent.
+ */
+VAFM_API void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, const vafm_params *p,
+                                     const vafm_curve_result *r);
+
+/** Fill a ground-truth row for a simulated curve: grid point `point`, the scene's T, retract speed,
+ *  spring constant, E*, γ and surface height, the curve result (status 0). result.index stays the curve's stream index: a writer
+ *  that numbers rows by group sets it afterwards. */
+VAFM_API void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params *p,
+                                     const vafm_curve_result *r);
+
 #ifdef __cplusplus
 }
 #endif
