@@ -35,17 +35,16 @@ static int s_read_root_str(hid_t file, const char *name, char **out)
     return 0;
 }
 
+/* The root's curve groups: their names (the h5 layer's name list) and their numbers. names.bad/bad_name
+ * record the first root object that is not a curve group. */
 typedef struct s_linklist {
-    uint64_t *num;
-    char **name;
-    size_t n, cap;
-    int bad;
-    char bad_name[64];
+    vafm_h5i_names names;
+    uint64_t *num; /* num[i]: the number of names.v[i] */
 } s_linklist;
 
 static herr_t s_root_link_cb(hid_t g, const char *name, const H5L_info_t *info, void *data)
 {
-    s_linklist *l = data;
+    vafm_h5i_names *l = data;
     uint64_t num;
     if (!vafm_h5i_group_name(name, &num)) {
         if (!l->bad)
@@ -53,29 +52,24 @@ static herr_t s_root_link_cb(hid_t g, const char *name, const H5L_info_t *info, 
         l->bad = 1;
         return 0;
     }
-    if (l->n == l->cap) {
-        size_t cap = l->cap ? 2 * l->cap : 64;
-        uint64_t *a = realloc(l->num, cap * sizeof *a);
-        if (!a)
-            return -1;
-        l->num = a;
-        char **b = realloc(l->name, cap * sizeof *b);
-        if (!b)
-            return -1;
-        l->name = b;
-        l->cap = cap;
-    }
-    if (!(l->name[l->n] = strdup(name)))
+    return vafm_h5i_names_push(l, name) ? -1 : 0;
+}
+
+/* List the root's curve groups into l. @return 0, -1 when the root cannot be listed, -2 out of memory. */
+static int s_linklist_read(hid_t file, s_linklist *l)
+{
+    if (H5Literate(file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_root_link_cb, &l->names) < 0)
         return -1;
-    l->num[l->n++] = num;
+    if (!(l->num = calloc(l->names.n + 1, sizeof *l->num)))
+        return -2;
+    for (size_t i = 0; i < l->names.n; i++)
+        vafm_h5i_group_name(l->names.v[i], &l->num[i]);
     return 0;
 }
 
 static void s_linklist_free(s_linklist *l)
 {
-    for (size_t i = 0; i < l->n; i++)
-        free(l->name[i]);
-    free(l->name);
+    vafm_h5i_names_free(&l->names);
     free(l->num);
     memset(l, 0, sizeof *l);
 }
@@ -87,7 +81,7 @@ static int s_keep_intact(vafm_h5_writer *w, const s_linklist *l, const uint8_t *
 {
     uint64_t intact = 0, last = 0;
     vafm_h5_curve cv;
-    for (size_t i = 0; i < l->n; i++)
+    for (size_t i = 0; i < l->names.n; i++)
         if (l->num[i] > c && !vafm_h5i_curve_read(w->file, w->path, l->num[i], 0, file_size, buf, &cv, NULL)) {
             intact++;
             last = l->num[i] > last ? l->num[i] : last;
@@ -97,7 +91,7 @@ static int s_keep_intact(vafm_h5_writer *w, const s_linklist *l, const uint8_t *
     char why[200];
     vafm_error e;
     memset(&e, 0, sizeof e);
-    if (c >= l->n || !present[c])
+    if (c >= l->names.n || !present[c])
         snprintf(why, sizeof why, "is missing");
     else if (w->has_prov && !(c < nrows && rows[c].curve == c))
         snprintf(why, sizeof why, "has no ground-truth row");
@@ -171,30 +165,35 @@ int vafm_h5i_writer_resume(vafm_h5_writer *w, vafm_error *err)
     if (rc)
         return rc;
     s_linklist l = { 0 };
-    if (H5Literate(w->file, H5_INDEX_NAME, H5_ITER_NATIVE, NULL, s_root_link_cb, &l) < 0) {
+    int lr = s_linklist_read(w->file, &l);
+    if (lr == -1) {
         vafm_h5i_err_hdf5(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: the root group cannot be listed", w->path);
         goto done;
     }
-    if (l.bad) {
+    if (lr) {
+        vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
+        goto done;
+    }
+    if (l.names.bad) {
         vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: root object '%s' is not a curve group", w->path,
-                     l.bad_name);
+                     l.names.bad_name);
         goto done;
     }
     /* numbers → presence map over 0..n−1 (numbers ≥ n cannot be part of the complete prefix) */
-    uint8_t *present = calloc(l.n + 1, 1);
+    uint8_t *present = calloc(l.names.n + 1, 1);
     if (!present) {
         vafm_h5i_err(err, rc = VAFM_ENOMEM, "", "%s: out of memory", w->path);
         goto done;
     }
-    for (size_t i = 0; i < l.n; i++)
-        if (l.num[i] < l.n)
+    for (size_t i = 0; i < l.names.n; i++)
+        if (l.num[i] < l.names.n)
             present[l.num[i]] = 1;
     uint64_t file_size = (uint64_t)st.st_size;
     vafm_h5i_curvebuf buf = { 0 };
     vafm_h5_curve cv;
     uint64_t c = 0;
     /* the complete prefix: structure of every group, plus a ground-truth row when the file has a scene */
-    while (c < l.n && present[c] && (!w->has_prov || (c < nrows && rows[c].curve == c)) &&
+    while (c < l.names.n && present[c] && (!w->has_prov || (c < nrows && rows[c].curve == c)) &&
            !vafm_h5i_curve_read(w->file, w->path, c, 0, file_size, &buf, &cv, NULL))
         c++;
     /* the last curves kept were written last: read their data back through their checksums */
@@ -214,10 +213,10 @@ int vafm_h5i_writer_resume(vafm_h5_writer *w, vafm_error *err)
     }
     vafm_h5i_curvebuf_free(&buf);
     free(present);
-    for (size_t i = 0; i < l.n; i++)
-        if (l.num[i] >= c && H5Ldelete(w->file, l.name[i], H5P_DEFAULT) < 0) {
+    for (size_t i = 0; i < l.names.n; i++)
+        if (l.num[i] >= c && H5Ldelete(w->file, l.names.v[i], H5P_DEFAULT) < 0) {
             vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: cannot be resumed: incomplete curve '%s' cannot be removed",
-                              w->path, l.name[i]);
+                              w->path, l.names.v[i]);
             goto done;
         }
     w->count = c;
