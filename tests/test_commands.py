@@ -181,7 +181,7 @@ def test_defaults_equal_get():
 
 def test_format_version_in_docs():
     """wire.md's log and hdf5.md name the format version the writer writes (0.6.2's said 1.0, files 1.1)."""
-    h = read("include", "vafm", "h5.h")
+    h = read("src", "h5", "h5.h")
     v = "%s.%s" % (re.search(r"#define VAFM_H5_FORMAT_MAJOR (\d+)", h).group(1),
                    re.search(r"#define VAFM_H5_FORMAT_MINOR (\d+)", h).group(1))
     assert f"(afmformats' layout, vafm format {v})" in read("protocol", "wire.md")
