@@ -435,6 +435,69 @@ def test_selection_over_memory_bound_refused(fig4, tmp_path):
     assert fig4.cmd({"cmd": "status"})["state"] == "idle"
 
 
+def vm_hwm_kib(pid):
+    """Peak resident memory of a process (VmHWM of /proc/pid/status), KiB."""
+    with open(f"/proc/{pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
+
+
+def attr_file(path, attrs, root_software="test"):
+    """A one-curve file whose curve group carries these string attributes (libver latest: attributes over
+    64 KiB are stored densely, as h5py does for them)."""
+    ch = instrument_curve(np.random.default_rng(2), 30, 20, 0.1)
+    with h5py.File(path, "w", libver="latest") as f:
+        f.attrs["software"] = root_software
+        f.attrs["software version"] = "0"
+        write_curve(f, 0, ch, {"imaging mode": "force-distance", "spring constant": 0.1, "rate approach": 1e3,
+                               "rate retract": 1e3, **attrs})
+    return path
+
+
+def test_hostile_attributes_bounded(fig4, tmp_path):
+    """Issue #29 item 5: 0.6.2 copied each curve's attributes into run.start once per selection entry; a
+    1 MiB 'software' attribute with "curves": [0]*512 took vafmd to 1.55 GB and held its control loop 35 s.
+    An attribute over 64 KiB is refused, so is a selection whose attributes take more than 8 MiB in
+    run.start (out_of_range, naming the field and the limit), each at once; a repetition is read once."""
+    s = fig4.sub(greet=True)
+    hwm0 = vm_hwm_kib(fig4.proc.pid)
+    big = attr_file(tmp_path / "big.h5", {"software": "x" * (1 << 20)})
+    t0 = time.monotonic()
+    r = fig4.cmd({"cmd": "replay", "path": str(big), "curves": [0] * 512})
+    dt = time.monotonic() - t0
+    error_ok(r, "out_of_range", "path")
+    assert "'software'" in r["message"] and "65536" in r["message"], r
+    assert dt < 2.0, dt
+    root = attr_file(tmp_path / "root.h5", {}, root_software="y" * 70000)
+    r = fig4.cmd({"cmd": "replay", "path": str(root)})
+    error_ok(r, "out_of_range", "path")
+    assert "root attribute 'software'" in r["message"] and "70000" in r["message"], r
+    # eight string attributes of 65 000 characters (imaging mode stays "force-distance"): 520 000 bytes and
+    # some encoded an entry; 17 entries pass 8 MiB
+    names = ["feedback mode", "instrument", "software", "software version", "date", "time", "session id",
+             "curve id"]
+    wide = attr_file(tmp_path / "wide.h5", {k: chr(97 + i) * 65000 for i, k in enumerate(names)})
+    t0 = time.monotonic()
+    r = fig4.cmd({"cmd": "replay", "path": str(wide), "curves": [0] * 512})
+    dt = time.monotonic() - t0
+    error_ok(r, "out_of_range", "curves")
+    assert "8388608" in r["message"] and "entry 16," in r["message"], r
+    assert dt < 2.0, dt
+    # 16 entries (8.3 MB) are streamed; every entry carries the curve's attributes
+    rr = fig4.cmd({"cmd": "replay", "path": str(wide), "curves": [0] * 16})
+    assert rr["status"] == "ok", rr
+    start, blocks, events, end, _, _ = collect_run(s, rr["run_id"])
+    fig4.wait_idle()
+    assert end["status"] == "ok", end
+    cs = start["replay"]["curves"]
+    assert len(cs) == 16 and all(c["attributes"] == cs[0]["attributes"] for c in cs), len(cs)
+    assert cs[0]["attributes"]["instrument"] == "b" * 65000
+    a = arrays(start, blocks)
+    assert a["force_N"].size == 16 * 50 and np.array_equal(bits(a["force_N"][:50]), bits(a["force_N"][-50:]))
+    grown_mib = (vm_hwm_kib(fig4.proc.pid) - hwm0) / 1024
+    assert grown_mib < 300, grown_mib
+    assert fig4.cmd({"cmd": "status"})["state"] == "idle"
+
+
 def test_loop_forever_until_abort_and_busy(fig4, tmp_path):
     path = minimal_file(tmp_path / "ok.h5")
     assert fig4.cmd({"cmd": "set", "values": {"free_run": False}})["status"] == "ok"

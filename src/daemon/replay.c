@@ -37,6 +37,7 @@ typedef struct s_curve {
     size_t off;     /* its first sample in the flat arrays */
     double sens;    /* sensitivity, m/V (NaN: none) */
     double t_off;   /* pass clock at the curve's start, s */
+    size_t attr_bytes; /* its attributes in run.start, JSON-encoded (loading only) */
 } s_curve;
 
 struct vafmd_replay {
@@ -237,17 +238,39 @@ fail:
 
 static int s_pos(double x) { return isfinite(x) && x > 0; }
 
-/* The curve group's attributes as JSON (afmformats' names; absent ones left out). */
-static json_t *s_attrs(const vafm_h5_meta *m)
+/* A string attribute longer than VAFMD_REPLAY_MAX_ATTR_BYTES is refused (run.start carries it). */
+static int s_attr_long(const char *v, const char *path, const char *where, const char *name, vafmd_err *e)
+{
+    size_t len = v ? strlen(v) : 0;
+    if (len <= VAFMD_REPLAY_MAX_ATTR_BYTES)
+        return 0;
+    vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "path", "%.300s: %s attribute '%s' holds %zu bytes; replay takes at most "
+                  "%u bytes an attribute (run.start carries them)", path, where, name, len, VAFMD_REPLAY_MAX_ATTR_BYTES);
+    return -1;
+}
+
+/* The curve group's attributes as JSON (afmformats' names; absent ones left out); NULL with e set for
+ * a string attribute over VAFMD_REPLAY_MAX_ATTR_BYTES or no memory. */
+static json_t *s_attrs(const vafm_h5_meta *m, const char *path, uint64_t group, vafmd_err *e)
 {
     json_t *o = json_object();
+    if (!o) {
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "", "out of memory");
+        return NULL;
+    }
     const struct { const char *k; const char *v; } str[] = {
         { "imaging mode", m->imaging_mode }, { "feedback mode", m->feedback_mode }, { "instrument", m->instrument },
         { "software", m->software }, { "software version", m->software_version }, { "date", m->date },
         { "time", m->time }, { "session id", m->session_id }, { "curve id", m->curve_id },
     };
+    char where[48];
+    snprintf(where, sizeof where, "curve group '%" PRIu64 "':", group);
     for (size_t i = 0; i < sizeof str / sizeof *str; i++)
         if (str[i].v) {
+            if (s_attr_long(str[i].v, path, where, str[i].k, e)) {
+                json_decref(o);
+                return NULL;
+            }
             json_t *s = json_string(str[i].v); /* NULL for invalid UTF-8: leave it out */
             if (s)
                 json_object_set_new(o, str[i].k, s);
@@ -407,10 +430,37 @@ static int s_load_curve(vafmd_replay *r, const char *path, const vafm_h5_curve *
         return -1;
     }
     *mask &= have;
-    *c = (s_curve){ cv->group, n, o, s_pos(sens) ? sens : NAN, r->pass_s };
+    *c = (s_curve){ cv->group, n, o, s_pos(sens) ? sens : NAN, r->pass_s, 0 };
     r->pass_s += r->clock[o + n - 1];
     r->total += n;
     *rate_out = fs;
+    return 0;
+}
+
+/* Append a repetition of the loaded curve `src` at the end of the flat arrays (same samples, its own
+ * place in the pass). */
+static int s_repeat_curve(vafmd_replay *r, const s_curve *src, s_curve *c, size_t *cap, vafmd_err *e)
+{
+    size_t n = src->n, o = r->total;
+    if (o + n > VAFMD_REPLAY_MAX_SAMPLES) { /* counted before anything was read: kept as a guard */
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "the selection holds more than %u samples; replay holds "
+                      "at most %u samples (~100 MiB) in memory: select fewer curves", VAFMD_REPLAY_MAX_SAMPLES,
+                      VAFMD_REPLAY_MAX_SAMPLES);
+        return -1;
+    }
+    if (s_grow(r, o + n, cap)) {
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "curves", "out of memory for %zu samples", o + n);
+        return -1;
+    }
+    double *d[] = { r->height, r->force, r->defl, r->tip, r->time, r->clock };
+    for (size_t i = 0; i < sizeof d / sizeof *d; i++) /* src lies before o: no overlap */
+        memcpy(d[i] + o, d[i] + src->off, n * sizeof(double));
+    memcpy(r->seg + o, r->seg + src->off, n);
+    *c = *src;
+    c->off = o;
+    c->t_off = r->pass_s;
+    r->pass_s += r->clock[o + n - 1];
+    r->total += n;
     return 0;
 }
 
@@ -463,10 +513,18 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
     uint64_t declared = 0;
     for (size_t i = 0; i < n_sel; i++) { /* the lengths first: nothing is read beyond the pass's limit */
         vafm_h5_curve cv;
-        if ((rc = vafm_h5_reader_curve_info(rd, (size_t)sel[i], &cv, &verr)) != 0) {
+        size_t j = 0;
+        while (j < i && sel[j] != sel[i])
+            j++;
+        if (j < i) { /* a repetition: its length is known */
+            cv.n = r->c[j].n;
+            cv.group = r->c[j].group;
+        } else if ((rc = vafm_h5_reader_curve_info(rd, (size_t)sel[i], &cv, &verr)) != 0) {
             s_file_err(e, rc, c->replay_path, &verr);
             goto fail;
         }
+        r->c[i].n = cv.n;
+        r->c[i].group = cv.group;
         declared += cv.n;
         if (declared > VAFMD_REPLAY_MAX_SAMPLES) {
             vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "the selection holds more than %u samples (%llu up "
@@ -476,25 +534,63 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
             goto fail;
         }
     }
+    if (s_attr_long(pv.software, c->replay_path, "root", "software", e) ||
+        s_attr_long(pv.software_version, c->replay_path, "root", "software version", e))
+        goto fail;
+    /* Each distinct curve is read, checked and encoded once; a repetition copies its samples and shares
+     * its run.start entry (0.6.2 read and encoded it again per entry: 512 entries of one curve with a
+     * 1 MiB attribute took the daemon to 1.55 GB). attr_bytes: the attributes' encoded size, summed per
+     * entry as run.start spells them. */
+    size_t attr_total = 0;
     for (size_t i = 0; i < n_sel; i++) {
-        vafm_h5_curve cv;
-        rc = vafm_h5_reader_curve(rd, (size_t)sel[i], &cv, &verr);
-        if (rc) {
-            s_file_err(e, rc, c->replay_path, &verr);
-            goto fail;
+        size_t j = 0;
+        while (j < i && sel[j] != sel[i])
+            j++;
+        json_t *jc;
+        size_t attr_bytes;
+        if (j < i) {
+            if (s_repeat_curve(r, &r->c[j], &r->c[i], &cap, e))
+                goto fail;
+            jc = json_array_get(curves, j);
+            attr_bytes = r->c[j].attr_bytes;
+            json_incref(jc);
+        } else {
+            vafm_h5_curve cv;
+            rc = vafm_h5_reader_curve(rd, (size_t)sel[i], &cv, &verr);
+            if (rc) {
+                s_file_err(e, rc, c->replay_path, &verr);
+                goto fail;
+            }
+            double fs;
+            if (s_load_curve(r, c->replay_path, &cv, &r->c[i], &mask, &fs, &cap, e))
+                goto fail;
+            if (i == 0)
+                r->rate_Hz = fs;
+            json_t *attrs = s_attrs(&cv.meta, c->replay_path, cv.group, e);
+            if (!attrs)
+                goto fail;
+            attr_bytes = json_dumpb(attrs, NULL, 0, JSON_COMPACT);
+            jc = json_pack("{s:I,s:I,s:o,s:o}", "curve", (json_int_t)cv.group, "samples", (json_int_t)cv.n,
+                           "sample_rate_Hz", json_real(fs), "attributes", attrs);
+            if (!jc) {
+                vafmd_err_set(e, VAFMD_E_INTERNAL, "", "out of memory");
+                goto fail;
+            }
+            vafm_h5_truth t;
+            if (pv.is_vafm && vafm_h5_reader_truth(rd, cv.group, &t) == 0)
+                json_object_set_new(jc, "ground_truth", s_truth(&t));
+            r->c[i].attr_bytes = attr_bytes;
         }
-        double fs;
-        if (s_load_curve(r, c->replay_path, &cv, &r->c[i], &mask, &fs, &cap, e))
-            goto fail;
-        if (i == 0)
-            r->rate_Hz = fs;
-        json_t *jc = json_pack("{s:I,s:I,s:o,s:o}", "curve", (json_int_t)cv.group, "samples", (json_int_t)cv.n,
-                               "sample_rate_Hz", json_real(fs), "attributes", s_attrs(&cv.meta));
-        vafm_h5_truth t;
-        if (pv.is_vafm && vafm_h5_reader_truth(rd, cv.group, &t) == 0)
-            json_object_set_new(jc, "ground_truth", s_truth(&t));
         json_array_append_new(curves, jc);
         r->n_curves = i + 1;
+        attr_total += attr_bytes;
+        if (attr_total > VAFMD_REPLAY_MAX_ATTRS_TOTAL) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "curves", "the selection's curve attributes take more than %u "
+                          "bytes in run.start (%zu up to entry %zu, curve %llu); replay sends at most %u (8 MiB): "
+                          "select fewer curves", VAFMD_REPLAY_MAX_ATTRS_TOTAL, attr_total, i,
+                          (unsigned long long)r->c[i].group, VAFMD_REPLAY_MAX_ATTRS_TOTAL);
+            goto fail;
+        }
     }
     r->mask = mask;
     /* the flat arrays of channels that are not streamed are not needed */

@@ -21,6 +21,10 @@
 #define VAFMD_REPLAY_MAX_CURVES 4096u       /* entries of a selection */
 #define VAFMD_REPLAY_MAX_PASSES 1000000     /* "loop": passes over the selection; 0 = until abort */
 #define VAFMD_REPLAY_MAX_EVENTS 64          /* curve events kept between two blocks */
+/* Bounds of run.start: one string attribute (a curve's, or the root's software/software version), and
+ * the attributes of replay.curves, JSON-encoded, summed over the selection's entries (repeats count). */
+#define VAFMD_REPLAY_MAX_ATTR_BYTES 65536u      /* 64 KiB */
+#define VAFMD_REPLAY_MAX_ATTRS_TOTAL (8u << 20) /* 8 MiB */
 
 /* Channel bits of a run (bit i = channel i of the stream's channel table; time_s only in replays). */
 #define VAFMD_CH_TIME 5
