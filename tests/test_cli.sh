@@ -143,6 +143,13 @@ run params --json --preset contact-silica
 if [ "$rc" -eq 0 ] && [ -n "$paper" ] && grep -qF -- "$paper," "$TMP/out"; then
     ok "--omega_dt paper is the default step ($paper)"
 else bad "--omega_dt paper" "exit $rc, '$paper' vs $(grep -o '"omega_dt": [^,]*' "$TMP/out")"; fi
+# issue #29 item 10: a nonzero value that reads as 0 or a subnormal is an underflow, refused naming the range
+expect_fail "--T 1e-400 underflows" 2 T_K "'1e-400' underflows" "[0, 1e+09] K" -- params --T 1e-400
+expect_fail "--setpoint 1e-400 underflows" 2 setpoint_N underflows "[0, 1] N" -- params --setpoint 1e-400
+expect_fail "--setpoint_N=1e-300fN underflows" 2 setpoint_N underflows -- params --setpoint_N=1e-300fN
+expect_fail "--flush-interval 1e-400 underflows" 2 --flush-interval underflows 86400 -- campaign -n 1 --preset paper-fig4 --out "$TMP/uf.h5" --flush-interval 1e-400
+run params --setpoint 0e-400
+if [ "$rc" -eq 0 ] && grep -qE "^ *setpoint_N +0 " "$TMP/out"; then ok "--setpoint 0e-400 is zero"; else bad "--setpoint 0e-400 is zero" "exit $rc: $(grep setpoint_N "$TMP/out" | head -c 200)"; fi
 expect_fail "a value in the wrong unit names field and unit" 2 setpoint_N "'2nm'" "in N" -- params --setpoint 2nm
 expect_fail "a ramp rate needs a ramp size" 2 ramp_rate_Hz ramp_size_m -- params --ramp-size 0 --ramp-rate 1Hz
 expect_fail "a list element in the wrong unit" 2 "--T" "element 2" -- curves -n 1 --preset paper-fig4 --T 300K,5nN

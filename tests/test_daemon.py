@@ -1434,6 +1434,29 @@ def test_error_codes_pinned_down(fig4):
     assert fig4.cmd({"cmd": "status"})["state"] == "idle"
 
 
+def test_underflow_refused(fig4):
+    """Issue #29 item 10: jansson reads 1e-400 as 0 without a word, so set setpoint_N=1e-400 set 0. A
+    nonzero number that reads as 0 or a subnormal is out_of_range, naming the key; zero spelled any way,
+    the smallest normal double and digits inside strings are not underflows."""
+    before = fig4.cmd({"cmd": "get"})["values"]
+    cases = [
+        (b'{"cmd":"set","values":{"setpoint_N":1e-400},"id":9}', "setpoint_N", 9),
+        (b'{"cmd":"set","values":{"T_K":-4e-320}}', "T_K", None),
+        (b'{"cmd":"set","values":{"k_N_per_m":0.000001e-305}}', "k_N_per_m", None),
+        (b'{"cmd":"campaign","n":1,"T_K":[300, 1e-999]}', "T_K", None),
+    ]
+    for raw, field, rid in cases:
+        r = fig4.send_raw(raw)
+        assert (r["status"], r["code"], r.get("field"), r.get("id")) == ("error", "out_of_range", field, rid), (raw, r)
+        assert "underflows" in r["message"] and "2.2250738585072014e-308" in r["message"], r
+    assert fig4.cmd({"cmd": "get"})["values"] == before
+    for v in (b"0e-400", b"0.0", b"-0.000e-999", b"2.2250738585072014e-308"):
+        r = fig4.send_raw(b'{"cmd":"set","values":{"setpoint_N":' + v + b'}}')
+        assert r["status"] == "ok", (v, r)
+    r = fig4.send_raw(b'{"cmd":"set","values":{"setpoint_N":1e-9},"id":"1e-400 \\" 1e-400"}')
+    assert r["status"] == "ok" and fig4.cmd({"cmd": "get"})["values"]["setpoint_N"] == 1e-9, r
+
+
 # ---- compute ahead (lookahead_s; protocol/wire.md §5.1) --------------------------------------------------
 # paper-fig4 computes about as fast as real time (~63 ms of samples per curve at 200 kS/s), so at speed 0.1
 # the simulation runs far ahead of the release and the FIFO matters; these tests check its semantics, not

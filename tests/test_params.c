@@ -696,6 +696,8 @@ static void test_units_parse(void)
         { "N", "1nm" },  { "N", "1 nN " }, { "N", "1  nN" }, { "N", "1cN" },   { "m", "1um/s" }, { "m/s", "2um" },
         { "Hz", "70k" }, { "K", "25F" },   { "Pa", "1MPA" }, { "", "30m" },    { "N", "nan" },   { "N", "inf" },
         { "N", "0x10" }, { "N", "" },      { "N", "nN" },    { "K", "25kC" },  { "m", "1e" },    { "N", "1e400" },
+        /* underflow: a nonzero literal that reads as 0 or a subnormal (issue #29 item 10) */
+        { "N", "1e-400" }, { "N", "-1e-400" }, { "N", "4e-320" }, { "N", "1e-300fN" }, { "N", "0.00000001e-301" },
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         double v = 7.0;
@@ -715,6 +717,15 @@ static void test_units_parse(void)
     memset(&err, 0, sizeof err);
     ENSURE(vafm_params_set(&p, "setpoint_N", "2nm", &err) == VAFM_EINVAL && !strcmp(err.field, "setpoint_N") &&
            strstr(err.message, "[0, 1] N") != NULL);
+    /* an underflow names the field and the range; zero itself and the smallest normal double are values */
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_set(&p, "setpoint_N", "1e-400", &err) == VAFM_EINVAL && p.setpoint_N == 2e-9 &&
+           !strcmp(err.field, "setpoint_N") && strstr(err.message, "underflows") && strstr(err.message, "[0, 1] N"));
+    memset(&err, 0, sizeof err);
+    ENSURE(vafm_params_set(&p, "T_K", "1e-400", &err) == VAFM_EINVAL && p.T_K == 298.15 && !strcmp(err.field, "T_K"));
+    ENSURE(vafm_params_set(&p, "setpoint_N", "0e-400", NULL) == 0 && p.setpoint_N == 0.0);
+    ENSURE(vafm_params_set(&p, "setpoint_N", "0.000nN", NULL) == 0 && p.setpoint_N == 0.0);
+    ENSURE(vafm_params_set(&p, "setpoint_N", "2.2250738585072014e-308", NULL) == 0 && p.setpoint_N == DBL_MIN);
 }
 
 /* The instrument's ramp settings derive the fields underneath; a field changed afterwards is caught. */

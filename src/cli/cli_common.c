@@ -1,6 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /* What several `vafm` commands share: messages, number parsing, scene resolution, progress, formatting, output files, statistics tables (design: cli.h). */
 #include "cli/cli.h"
+#include <float.h>
+#include <math.h>
 
 /* ---- messages --------------------------------------------------------------------------------- */
 
@@ -430,6 +432,14 @@ int vafm_cli_parse_real(const char *opt, const char *text, double lo, double hi,
     double v = strtod(text, &end);
     if (end == text || *end != '\0' || !(v >= lo && v <= hi)) {
         vafm_cli_error("%s: '%s' is not a number in [%g, %g]%s%s", opt, text, lo, hi, unit[0] ? " " : "", unit);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    int nonzero = 0; /* "1e-400" reads as 0: an underflow, not a zero */
+    for (const char *c = text; *c && *c != 'e' && *c != 'E'; c++)
+        nonzero |= *c >= '1' && *c <= '9';
+    if (nonzero && fabs(v) < DBL_MIN) {
+        vafm_cli_error("%s: '%s' underflows (a nonzero value must be at least %.17g in magnitude; range [%g, %g]%s%s)",
+                       opt, text, DBL_MIN, lo, hi, unit[0] ? " " : "", unit);
         return VAFM_CLI_EXIT_USAGE;
     }
     *out = v;

@@ -1,5 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /* The only place where SI meets reduced units (physics notes, "Units"). */
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -143,6 +144,26 @@ static size_t s_number_length(const char *t)
     return i;
 }
 
+/* The number of n characters has a nonzero digit before its exponent. */
+static int s_nonzero_literal(const char *t, size_t n)
+{
+    for (size_t i = 0; i < n && t[i] != 'e' && t[i] != 'E'; i++)
+        if (t[i] >= '1' && t[i] <= '9')
+            return 1;
+    return 0;
+}
+
+/* A nonzero literal that reads as 0 or a subnormal (|v| < DBL_MIN, 2.2e-308) underflowed: refused, as
+ * "1e-400" (0.6.2 set such a value to 0 without a word). */
+static int s_underflow(const char *field, const char *text, size_t n, double v, vafm_error *err)
+{
+    if (!(fabs(v) < DBL_MIN) || !s_nonzero_literal(text, n))
+        return 0;
+    vafm_err_set(err, VAFM_EINVAL, field, "%s: '%s' underflows: a nonzero value must be at least %.17g in magnitude "
+                 "(it would read as %g)", field, text, DBL_MIN, v);
+    return VAFM_EINVAL;
+}
+
 int vafm_units_parse(const char *field, const char *text, const char *unit, double *out, vafm_error *err)
 {
     if (!field)
@@ -160,6 +181,8 @@ int vafm_units_parse(const char *field, const char *text, const char *unit, doub
         v = strtod(num, NULL);
         ok = isfinite(v);
     }
+    if (ok && s_underflow(field, text, n, v, err))
+        return VAFM_EINVAL;
     if (ok) {
         const char *sfx = end;
         if (*sfx == ' ')
@@ -182,6 +205,8 @@ int vafm_units_parse(const char *field, const char *text, const char *unit, doub
                 double w = s_scaled(text, n, s_prefixes[i].exp10);
                 if (!isfinite(w))
                     break;
+                if (s_underflow(field, text, n, w, err))
+                    return VAFM_EINVAL;
                 *out = w;
                 return 0;
             }

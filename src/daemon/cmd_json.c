@@ -7,6 +7,7 @@
 #include "record/scene_value.h"
 #include "record/scene.h"
 #include <inttypes.h>
+#include <float.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -308,6 +309,59 @@ static void s_key_before(const void *buf, size_t pos, char *key, size_t len)
     key[n] = '\0';
 }
 
+/* A number of valid JSON text buf that underflows: a nonzero literal that the decoder reads as 0 or a
+ * subnormal (|x| < DBL_MIN; jansson takes "1e-400" as 0 without a word, so set setpoint_N=1e-400 set 0).
+ * @return 1 with e set (out_of_range, field = the key before it), else 0. */
+static int s_underflow(const char *b, size_t len, vafmd_err *e)
+{
+    int in_str = 0;
+    for (size_t i = 0; i < len; i++) {
+        char ch = b[i];
+        if (in_str) {
+            if (ch == '\\')
+                i++;
+            else if (ch == '"')
+                in_str = 0;
+            continue;
+        }
+        if (ch == '"') {
+            in_str = 1;
+            continue;
+        }
+        if (ch != '-' && (ch < '0' || ch > '9'))
+            continue; /* outside strings only numbers hold '-' and digits */
+        size_t j = i, exp_at = 0;
+        int nonzero = 0;
+        for (; j < len && b[j] && strchr("+-.0123456789eE", b[j]); j++) {
+            if ((b[j] == 'e' || b[j] == 'E') && !exp_at)
+                exp_at = j;
+            nonzero |= !exp_at && b[j] >= '1' && b[j] <= '9';
+        }
+        if (nonzero) {
+            char small[64], *t = j - i < sizeof small ? small : malloc(j - i + 1);
+            if (t) {
+                memcpy(t, b + i, j - i);
+                t[j - i] = '\0';
+                double x = strtod(t, NULL);
+                if (fabs(x) < DBL_MIN) {
+                    char key[64] = "";
+                    s_key_before(b, i, key, sizeof key);
+                    vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, key, "the number %.40s%s%s%s%s underflows: a nonzero value "
+                                  "must be at least %.17g in magnitude (it would read as %g)", t,
+                                  j - i > 40 ? "..." : "", key[0] ? " of '" : "", key, key[0] ? "'" : "", DBL_MIN, x);
+                    if (t != small)
+                        free(t);
+                    return 1;
+                }
+                if (t != small)
+                    free(t);
+            }
+        }
+        i = j - 1;
+    }
+    return 0;
+}
+
 int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
 {
     memset(c, 0, sizeof *c);
@@ -334,6 +388,8 @@ int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
         return -1;
     }
     int rc = vafmd_cmd_decode_json(root, c, e);
+    if (rc == 0 && s_underflow(buf, len, e))
+        rc = -1; /* after the decoding: c keeps the request, so the error echoes its id */
     json_decref(root);
     return rc;
 }
