@@ -44,26 +44,55 @@ else
     bad "the installed vafm study" "$(tail -3 "$TMP/study")"
 fi
 
-# a user's C program against the installed client library, through pkg-config
+# a user's C program against the installed client library, through pkg-config: it calls every function
+# client.h declares, those of the headers it includes too (0.6.2's vafm-client.pc left out libvafm, so a
+# program calling vafm_strerror did not link: issue #29 item 11)
 PCDIR=$(dirname "$(find "$ROOT" -name vafm-client.pc | head -1)")
-cat >client_hello.c <<'CEOF'
+cat >client_all.c <<'CEOF'
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 #include "vafm/client.h"
-#include "vafm/common.h"
 int main(void)
 {
     vafm_client *c = NULL;
     vafm_error err = {0};
-    int r = vafm_client_new(&c, "ipc:///nonexistent/vafm-install-test", NULL, &err);
-    printf("client %s\n", r == 0 ? "created" : err.message);
+    int r = vafm_client_new(&c, "ipc:///nonexistent/vafm-install-test", "ipc:///nonexistent/vafm-install-pub", &err);
+    if (r) {
+        printf("vafm_client_new: %s (%s)\n", err.message, vafm_strerror(r));
+        return 1;
+    }
+    vafm_client_set_retries(c, 0);
+    int rc = vafm_client_set_curve(c, "short", "short", "short", &err); /* refused: not Z85 keys */
+    char *reply = NULL;
+    int rq = vafm_client_request(c, "{\"cmd\":\"status\"}", 50, &reply, &err); /* no daemon: times out */
+    const char *code = vafm_client_reply_code(c);
+    int sb = vafm_client_subscribe(c, 50, &err);
+    vafm_client_msg msg;
+    memset(&msg, 0, sizeof msg);
+    int rv = vafm_client_receive(c, &msg, 10, &err);
+    vafm_client_msg_clear(&msg);
+    unsigned long long gaps = (unsigned long long)vafm_client_gaps(c);
     vafm_client_destroy(&c);
-    return r == 0 ? 0 : 1;
+    free(reply);
+    unsigned char b[8];
+    vafm_wire_put_f64(b, 1.5);
+    printf("client %s api %06x: curve keys %s, request %s, code '%s', subscribe %d, receive %d, gaps %llu, f64 %g%s\n",
+           vafm_version(), vafm_version_api(), rc ? "refused" : "taken", rq ? vafm_strerror(rq) : "answered",
+           code ? code : "", sb, rv, gaps, vafm_wire_get_f64(b), c == NULL ? "" : " (destroy left c)");
+    return rc != 0 && rq != 0 && c == NULL ? 0 : 1;
 }
 CEOF
+missing=""
+for f in $(sed -n 's/^VAFM_API[^(]*[ *]\(vafm_[a-z0-9_]*\)(.*/\1/p' "$ROOT/include/vafm/client.h" "$ROOT/include/vafm/common.h"); do
+    grep -q "$f(" client_all.c || missing="$missing $f"
+done
+[ -z "$missing" ] && ok "the client test program calls every function of client.h and common.h" ||
+    bad "the client test program calls every function of client.h and common.h" "missing:$missing"
 flags=$(PKG_CONFIG_PATH=$PCDIR pkg-config --define-variable=prefix="$ROOT" --cflags --libs vafm-client 2>"$TMP/pc")
-if [ $? -eq 0 ] && cc -std=c17 client_hello.c $flags -o client_hello 2>"$TMP/cc"; then
+if [ $? -eq 0 ] && cc -std=c17 -Wall -Werror client_all.c $flags -o client_all 2>"$TMP/cc"; then
     ok "a C program builds against the installed client with pkg-config ($flags)"
-    ./client_hello >"$TMP/ch" 2>&1 && ok "... and runs: $(cat "$TMP/ch")" || bad "the C program runs" "$(cat "$TMP/ch")"
+    ./client_all >"$TMP/ch" 2>&1 && ok "... and runs: $(cat "$TMP/ch")" || bad "the C program runs" "$(cat "$TMP/ch")"
 else
     bad "a C program builds against the installed client with pkg-config" "$(cat "$TMP/pc" "$TMP/cc" | head -5)"
 fi
