@@ -115,6 +115,34 @@ grep -q "ExecStart=$PREFIX/bin/vafmd --config $PREFIX/etc/vafm/vafmd.json" "$ROO
     ok "the unit starts the installed vafmd with the installed configuration" || bad "the unit's ExecStart"
 grep -q '"tcp://127.0.0.1:5555"' "$ROOT/etc/vafm/vafmd.json" && ok "the default configuration is loopback" ||
     bad "the default configuration is loopback"
+# the installed configuration starts the documented default scene (contact-silica, docs/daemon.md and
+# `vafmd --help`): the scene `get` reports with it equals the one without a configuration (0.6.2's file
+# named paper-fig1, 7 °C and Q 0.63: issue #29 item 12). Private ipc endpoints, not the file's tcp ones.
+scene_with() { # CONFIG|"" -> the `get` reply's values, on stdout
+    local dir=$TMP/d$RANDOM cfg=() pid
+    mkdir -p "$dir"
+    if [ -n "$1" ]; then
+        /usr/bin/python3 -c 'import json,sys; c=json.load(open(sys.argv[1])); c.update(rep=sys.argv[2], pub=sys.argv[3]); json.dump(c, open(sys.argv[4], "w"))' \
+            "$1" "ipc://$dir/r" "ipc://$dir/p" "$dir/cfg.json" && cfg=(--config "$dir/cfg.json")
+    else
+        cfg=(--rep "ipc://$dir/r" --pub "ipc://$dir/p")
+    fi
+    "$ROOT/bin/vafmd" "${cfg[@]}" >"$dir/log" 2>&1 &
+    pid=$!
+    "$ROOT/bin/vafm" ctl --endpoint "ipc://$dir/r" --timeout 5000 get | /usr/bin/python3 -c 'import json,sys; print(json.dumps(json.load(sys.stdin)["values"], sort_keys=True))'
+    kill "$pid" 2>/dev/null
+    wait "$pid" 2>/dev/null
+}
+grep -q "default $(sed -n 's/.*"preset": *"\([^"]*\)".*/\1/p' "$ROOT/etc/vafm/vafmd.json"))" <("$ROOT/bin/vafmd" --help) &&
+    ok "the installed vafmd.json names the default preset of vafmd --help" ||
+    bad "the installed vafmd.json names the default preset of vafmd --help" "$(grep preset "$ROOT/etc/vafm/vafmd.json")"
+with=$(scene_with "$ROOT/etc/vafm/vafmd.json")
+without=$(scene_with "")
+if [ -n "$with" ] && [ "$with" = "$without" ]; then
+    ok "the installed vafmd.json starts the default scene"
+else
+    bad "the installed vafmd.json starts the default scene" "$(printf '%s\n%s' "$with" "$without" | head -c 600)"
+fi
 for h in h5.h record.h scene.h; do
     [ ! -e "$ROOT/include/vafm/$h" ] && ok "not installed: vafm/$h (a program-internal library's header)" ||
         bad "not installed: vafm/$h"
