@@ -44,11 +44,21 @@ bench: all
 	$(MESON) test -C $(BUILD) --benchmark --verbose
 
 # Install (meson install): `make install` into the build's prefix (default /usr/local), `make install
-# PREFIX=/opt/vafm`, `make install DESTDIR=/tmp/stage` (a staged root, as packagers do).
+# PREFIX=/opt/vafm`, `make install DESTDIR=/tmp/stage` (a staged root, as packagers do). PREFIX applies to
+# that install only: the build is configured for it (paths, the programs' RUNPATH), installed, then set back
+# to its own prefix, even when the install fails (0.6.2 left it at PREFIX for every later install).
 PREFIX ?=
 install: all
-	$(if $(PREFIX),$(MESON) configure $(BUILD) -Dprefix=$(PREFIX) && ninja -C $(BUILD),)
+ifeq ($(PREFIX),)
 	$(MESON) install -C $(BUILD) $(if $(DESTDIR),--destdir $(DESTDIR),)
+else
+	@old=$$($(MESON) introspect --buildoptions $(BUILD) | $(PY) -c 'import json,sys; print([o["value"] for o in json.load(sys.stdin) if o["name"] == "prefix"][0])'); \
+	[ -n "$$old" ] || { echo "make install: cannot read the prefix of $(BUILD)" >&2; exit 1; }; \
+	echo "make install: prefix $(PREFIX) for this install (the build's is $$old)"; \
+	$(MESON) configure $(BUILD) -Dprefix=$(PREFIX) && ninja -C $(BUILD) && \
+	$(MESON) install -C $(BUILD) $(if $(DESTDIR),--destdir $(DESTDIR),); rc=$$?; \
+	$(MESON) configure $(BUILD) -Dprefix=$$old && ninja -C $(BUILD) >/dev/null && exit $$rc
+endif
 
 # Debian packages (debian/): built from a copy of the tree in $(DEB)/vafm-VERSION, the .debs left in $(DEB),
 # then lintian (its errors fail) and tests/test_deb.sh (each package's files; the extracted vafm runs).

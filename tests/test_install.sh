@@ -21,6 +21,17 @@ ok "meson install into a temporary root"
 PREFIX=$(meson introspect --buildoptions "$BUILD" | /usr/bin/python3 -c 'import json,sys; print([o["value"] for o in json.load(sys.stdin) if o["name"] == "prefix"][0])')
 ROOT=$STAGE$PREFIX
 LIBDIR=$(dirname "$(find "$ROOT" -name 'libvafm.so*' | head -1)")
+# the installed programs find their libraries themselves (a RUNPATH relative to the binary, unless the
+# prefix is /usr): 0.6.2's did not, `make install PREFIX=/opt/vafm` gave a vafm that did not start
+for b in vafm vafmd; do
+    if [ "$PREFIX" = /usr ]; then
+        ok "$b: prefix /usr, no RUNPATH wanted"
+    elif env -u LD_LIBRARY_PATH "$ROOT/bin/$b" --version >"$TMP/v" 2>&1; then
+        ok "the installed $b runs without LD_LIBRARY_PATH"
+    else
+        bad "the installed $b runs without LD_LIBRARY_PATH" "$(head -2 "$TMP/v")"
+    fi
+done
 export LD_LIBRARY_PATH=$LIBDIR
 mkdir -p "$TMP/away" && cd "$TMP/away" || exit 1 # nowhere near the source tree
 
