@@ -1434,6 +1434,34 @@ def test_error_codes_pinned_down(fig4):
     assert fig4.cmd({"cmd": "status"})["state"] == "idle"
 
 
+def test_derived_value_conflicts_refused(fig4):
+    """Issue #29 item 9: a value that an instrument setting (> 0) derives (vafm_params_resolve) was dropped
+    without a word. Given with the setting in one set: out_of_range naming the setting; against the scene's
+    setting: out_of_range naming the value; the value the setting makes anyway, or the setting set to 0 with
+    it, passes; `get` sent back passes."""
+    assert fig4.cmd({"cmd": "set", "values": {"ramp_size_m": 1e-6, "ramp_rate_Hz": 1.0}})["status"] == "ok"
+    r = fig4.cmd({"cmd": "set", "values": {"v_approach_m_per_s": 3e-6}})
+    error_ok(r, "out_of_range", "v_approach_m_per_s")
+    assert "ramp_rate_Hz" in r["message"] and "in the same set" in r["message"], r
+    r = fig4.cmd({"cmd": "set", "values": {"v_approach_m_per_s": 3e-6, "ramp_rate_Hz": 2.0}})
+    error_ok(r, "out_of_range", "ramp_rate_Hz")
+    assert "v_approach_m_per_s" in r["message"], r
+    r = fig4.cmd({"cmd": "set", "values": {"setpoint_N": 1e-9, "setpoint_V": 0.5}})
+    error_ok(r, "out_of_range", "setpoint_V")
+    r = fig4.cmd({"cmd": "set", "values": {"sample_rate_Hz": 1e4, "segment_samples": 1000}})
+    error_ok(r, "out_of_range", "segment_samples")
+    vals = fig4.cmd({"cmd": "get"})["values"]
+    assert vals["v_approach_m_per_s"] == 2e-6 and vals["ramp_rate_Hz"] == 1.0, vals
+    assert fig4.cmd({"cmd": "set", "values": {"v_approach_m_per_s": 2e-6}})["status"] == "ok"  # what it makes
+    back = {k: vals[k] for k in ("ramp_size_m", "ramp_rate_Hz", "v_approach_m_per_s", "v_retract_m_per_s",
+                                 "sample_rate_Hz", "segment_samples", "setpoint_N", "setpoint_V")}
+    assert fig4.cmd({"cmd": "set", "values": back})["status"] == "ok"  # `get` sent back
+    r = fig4.cmd({"cmd": "set", "values": {"v_approach_m_per_s": 3e-6, "ramp_rate_Hz": 0}})
+    assert r["status"] == "ok", r
+    vals = fig4.cmd({"cmd": "get"})["values"]
+    assert vals["v_approach_m_per_s"] == 3e-6 and vals["ramp_rate_Hz"] == 0, vals
+
+
 def test_underflow_refused(fig4):
     """Issue #29 item 10: jansson reads 1e-400 as 0 without a word, so set setpoint_N=1e-400 set 0. A
     nonzero number that reads as 0 or a subnormal is out_of_range, naming the key; zero spelled any way,

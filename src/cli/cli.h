@@ -63,6 +63,7 @@ enum vafm_cli_opt {
 
 typedef struct vafm_cli_override {
     char name[64];
+    char opt[72]; /* the option as typed, for messages: --speed, --v, --v_approach_m_per_s */
     const char *value;
     int axis; /* 1 + O_T, O_V or O_K when that option set it (dropped where the option is a grid axis), else 0 */
 } vafm_cli_override;

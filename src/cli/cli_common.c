@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* What several `vafm` commands share: messages, number parsing, scene resolution, progress, formatting, output files, statistics tables (design: cli.h). */
 #include "cli/cli.h"
+#include "record/scene_value.h"
 #include <float.h>
 #include <math.h>
 
@@ -113,6 +114,71 @@ int vafm_cli_report(const vafm_error *err, int code)
     return vafm_cli_exit_of(code);
 }
 
+/* Is `field` set on the command line? (ctx: the args) */
+static int s_given_on_cli(const char *field, void *ctx)
+{
+    const vafm_cli_args *a = ctx;
+    for (int i = 0; i < a->n_ov; i++)
+        if (!strcmp(a->ov[i].name, field))
+            return 1;
+    return 0;
+}
+
+static const char *s_unit(const char *field)
+{
+    const vafm_param_info *f = vafm_params_field_find(field);
+    return f ? f->unit : "";
+}
+
+static const char *s_opt_of(const vafm_cli_args *a, const char *field)
+{
+    for (int i = a->n_ov - 1; i >= 0; i--) /* the last one: it is the value that stands */
+        if (!strcmp(a->ov[i].name, field))
+            return a->ov[i].opt;
+    return NULL;
+}
+
+/* A field given on the command line that an instrument setting (> 0) would derive in vafm_params_resolve,
+ * where 0.6.2 let the setting win without a word (--speed with --ramp-rate; --setpoint with --setpoint_V;
+ * --rate with --segment_samples; a scene file's ramp_rate_Hz over --speed). Both on the command line: a
+ * usage error naming both. The setting from the preset or the scene file: the command line wins, the
+ * setting is set to 0 (the fields it derives and the command line does not give keep what it made them)
+ * and a note on stderr says so. */
+static int s_derived_conflicts(const vafm_cli_args *a, vafm_cli_scene *sc)
+{
+    vafm_scene_conflict cf;
+    for (int next = 0; (next = vafm_scene_derived_next(&sc->p, next, s_given_on_cli, (void *)a, &cf)) != 0;) {
+        const char *opt = s_opt_of(a, cf.derived), *sopt = s_opt_of(a, cf.setting);
+        if (sopt) {
+            vafm_cli_error("%s and %s conflict: %s = %g %s sets %s (to %.6g %s), %s gives %.6g %s; give one of them "
+                           "(%s 0 gives %s directly)", opt, sopt, cf.setting, cf.setting_value, s_unit(cf.setting),
+                           cf.derived, cf.derives, s_unit(cf.derived), opt, cf.value, s_unit(cf.derived), sopt,
+                           cf.derived);
+            return VAFM_CLI_EXIT_USAGE;
+        }
+        vafm_params r = sc->p;
+        int resolved = vafm_params_resolve(&r, NULL) == 0;
+        for (int i = 0; resolved && i < vafm_params_field_count(); i++) { /* keep what the setting made the others */
+            const char *f = vafm_params_field_at(i)->name;
+            static const char *const derived[] = { "v_approach_m_per_s", "v_retract_m_per_s", "sample_rate_Hz",
+                                                   "setpoint_N" };
+            char buf[64];
+            for (size_t k = 0; k < sizeof derived / sizeof *derived; k++)
+                if (!strcmp(f, derived[k]) && !s_given_on_cli(f, (void *)a) &&
+                    !vafm_params_get(&r, f, buf, sizeof buf))
+                    vafm_params_set(&sc->p, f, buf, NULL);
+        }
+        vafm_error err;
+        if (vafm_params_set(&sc->p, cf.setting, "0", &err)) /* every setting takes 0 (off): not reached */
+            return vafm_cli_report(&err, VAFM_EINVAL);
+        fprintf(stderr, "vafm: note: %s (%s = %.6g %s) wins over %s = %g %s of the %s%s: %s set to 0\n", opt,
+                cf.derived, cf.value, s_unit(cf.derived), cf.setting, cf.setting_value, s_unit(cf.setting),
+                sc->file ? "scene file " : "preset ", sc->file ? sc->file : sc->preset, cf.setting);
+        next = 0; /* the setting is 0 now: look again from the start */
+    }
+    return 0;
+}
+
 /* Preset, then scene file (its own "preset" key first), then overrides in order; then validate. */
 int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int validate)
 {
@@ -142,6 +208,8 @@ int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int valid
         if (r)
             return vafm_cli_report(&err, r);
     }
+    if ((r = s_derived_conflicts(a, sc)) != 0)
+        return r;
     if ((r = vafm_params_resolve(&sc->p, &err)) != 0) /* the instrument's settings → speeds, rate, setpoint */
         return vafm_cli_report(&err, r);
     if (validate && (r = vafm_params_validate(&sc->p, &err)) != 0)

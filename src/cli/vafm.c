@@ -78,10 +78,11 @@ static const struct {
     { "radius", "R_m", NULL },
 };
 
-static vafm_cli_override *s_add_override(vafm_cli_args *a, const char *field, const char *value)
+static vafm_cli_override *s_add_override(vafm_cli_args *a, const char *opt, const char *field, const char *value)
 {
     vafm_cli_override *o = &a->ov[a->n_ov++];
     snprintf(o->name, sizeof o->name, "%s", field);
+    snprintf(o->opt, sizeof o->opt, "--%s", opt);
     o->value = value;
     o->axis = 0;
     return o;
@@ -115,9 +116,9 @@ static int s_parse_override(vafm_cli_args *a, const char *arg, size_t len, const
         vafm_cli_error("parameter --%s needs a value (--%s=VALUE or --%s VALUE)", buf, buf, buf);
         return VAFM_CLI_EXIT_USAGE;
     }
-    s_add_override(a, f1, value);
+    s_add_override(a, buf, f1, value);
     if (f2)
-        s_add_override(a, f2, value);
+        s_add_override(a, buf, f2, value);
     return 0;
 }
 
@@ -163,9 +164,9 @@ static int s_parse_option(vafm_cli_args *a, int argc, char **argv, int *i)
     } axes[] = { { O_T, "T_K", NULL }, { O_V, "v_approach_m_per_s", "v_retract_m_per_s" }, { O_K, "k_N_per_m", NULL } };
     for (size_t k = 0; k < sizeof axes / sizeof axes[0]; k++)
         if (axes[k].id == id) {
-            s_add_override(a, axes[k].f1, a->val[id])->axis = 1 + id;
+            s_add_override(a, s_options[id].name + 2, axes[k].f1, a->val[id])->axis = 1 + id;
             if (axes[k].f2)
-                s_add_override(a, axes[k].f2, a->val[id])->axis = 1 + id;
+                s_add_override(a, s_options[id].name + 2, axes[k].f2, a->val[id])->axis = 1 + id;
         }
     return 0;
 }

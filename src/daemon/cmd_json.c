@@ -723,6 +723,8 @@ void vafmd_cmd_free(vafmd_cmd *c)
     memset(c, 0, sizeof *c);
 }
 
+static int s_in_values(const char *field, void *values) { return json_object_get(values, field) != NULL; }
+
 int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd_err *e)
 {
     vafm_params np = *p;
@@ -752,6 +754,16 @@ int vafmd_apply_set(vafm_params *p, vafmd_settings *s, const vafmd_cmd *c, vafmd
                 return -1;
             }
         }
+    }
+    vafm_scene_conflict cf; /* a value resolve would overwrite: 0.6.2 dropped it without a word */
+    if (c->values && vafm_scene_derived_next(&np, 0, s_in_values, c->values, &cf)) {
+        const vafm_param_info *fd = vafm_params_field_find(cf.derived), *fs = vafm_params_field_find(cf.setting);
+        int both = json_object_get(c->values, cf.setting) != NULL;
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, both ? cf.setting : cf.derived, "'%s' = %.6g %s conflicts with %s'%s' = "
+                      "%g %s, which makes it %.6g %s: set %s to 0 %sto give %s directly", cf.derived, cf.value,
+                      fd->unit, both ? "" : "the scene's ", cf.setting, cf.setting_value, fs->unit, cf.derives,
+                      fd->unit, cf.setting, both ? "" : "in the same set ", cf.derived);
+        return -1;
     }
     vafm_error verr = { 0 };
     int rc = vafm_params_resolve(&np, &verr); /* ramp rate, extend/retract times, segment samples, setpoint_V */

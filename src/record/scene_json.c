@@ -8,6 +8,7 @@
  * integer where a boolean belongs, a negative or fractional seed are errors, not silent conversions.
  * The same code reads the scene and the campaign grid that vafm stores in its HDF5 files (vafm info).
  */
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -338,4 +339,39 @@ int vafm_scene_from_h5(const vafm_h5_reader *r, const char *path, vafm_params *p
         rc = vafm_scene_grid_parse(pv.grid_json, origin, g, err);
     }
     return rc;
+}
+
+/* ---- fields the instrument settings derive (vafm_params_resolve) --------------------------------- */
+
+static const struct {
+    const char *derived, *setting;
+} s_derived_pairs[] = {
+    { "v_approach_m_per_s", "ramp_rate_Hz" }, { "v_retract_m_per_s", "ramp_rate_Hz" },
+    { "v_approach_m_per_s", "extend_time_s" }, { "v_retract_m_per_s", "retract_time_s" },
+    { "sample_rate_Hz", "segment_samples" },   { "setpoint_N", "setpoint_V" },
+};
+
+static double s_field_value(const vafm_params *p, const char *name)
+{
+    char buf[64];
+    return vafm_params_get(p, name, buf, sizeof buf) ? NAN : strtod(buf, NULL);
+}
+
+int vafm_scene_derived_next(const vafm_params *p, int from, int (*given)(const char *field, void *ctx), void *ctx,
+                            vafm_scene_conflict *out)
+{
+    int n = (int)(sizeof s_derived_pairs / sizeof *s_derived_pairs);
+    for (int i = from < 0 ? 0 : from; i < n; i++) {
+        const char *d = s_derived_pairs[i].derived, *st = s_derived_pairs[i].setting;
+        double sv = s_field_value(p, st);
+        if (!(sv > 0) || !given(d, ctx))
+            continue;
+        vafm_params r = *p;
+        double want = vafm_params_resolve(&r, NULL) ? NAN : s_field_value(&r, d), have = s_field_value(p, d);
+        if (!isnan(want) && fabs(have - want) <= 1e-12 * fabs(want))
+            continue; /* the value given is the one the setting makes (a `get` sent back, a saved scene) */
+        *out = (vafm_scene_conflict){ d, st, have, sv, want };
+        return i + 1;
+    }
+    return 0;
 }
