@@ -156,6 +156,12 @@ VAFM_API int vafm_map_validate(const vafm_map_spec *s, const vafm_params *base, 
 VAFM_API int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int iy, vafm_params *out,
                             vafm_map_truth *truth, vafm_error *err);
 
+/** The sample at any point (x_m, y_m) of the scan plane, not only at pixel centres (the live controller's
+ *  surface under the tip, vafm/ctrl.h): its material (0 or 1) and its surface height above the substrate, m.
+ *  Pure and allocation-free; the spec is not validated here. Either output may be NULL.
+ *  @return 0, or VAFM_EINVAL (no spec, or a coordinate not finite). */
+VAFM_API int vafm_map_surface_at(const vafm_map_spec *s, double x_m, double y_m, int *material, double *height_m);
+
 /**
  * A campaign over the map's pixels (vafm/campaign.h): one curve per pixel, curve index = point =
  * iy·nx + ix. Sets grid->n_points, point_fn, point_user (= s, which must outlive the campaign) and

@@ -23,7 +23,8 @@ extern "C" {
 typedef struct vafm_sim vafm_sim;
 
 /** Segment labels of a force curve (the afmformats convention, plus dwell = 2, vafm's choice). */
-enum vafm_segment { VAFM_SEG_APPROACH = 0, VAFM_SEG_RETRACT = 1, VAFM_SEG_DWELL = 2, VAFM_SEG_TUNE = 3 };
+enum vafm_segment { VAFM_SEG_APPROACH = 0, VAFM_SEG_RETRACT = 1, VAFM_SEG_DWELL = 2, VAFM_SEG_TUNE = 3,
+                   VAFM_SEG_LIVE = 4 /**< the live scene (vafm_sim_live_begin) */ };
 
 /** A block of output samples. Arrays are owned by the simulation and valid during the callback. */
 typedef struct vafm_samples {
@@ -134,6 +135,39 @@ VAFM_API int vafm_sim_curve_begin(vafm_sim *s, uint64_t index);
 
 /** Start a thermal tune (free cantilever, piezo at start height) of p->tune_duration_s. */
 VAFM_API int vafm_sim_tune_begin(vafm_sim *s, uint64_t index);
+
+/** The live scene's Philox key: seed ^ this constant ("LIVESCN"), so that its stream is none of the curves'. */
+#define VAFM_SIM_LIVE_KEY UINT64_C(0x004c49564553434e)
+
+/** One output sample of the live scene as its commander sees it (SI; as vafm_samples). */
+typedef struct vafm_live_sample {
+    uint64_t index;      /**< sample index since vafm_sim_live_begin */
+    double time_s;       /**< time since vafm_sim_live_begin, s (the sample's own time: mid-interval for the
+                              mean anti-alias filter, the interval's end otherwise) */
+    double height_m;     /**< the support's (undeflected tip's) height above the local surface, m */
+    double deflection_m; /**< cantilever deflection, m, positive away from the sample */
+    double force_N;      /**< k·deflection, N, positive repulsive */
+    double tip_m;        /**< the tip's height above the undeformed local surface, m */
+    int in_contact;      /**< 1 if the tip touches the surface at the interval's end */
+} vafm_live_sample;
+
+/** The live scene's commander: called at every sample boundary (after the sample is made, before it is
+ *  handed to the sink) with that sample. @return the support's height above the local surface at the end
+ *  of the next sample interval, m (the support moves there at a constant speed: a change of the surface
+ *  under the tip, as an XY move over topography, is a change of this height); NaN ends the scene.
+ *  It runs on the advancing thread and must not block. */
+typedef double (*vafm_live_fn)(void *user, const vafm_live_sample *smp);
+
+/** Start the live scene (the always-on controller's lever, vafm/ctrl.h): the support at height0_m above
+ *  the local surface, the lever at thermal equilibrium there (in contact at equilibrium when height0_m ≤ 0
+ *  on a surface model), random stream `stream` of seed ^ VAFM_SIM_LIVE_KEY. It runs until fn returns NaN;
+ *  the lever's state carries from one sample to the next. Far from the surface (the gap beyond the
+ *  deterministic excursion plus 8 thermal standard deviations over the whole interval) a sample is one exact
+ *  free transition (a few normal draws); near or in contact the curve's machinery (integrator, exact well
+ *  step) runs. No piezo model, drift or contact-point scatter: the commander owns the geometry. Segment
+ *  VAFM_SEG_LIVE. Any running scene is discarded.
+ *  @return 0, or VAFM_EINVAL (no fn, height0_m not finite, or a tune-only simulation). */
+VAFM_API int vafm_sim_live_begin(vafm_sim *s, uint64_t stream, double height0_m, vafm_live_fn fn, void *user);
 
 /** Advance the running scene by up to max_samples output samples, handing them to fn (may be NULL).
  *  Never allocates. @return 1 while the scene goes on, 0 when it ended, or a negative VAFM_E* code. */

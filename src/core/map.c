@@ -298,6 +298,20 @@ static void s_sample_at(const vafm_map_spec *s, double x, double y, int *mat, do
     }
 }
 
+int vafm_map_surface_at(const vafm_map_spec *s, double x_m, double y_m, int *material, double *height_m)
+{
+    if (!s || !isfinite(x_m) || !isfinite(y_m))
+        return VAFM_EINVAL;
+    int mat;
+    double h;
+    s_sample_at(s, x_m, y_m, &mat, &h);
+    if (material)
+        *material = mat;
+    if (height_m)
+        *height_m = h;
+    return 0;
+}
+
 int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int iy, vafm_params *out,
                    vafm_map_truth *truth, vafm_error *err)
 {

@@ -28,75 +28,8 @@
 #include "core/piezo.h"
 #include "core/well_exact.h"
 
-#define S_BLOCK 512
-/* Integrator steps per sample from which the exact well step pays: it costs ~0.15-0.2 µs (closed-form
- * transition, an equilibrium Newton update, three normals, one contact solve), an in-contact step ~35 ns
- * (bench_step). */
-#define S_WELL_MIN_STEPS 8
+#include "core/sim_impl.h"
 
-enum { S_SCENE_NONE = 0, S_SCENE_CURVE, S_SCENE_TUNE };
-
-enum { S_PH_APPROACH = 0, S_PH_DWELL, S_PH_RETRACT, S_PH_TUNE, S_PH_DONE };
-
-/* The contact branch's equilibrium for one support position, with the branch's stiffness and curvature
- * there (the exact well step's linearisation). */
-typedef struct s_weq {
-    double uspr;     /* support position it belongs to */
-    double t;        /* s − s_m at the equilibrium (contact_jkr.c's t-form) */
-    double ueq;      /* equilibrium indentation */
-    double dF, F2, F3; /* dF/du, d²F/du² and d³F/du³ of the contact force there */
-    int ok;
-} s_weq;
-
-struct vafm_sim {
-    vafm_params p;
-    vafm_numerics nm;
-    const vafm_integrator_type *it;
-    vafm_kernel K;
-    vafm_free_ou ou;
-    vafm_jkr_table jtab;
-    long n_free;        /* exact free steps per sample */
-    double sigma_free;  /* √(kT/k): thermal spread of the free cantilever */
-    int mode_free;      /* the last sample interval used exact free steps */
-    int mode_well;      /* the last sample interval used the exact contact well */
-    int adaptive;       /* two step sizes: nm.dt near the instability, nm.dt_far elsewhere in contact */
-    int well_ok;        /* the exact contact-well step may be used */
-    double dt_cur;      /* the integrator step in use */
-    double guard_dt[2]; /* the steps the stiffness guard's thresholds belong to (0: none computed yet) */
-    double guard_u[2];  /* for u ≤ guard_u[i] the guard at guard_dt[i] passes without a contact solve (s_guard_u) */
-    int guard_next;     /* the entry the next threshold replaces */
-    s_weq weq;          /* the last well equilibrium (the next interval starts where it ends); reset per curve */
-    long sub_left;      /* integrator steps left in the current sample interval (> 0 only while one runs, or
-                         * when a step budget paused it: the next call goes on from there) */
-    int need_prepare;   /* the integrator's cached force is stale */
-    int batch_yield;    /* an advance for the batch kernel (batch.h): hand plain in-contact gjf runs out */
-    long batch_want;    /* the steps of the run handed out */
-    int batch_back;     /* the batch kernel ran them: the interval goes on (or ends) where it stopped */
-    /* scene */
-    int scene, phase;
-    uint64_t index, sample_index, tune_samples;
-    long dwell_left;
-    double uspr_start, uspr_turn, uspr_trigger, uspr_zlimit, retract_travel_max, margin, F_set;
-    double base_sum;    /* relative setpoint: sum of the baseline samples so far */
-    int base_n;         /* ... and their number (≤ VAFM_BASELINE_SAMPLES) */
-    double F_hold;      /* constant-force dwell: the force the feedback holds (reduced) */
-    double fb_gain;     /* constant-force dwell: piezo speed per unit force error, 1/(k·τ) (reduced) */
-    int trigger_off;    /* fault injection: the trigger never fires (vafm_sim_set_trigger) */
-    int tune_only;      /* made by vafm_sim_new_tune: a curve's cost was not checked, curves are refused */
-    int touched, detached_in_retract, flags, retract_samples;
-    double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
-    double touch_t, touch_uspr;
-    double surf0_m;     /* artefacts: the curve's contact point above the reference plane, m (vafm/detector.h) */
-    double drift_m_per_s, v_drift; /* the sample's drift, m/s and reduced (added to the support's speed) */
-    vafm_piezo pz;      /* the piezo's hysteresis and creep (pz.on: the support follows the actual extension) */
-    double v_cmd;       /* the command's speed in the current phase (reduced, as the support's) */
-    double ucmd_now, ucmd_next; /* with pz.on: the command at this sample boundary and at the next (reduced) */
-    vafm_error err;     /* detail of the error that ended the scene (err.code 0: none) */
-    /* output block */
-    size_t nblk;
-    double *bt, *bh, *bd, *bf, *btip, *bha;
-    uint8_t *bseg;
-};
 
 int vafm_sim_estimate_cost(const vafm_params *p, vafm_sim_estimate *out, vafm_error *err)
 {
@@ -174,8 +107,11 @@ static int s_sim_new(vafm_sim **out, const vafm_params *p, int tune_only, vafm_e
         nf = s->nm.n_sub;
     s->n_free = nf < 1 ? 1 : nf;
     vafm_free_ou_setup(&s->ou, K, Ts / (double)s->n_free, s->it->overdamped);
-    if (p->antialias == VAFM_ANTIALIAS_MEAN)
+    vafm_free_ou_setup(&s->ou_live, K, Ts, s->it->overdamped);
+    if (p->antialias == VAFM_ANTIALIAS_MEAN) {
         vafm_free_ou_integrate(&s->ou, K);
+        vafm_free_ou_integrate(&s->ou_live, K);
+    }
     s->sigma_free = sqrt(rd->kT / rd->k);
     s->adaptive = s->nm.n_sub_far != s->nm.n_sub;
     /* The exact well step costs about as much as a few integrator steps: it is used only where an output
@@ -321,7 +257,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
 {
     vafm_kernel *K = &s->K;
     const vafm_reduced *rd = &s->nm.r;
-    s_kernel_rng_init(K, s->p.seed, index);
+    s_kernel_rng_init(K, scene == S_SCENE_LIVE ? s->p.seed ^ VAFM_SIM_LIVE_KEY : s->p.seed, index);
     s->scene = scene;
     s->index = index;
     memset(&s->err, 0, sizeof s->err);
@@ -346,10 +282,12 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
 
     const double L = s->nm.sc.length_m;
     /* the sample's artefacts: where its surface is for this curve, and how fast it rises (a tune has neither) */
-    s->surf0_m = scene == S_SCENE_CURVE ? vafm_artefact_contact_point(&s->p, index) : s->p.surface_height_m;
+    s->surf0_m = scene == S_SCENE_CURVE  ? vafm_artefact_contact_point(&s->p, index)
+                 : scene == S_SCENE_LIVE ? 0.0 /* the commander owns the geometry */
+                                         : s->p.surface_height_m;
     s->drift_m_per_s = scene == S_SCENE_CURVE ? s->p.sample_drift_m_per_s : 0.0;
     s->v_drift = s->drift_m_per_s / s->nm.sc.speed_m_per_s;
-    s->uspr_start = -s->p.start_height_m / L;
+    s->uspr_start = -(scene == S_SCENE_LIVE ? s->live_h0_m : s->p.start_height_m) / L;
     s->F_set = s->p.setpoint_N / s->nm.sc.force_N;
     s->uspr_trigger = -s->p.trigger_height_m / L;
     s->margin = s->p.retract_margin_m / L;
@@ -389,7 +327,8 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     const int has_contact = (K->contact.type->flags & VAFM_CONTACT_SURFACE) != 0;
     /* Start in contact at equilibrium (pressed in, or start_in_contact), else free at the support; a
      * thermal draw of position then velocity either way. */
-    const int start_pressed = has_contact && (s->uspr_start >= K->contact.u_touch || s->p.start_in_contact);
+    const int start_pressed = has_contact && (s->uspr_start >= K->contact.u_touch ||
+                                              (scene != S_SCENE_LIVE && s->p.start_in_contact));
     double sigma_u = s->sigma_free;
     if (start_pressed) {
         double K_loc;
@@ -418,7 +357,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
     if (s->pz.on)
         s_piezo_next(s);
-    s->phase = scene == S_SCENE_CURVE ? S_PH_APPROACH : S_PH_TUNE;
+    s->phase = scene == S_SCENE_CURVE ? S_PH_APPROACH : scene == S_SCENE_LIVE ? S_PH_LIVE : S_PH_TUNE;
     if (scene == S_SCENE_TUNE)
         s->tune_samples = (uint64_t)llround(s->p.tune_duration_s * s->p.sample_rate_Hz);
 }
@@ -507,148 +446,6 @@ static void s_event(vafm_sim *s)
 }
 
 
-/* The equilibrium on the contact branch for the support at uspr: k(uspr − u) = F(u). Newton in t
- * (u = u_min + P(t), s = s_m + t) from the last equilibrium, which the pull has moved by a tiny fraction
- * of a well width, so two or three iterations reach round-off; a cold start, or a Newton run that does not
- * settle, takes the bracketing solver of theory.c instead. The derivatives come in closed form
- * (vafm_jkr_derivs, jkr_inline.h).
- * @return 1, or 0 if there is no equilibrium on the branch there (past the instability). */
-static int s_weq_solve(const vafm_sim *s, double uspr, double t_warm, s_weq *e)
-{
-    const vafm_kernel *K = &s->K;
-    const double s_m = K->contact.s_m, c = K->contact.c, k = K->k;
-    const double u_min = vafm_jkr_u_min(s_m), du_spr = uspr - u_min;
-    double t = t_warm;
-    int done = 0;
-    if (t > 0.0) {
-        for (int it = 0; it < 6 && !done; it++) {
-            const double sv = s_m + t, s2 = sv * sv, t2 = t * t;
-            /* g = k(Δu_spr − P) − F, F = s³((4/3)s³ − 2c) with s³ rounded as s²·s here (the warm-started
-             * Newton's own rounding, which the pinned curves depend on) */
-            const double g = k * (du_spr - vafm_jkr_P(s_m, t)) - s2 * sv * ((4.0 / 3.0) * s2 * sv - 2.0 * c);
-            const double dP = t * (4.0 * t2 + 12.0 * s_m * t + 12.0 * s_m * s_m);
-            const double dg = -k * dP - 2.0 * s2 * (4.0 * s2 * sv - 3.0 * c); /* −k·dP/dt − dF/ds */
-            const double d = g / dg;
-            if (!(dg < 0.0) || !(fabs(d) <= 0.25 * t))
-                break; /* not on the stable branch's monotone side, or far off: bracket instead */
-            t -= d;
-            /* quadratic convergence: after a step |d| ≤ 1e-12·t what is left is ~d²/t, far below an ulp */
-            done = fabs(d) <= 1e-12 * t;
-        }
-    }
-    if (!done) {
-        double ueq, Feq;
-        if (vafm_theory_equilibrium(K->contact.gamma, k, uspr, &ueq, &Feq) != 0)
-            return 0;
-        t = vafm_jkr_solve_t(s_m, ueq - u_min, 0.0);
-    }
-    if (!(t > 0.0))
-        return 0;
-    e->uspr = uspr;
-    e->t = t;
-    e->ueq = u_min + vafm_jkr_P(s_m, t);
-    vafm_jkr_derivs(s_m, c, t, &e->dF, &e->F2, &e->F3);
-    e->ok = 1;
-    return 1;
-}
-
-/* The equilibrium at uspr through the one-entry memo (consecutive well intervals share their boundary
- * support position bit for bit). */
-static int s_weq_at(vafm_sim *s, double uspr, s_weq *e)
-{
-    if (s->weq.ok && s->weq.uspr == uspr) {
-        *e = s->weq;
-        return 1;
-    }
-    if (!s_weq_solve(s, uspr, s->weq.ok ? s->weq.t : 0.0, e))
-        return 0;
-    s->weq = *e;
-    return 1;
-}
-
-/* The exact contact-well step over one sample interval, when it applies (see the file comment).
- * Linearised about the equilibrium u_eq0 at the interval start with stiffness K = k + dF/du there; the
- * equilibrium moves at r = (u_eq1 − u_eq0)/Ts and friction (relative to the support for the cantilever
- * channel, to the sample for the contact channel) shifts the centre by x_s = −m(η_tot·r − v)/K.
- * @return 1 if the interval was done this way, 0 if it does not apply. */
-static int s_well_interval(vafm_sim *s)
-{
-    vafm_kernel *K = &s->K;
-    const double Ts = s->nm.Ts, v = K->v_spr;
-    s_weq e0, e1;
-    if (!s_weq_at(s, K->u_spr, &e0) || !s_weq_at(s, K->u_spr + v * Ts, &e1))
-        return 0;
-    const double ueq0 = e0.ueq, ueq1 = e1.ueq;
-    const double Kt = K->k + e0.dF;
-    const double room = ueq0 - s->nm.u_soft; /* distance to where the branch's stiffness vanishes */
-    if (!(Kt > 0.0) || !(room > 0.0))
-        return 0;
-    const double eta = K->co[1].eta_tot, m = K->m;
-    const double sigma = sqrt(K->kT / Kt);
-    /* curvature of the force: the leading anharmonic effect is the mean shift −F″kT/(2K²); it is
-     * added to the centre line. The second order (the variance, below) goes into the stiffness, and the
-     * scheme is used only while the third order is small: |F″|σ ≤ 0.1 K and |F‴|σ² ≤ 0.1 K, which keeps
-     * the neglected terms of the variance at the 1e-3 level (they go like (F″σ/K)³ and F″F‴σ³/K²). */
-    const double F2 = e0.F2;
-    const double r = (ueq1 - ueq0) / Ts;
-    const double xs = -m * (eta * r - v) / Kt - F2 * K->kT / (2.0 * Kt * Kt);
-    const double X = K->u - (ueq0 + xs), V = K->w - r;
-    const double amp = sqrt(X * X + m * V * V / Kt);
-    if (!(6.0 * sigma <= room) || !(fabs(F2) * sigma <= 0.1 * Kt) || !(fabs(e0.F3) * sigma * sigma <= 0.1 * Kt) ||
-        !(amp <= 6.0 * sigma + 1e-3 * room))
-        return 0;
-    vafm_well3 W;
-    /* quasi-harmonic stiffness: the anharmonic well's variance to second order, kT/K·(1 + (F″σ/K)² −
-     * F‴σ²/(2K)) (perturbation theory of V = Kx²/2 + F″x³/6 + F‴x⁴/24 about its minimum; the mean
-     * shift above is the first order). Without it the box-car samples' variance and lag-1 autocovariance
-     * of a paper-fig4 dwell (F″σ/K = 0.04) came out 1.0% and 1.3% low (−3σ, −4σ at N = 4e6) against plain
-     * steps at a quarter step; with it, −0.2% and −0.3% (−0.7σ, −0.9σ). */
-    const double Keff = Kt / (1.0 + (F2 * sigma / Kt) * (F2 * sigma / Kt) - e0.F3 * sigma * sigma / (2.0 * Kt));
-    vafm_well3_setup(&W, Keff / m, eta, 2.0 * eta * K->kT / m, Ts);
-    const vafm_kernel K0 = *K; /* to undo a draw that leaves the linear range (see below) */
-    double x[3] = { X, V, 0.0 }, nx[3];
-    for (int i = 0; i < 3; i++)
-        nx[i] = W.phi[i][0] * x[0] + W.phi[i][1] * x[1];
-    if (K->thermal) {
-        double xi[3];
-        for (int i = 0; i < 3; i++)
-            xi[i] = s_kernel_normal(K);
-        for (int i = 0; i < 3; i++)
-            for (int j = 0; j <= i; j++)
-                nx[i] += W.chol[i][j] * xi[j];
-    }
-    s_kernel_phase(K, v);
-    K->dt = Ts;
-    K->n = 1;
-    K->t = K->t0 + Ts;
-    K->u_spr = K->uspr0 + v * Ts;
-    const double c0 = ueq0 + xs;
-    K->u = c0 + r * Ts + nx[0];
-    K->w = r + nx[1];
-    if (!(K->u > s->nm.u_soft)) {
-        /* a tail draw (≥ 6σ, probability < 1e-9) beyond the branch's soft point, where the linear well
-         * is qualitatively wrong: undo it, random stream included, and let the integrator do this
-         * interval from the same state */
-        *K = K0;
-        return 0;
-    }
-    /* the sample is the interval mean: centre line mean plus I/Ts */
-    K->acc_u = c0 + 0.5 * r * Ts + nx[2] / Ts;
-    K->acc_uspr = K->uspr0 + 0.5 * v * Ts;
-    K->acc_n = 1;
-    K->s = K->contact.s_m + e1.t; /* warm start: the body is within a few σ of the new equilibrium */
-    K->Fc = K->jtab ? vafm_jkr_table_force(K->jtab, &K->contact, K->u, &K->s) /* as the integrator's steps */
-                    : K->cforce(&K->contact, K->u, &K->s, NULL);
-    double fs = K->k * (K->u_spr - K->u);
-    K->f = fs - K->Fc;
-    if (fs < K->fs_min)
-        K->fs_min = fs;
-    K->steps++;
-    K->steps_contact++;
-    K->steps_free++;
-    return 1;
-}
-
 static void s_budget_take(uint64_t *budget, uint64_t n)
 {
     if (budget)
@@ -710,15 +507,20 @@ static int s_step_interval(vafm_sim *s, uint64_t *budget)
         /* far from the instability: in contact, not yet near u_spr* on the retract */
         const int far = K->in_contact && (s->phase != S_PH_RETRACT || !(K->u_spr - s->nm.u_spr_star <= s->nm.y_near));
         if (s_free_safe(s)) {
+            /* the live scene takes one exact transition per sample (its dead travel is long, nobody needs the
+             * spring force between samples); a curve keeps its sub-steps (the retract's most tensile force) */
+            const int live = s->scene == S_SCENE_LIVE;
+            const vafm_free_ou *ou = live ? &s->ou_live : &s->ou;
+            const long nf = live ? 1 : s->n_free;
             if (!s->mode_free) {
                 s_kernel_phase(K, K->v_spr);
-                K->dt = s->ou.h;
+                K->dt = ou->h;
                 s->mode_free = 1;
                 s->mode_well = 0;
             }
-            vafm_free_ou_steps(K, &s->ou, s->n_free);
-            s_budget_take(budget, (uint64_t)s->n_free);
-        } else if (far && s->well_ok && s_well_interval(s)) {
+            vafm_free_ou_steps(K, ou, nf);
+            s_budget_take(budget, (uint64_t)nf);
+        } else if (far && s->well_ok && vafm_sim_well_interval(s)) {
             s->mode_well = 1;
             s->mode_free = 0;
             s->need_prepare = 1;
@@ -877,6 +679,44 @@ static void s_phase_logic(vafm_sim *s, double force)
     }
 }
 
+/* The live scene's sample boundary: the commander sees sample j of the block and says where the support is
+ * at the end of the next interval; the support moves there at a constant speed. */
+static void s_live_logic(vafm_sim *s, size_t j)
+{
+    vafm_kernel *K = &s->K;
+    const vafm_scale *sc = &s->nm.sc;
+    const vafm_live_sample smp = { s->sample_index - 1, s->bt[j], s->bh[j], s->bd[j], s->bf[j], s->btip[j],
+                                   K->in_contact };
+    const double h = s->live_fn(s->live_user, &smp);
+    if (!isfinite(h)) {
+        s->phase = S_PH_DONE;
+        return;
+    }
+    s_set_speed(s, (-h / sc->length_m - K->u_spr) / s->nm.Ts);
+    s->need_prepare = 1;
+}
+
+int vafm_sim_live_begin(vafm_sim *s, uint64_t stream, double height0_m, vafm_live_fn fn, void *user)
+{
+    if (!s)
+        return VAFM_EINVAL;
+    memset(&s->err, 0, sizeof s->err);
+    if (!fn || !isfinite(height0_m) || fabs(height0_m) > 1.0) {
+        vafm_err_set(&s->err, VAFM_EINVAL, "height0_m", "the live scene needs a commander and a finite start height "
+                     "within [-1, 1] m (got %g)", height0_m);
+        return VAFM_EINVAL;
+    }
+    if (s->tune_only) {
+        vafm_err_set(&s->err, VAFM_EINVAL, "", "this simulation runs thermal tunes only (vafm_sim_new_tune)");
+        return VAFM_EINVAL;
+    }
+    s->live_fn = fn;
+    s->live_user = user;
+    s->live_h0_m = height0_m;
+    s_begin(s, stream, S_SCENE_LIVE);
+    return 0;
+}
+
 static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sample_fn fn, void *user);
 
 int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user)
@@ -908,6 +748,7 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         int seg = s->phase == S_PH_APPROACH ? VAFM_SEG_APPROACH
                   : s->phase == S_PH_DWELL  ? VAFM_SEG_DWELL
                   : s->phase == S_PH_TUNE   ? VAFM_SEG_TUNE
+                  : s->phase == S_PH_LIVE   ? VAFM_SEG_LIVE
                                             : VAFM_SEG_RETRACT;
         int r = s_step_interval(s, budget);
         if (r == 3)
@@ -955,7 +796,10 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
             if (force < s->sample_min_force)
                 s->sample_min_force = force;
         }
-        s_phase_logic(s, force);
+        if (s->phase == S_PH_LIVE)
+            s_live_logic(s, j);
+        else
+            s_phase_logic(s, force);
         if (s->pz.on && s->phase != S_PH_DONE)
             s_piezo_next(s);
         if (s->nblk == S_BLOCK)

@@ -1,0 +1,98 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The simulation object's private state, shared by the files of its scenes (not installed): sim.c (the
+ * curve and the thermal tune, the sample loop) and sim_live.c (the live scene of vafm/ctrl.h).
+ *
+ * A scene is a state machine advanced one output sample at a time by sim.c's sample loop; its phase
+ * decides the segment label and what happens at each sample boundary (s_phase_logic for the curve and
+ * the tune; vafm_sim_live_logic for the live scene, whose support motion a caller commands). Everything
+ * here is allocated in vafm_sim_new: no scene allocates, locks or does I/O while it runs.
+ */
+#ifndef VAFM_CORE_SIM_IMPL_H
+#define VAFM_CORE_SIM_IMPL_H
+
+#include "vafm/sim.h"
+#include "core/internal.h"
+#include "core/kernel.h"
+#include "core/piezo.h"
+
+#define S_BLOCK 512
+/* Integrator steps per sample from which the exact well step pays: it costs ~0.15-0.2 µs (closed-form
+ * transition, an equilibrium Newton update, three normals, one contact solve), an in-contact step ~35 ns
+ * (bench_step). */
+#define S_WELL_MIN_STEPS 8
+
+enum { S_SCENE_NONE = 0, S_SCENE_CURVE, S_SCENE_TUNE, S_SCENE_LIVE };
+
+enum { S_PH_APPROACH = 0, S_PH_DWELL, S_PH_RETRACT, S_PH_TUNE, S_PH_LIVE, S_PH_DONE };
+
+/* The contact branch's equilibrium for one support position, with the branch's stiffness and curvature
+ * there (the exact well step's linearisation). */
+typedef struct s_weq {
+    double uspr;     /* support position it belongs to */
+    double t;        /* s − s_m at the equilibrium (contact_jkr.c's t-form) */
+    double ueq;      /* equilibrium indentation */
+    double dF, F2, F3; /* dF/du, d²F/du² and d³F/du³ of the contact force there */
+    int ok;
+} s_weq;
+
+struct vafm_sim {
+    vafm_params p;
+    vafm_numerics nm;
+    const vafm_integrator_type *it;
+    vafm_kernel K;
+    vafm_free_ou ou;
+    vafm_jkr_table jtab;
+    long n_free;        /* exact free steps per sample */
+    double sigma_free;  /* √(kT/k): thermal spread of the free cantilever */
+    int mode_free;      /* the last sample interval used exact free steps */
+    int mode_well;      /* the last sample interval used the exact contact well */
+    int adaptive;       /* two step sizes: nm.dt near the instability, nm.dt_far elsewhere in contact */
+    int well_ok;        /* the exact contact-well step may be used */
+    double dt_cur;      /* the integrator step in use */
+    double guard_dt[2]; /* the steps the stiffness guard's thresholds belong to (0: none computed yet) */
+    double guard_u[2];  /* for u ≤ guard_u[i] the guard at guard_dt[i] passes without a contact solve (s_guard_u) */
+    int guard_next;     /* the entry the next threshold replaces */
+    s_weq weq;          /* the last well equilibrium (the next interval starts where it ends); reset per curve */
+    long sub_left;      /* integrator steps left in the current sample interval (> 0 only while one runs, or
+                         * when a step budget paused it: the next call goes on from there) */
+    int need_prepare;   /* the integrator's cached force is stale */
+    int batch_yield;    /* an advance for the batch kernel (batch.h): hand plain in-contact gjf runs out */
+    long batch_want;    /* the steps of the run handed out */
+    int batch_back;     /* the batch kernel ran them: the interval goes on (or ends) where it stopped */
+    /* scene */
+    int scene, phase;
+    uint64_t index, sample_index, tune_samples;
+    long dwell_left;
+    double uspr_start, uspr_turn, uspr_trigger, uspr_zlimit, retract_travel_max, margin, F_set;
+    double base_sum;    /* relative setpoint: sum of the baseline samples so far */
+    int base_n;         /* ... and their number (≤ VAFM_BASELINE_SAMPLES) */
+    double F_hold;      /* constant-force dwell: the force the feedback holds (reduced) */
+    double fb_gain;     /* constant-force dwell: piezo speed per unit force error, 1/(k·τ) (reduced) */
+    int trigger_off;    /* fault injection: the trigger never fires (vafm_sim_set_trigger) */
+    int tune_only;      /* made by vafm_sim_new_tune: a curve's cost was not checked, curves are refused */
+    int touched, detached_in_retract, flags, retract_samples;
+    double uspr_detach, fs_detach, t_detach, t_retract0, sample_min_force, fs_min_retract;
+    double touch_t, touch_uspr;
+    double surf0_m;     /* artefacts: the curve's contact point above the reference plane, m (vafm/detector.h) */
+    double drift_m_per_s, v_drift; /* the sample's drift, m/s and reduced (added to the support's speed) */
+    vafm_piezo pz;      /* the piezo's hysteresis and creep (pz.on: the support follows the actual extension) */
+    double v_cmd;       /* the command's speed in the current phase (reduced, as the support's) */
+    double ucmd_now, ucmd_next; /* with pz.on: the command at this sample boundary and at the next (reduced) */
+    vafm_error err;     /* detail of the error that ended the scene (err.code 0: none) */
+    /* the live scene (vafm_sim_live_begin): the caller commands the support at each sample boundary */
+    vafm_live_fn live_fn;
+    void *live_user;
+    double live_h0_m;   /* the support's height above the surface at the start, m */
+    vafm_free_ou ou_live; /* exact free transition over a whole sample interval (live scene, far from the surface) */
+    /* output block */
+    size_t nblk;
+    double *bt, *bh, *bd, *bf, *btip, *bha;
+    uint8_t *bseg;
+};
+
+/** The exact contact-well step over the current sample interval (sim_well.c), when it applies.
+ *  @return 1 if the interval was done this way, 0 if it does not apply (nothing changed). */
+int vafm_sim_well_interval(vafm_sim *s);
+
+#endif
