@@ -1,0 +1,338 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The always-on controller (vafm/ctrl.h): lifecycle, commands, status, events and the advance that drives the
+ * simulation's live scene. Commands set targets and states only; ctrl_loop.c acts on them at the next sample
+ * boundary. Everything is allocated in vafm_ctrl_new.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "core/ctrl_impl.h"
+#include "core/internal.h"
+
+static int s_live_start(vafm_ctrl *c)
+{
+    const double gap = c->motor_z - c->piezo_z - c->surface;
+    return vafm_sim_live_begin(c->sim, c->cp.stream + c->restarts, gap, vafm_ctrl_loop, c);
+}
+
+int vafm_ctrl_new(vafm_ctrl **out, const vafm_params *scene, const vafm_ctrl_params *cp, const vafm_map_spec *map,
+                  vafm_error *err)
+{
+    if (!out || !scene) {
+        vafm_err_set(err, VAFM_EINVAL, "", "vafm_ctrl_new: no output or scene given");
+        return VAFM_EINVAL;
+    }
+    *out = NULL;
+    vafm_ctrl_params def;
+    if (!cp) {
+        vafm_ctrl_params_default(&def);
+        cp = &def;
+    }
+    int r = vafm_ctrl_check(cp, scene->k_N_per_m, scene->sensitivity_m_per_V, err);
+    if (r)
+        return r;
+    vafm_ctrl *c = calloc(1, sizeof *c);
+    if (!c)
+        return VAFM_ENOMEM;
+    c->cp = *cp;
+    c->map = map;
+    c->scene = *scene;
+    /* the scene's numerics (time step, contact table) must cover the forces the controller can reach: up to the
+     * force limit, and what one sample interval can add past it before the crash is seen */
+    c->scene.setpoint_N = fmax(scene->setpoint_N, 2.0 * cp->force_limit_N);
+    c->scene.setpoint_V = 0.0;
+    c->scene.trigger = VAFM_TRIGGER_FORCE;
+    r = vafm_sim_new(&c->sim, &c->scene, err);
+    if (r) {
+        free(c);
+        return r;
+    }
+    c->Ts = 1.0 / c->scene.sample_rate_Hz;
+    c->k = c->scene.k_N_per_m;
+    c->invols = c->scene.sensitivity_m_per_V;
+    vafm_detector_begin(&c->det, &c->scene, cp->stream ^ VAFM_SIM_LIVE_KEY);
+    c->state = VAFM_CTRL_IDLE;
+    c->motor_z = c->motor_target = cp->motor_z0_m;
+    c->piezo_z = c->z_target = 0.0;
+    c->z_speed = cp->z_speed_m_per_s;
+    c->xy_speed = cp->xy_speed_m_per_s;
+    c->surface = vafm_ctrl_surface(c, 0.0, 0.0);
+    c->F_target = NAN;
+    c->baseline = 0.0;
+    c->base_boot = 1;
+    c->crash_force = NAN;
+    if (!cp->setpoint_relative)
+        c->F_target = vafm_ctrl_setpoint_abs(cp, 0.0, c->k, c->invols, c->scene.baseline_offset_V);
+    r = s_live_start(c);
+    if (r) {
+        if (err)
+            *err = *vafm_sim_error(c->sim);
+        vafm_sim_destroy(&c->sim);
+        free(c);
+        return r;
+    }
+    *out = c;
+    return 0;
+}
+
+void vafm_ctrl_destroy(vafm_ctrl **c)
+{
+    if (!c || !*c)
+        return;
+    vafm_sim_destroy(&(*c)->sim);
+    free(*c);
+    *c = NULL;
+}
+
+static void s_flush(vafm_ctrl *c, vafm_ctrl_sample_fn fn, void *user)
+{
+    if (c->nblk == 0)
+        return;
+    if (fn) {
+        vafm_ctrl_samples b = { c->nblk, c->sample - c->nblk, c->b_t, c->b_motor, c->b_z, c->b_x, c->b_y, c->b_gap,
+                                c->b_defl, c->b_f, c->b_v, c->b_err, c->b_surf, c->b_state };
+        fn(user, &b);
+    }
+    c->nblk = 0;
+}
+
+long vafm_ctrl_advance(vafm_ctrl *c, size_t max_samples, vafm_ctrl_sample_fn fn, void *user)
+{
+    if (!c)
+        return VAFM_EINVAL;
+    const uint64_t first = c->sample;
+    size_t left = max_samples;
+    while (left > 0) {
+        size_t chunk = VAFM_CTRL_BLOCK - c->nblk;
+        if (chunk > left)
+            chunk = left;
+        const uint64_t before = c->sample;
+        int r = vafm_sim_advance(c->sim, chunk, NULL, NULL);
+        left -= (size_t)(c->sample - before);
+        if (c->nblk == VAFM_CTRL_BLOCK)
+            s_flush(c, fn, user);
+        if (r < 0) {
+            /* the lever restarts at rest where it was, on the next stream (a session stays reproducible) */
+            vafm_ctrl_push(c, VAFM_CTRL_EV_SIM_ERROR, r, 0.0);
+            c->restarts++;
+            s_flush(c, fn, user);
+            int r2 = s_live_start(c);
+            return r2 ? r2 : r;
+        }
+        if (r == 0 || c->sample == before)
+            break; /* cannot happen: the live scene ends only when told */
+    }
+    s_flush(c, fn, user);
+    return (long)(c->sample - first);
+}
+
+double vafm_ctrl_sample_interval_s(const vafm_ctrl *c)
+{
+    return c ? c->Ts : NAN;
+}
+
+const vafm_ctrl_params *vafm_ctrl_params_get(const vafm_ctrl *c)
+{
+    return c ? &c->cp : NULL;
+}
+
+int vafm_ctrl_status_get(const vafm_ctrl *c, vafm_ctrl_status *st)
+{
+    if (!c || !st)
+        return VAFM_EINVAL;
+    memset(st, 0, sizeof *st);
+    st->state = c->state;
+    st->engage_phase = c->phase;
+    st->last_fail = c->last_fail;
+    st->sample = c->sample;
+    st->time_s = (double)c->sample * c->Ts;
+    st->motor_z_m = c->motor_z;
+    st->piezo_z_m = c->piezo_z;
+    st->x_m = c->x;
+    st->y_m = c->y;
+    st->target_x_m = c->moving ? c->tx : c->x;
+    st->target_y_m = c->moving ? c->ty : c->y;
+    st->moving = c->moving;
+    st->surface_m = c->surface;
+    st->gap_m = c->motor_z - c->piezo_z - c->surface;
+    st->in_contact = c->in_contact;
+    st->feedback = c->feedback;
+    st->saturated = c->saturated;
+    st->setpoint_N = c->F_target;
+    st->baseline_N = c->baseline;
+    st->error_N = c->error;
+    st->force_N = c->force;
+    st->deflection_m = c->defl;
+    st->signal_V = c->volts;
+    st->sum_V = c->cp.sum_V;
+    st->invols_m_per_V = c->invols;
+    st->crash_force_N = c->crash_force;
+    st->motor_steps = c->motor_steps;
+    return 0;
+}
+
+int vafm_ctrl_event_pop(vafm_ctrl *c, vafm_ctrl_event *ev)
+{
+    if (!c || !ev)
+        return 0;
+    if (c->ev_dropped && c->ev_n < VAFM_CTRL_EVENTS) {
+        const uint64_t n = c->ev_dropped;
+        c->ev_dropped = 0;
+        vafm_ctrl_push(c, VAFM_CTRL_EV_OVERFLOW, 0, (double)n);
+    }
+    if (c->ev_n == 0)
+        return 0;
+    *ev = c->ev[c->ev_head];
+    c->ev_head = (c->ev_head + 1) % VAFM_CTRL_EVENTS;
+    c->ev_n--;
+    return 1;
+}
+
+/* ---- commands ---------------------------------------------------------------------------------- */
+
+int vafm_ctrl_engage(vafm_ctrl *c)
+{
+    if (!c)
+        return VAFM_EINVAL;
+    if (c->state == VAFM_CTRL_ENGAGED || c->state == VAFM_CTRL_APPROACHING || c->state == VAFM_CTRL_CRASHED)
+        return VAFM_ESTATE;
+    c->state = VAFM_CTRL_APPROACHING;
+    c->phase = VAFM_CTRL_ENGAGE_BASELINE;
+    c->feedback = 0;
+    c->saturated = 0;
+    c->last_fail = VAFM_CTRL_FAIL_NONE;
+    c->t_engage0 = c->t_now;
+    c->base_sum = 0.0;
+    c->base_n = 0;
+    c->base_boot = 0;
+    c->motor_target = c->motor_z;
+    c->z_target = 0.0; /* the baseline is measured with the piezo retracted */
+    c->z_speed = c->cp.z_speed_m_per_s;
+    c->z_moving = 1;
+    return 0;
+}
+
+int vafm_ctrl_withdraw(vafm_ctrl *c, unsigned motor_steps)
+{
+    if (!c)
+        return VAFM_EINVAL;
+    if (c->motor_z + motor_steps * c->cp.motor_step_m > c->cp.motor_max_m)
+        return VAFM_EINVAL;
+    if (c->state == VAFM_CTRL_APPROACHING) {
+        c->last_fail = VAFM_CTRL_FAIL_ABORTED;
+        vafm_ctrl_push(c, VAFM_CTRL_EV_FAILED, VAFM_CTRL_FAIL_ABORTED, c->motor_z);
+    }
+    c->state = VAFM_CTRL_WITHDRAWING;
+    c->phase = VAFM_CTRL_ENGAGE_NONE;
+    c->feedback = 0;
+    c->saturated = 0;
+    c->moving = 0;
+    c->motor_target = c->motor_z;
+    c->back_steps = motor_steps;
+    c->z_target = 0.0;
+    c->z_speed = c->cp.z_speed_m_per_s;
+    c->z_moving = 1;
+    return 0;
+}
+
+int vafm_ctrl_move(vafm_ctrl *c, double x_m, double y_m, double speed_m_per_s, vafm_error *err)
+{
+    if (!c)
+        return VAFM_EINVAL;
+    if (c->state == VAFM_CTRL_APPROACHING) {
+        vafm_err_set(err, VAFM_ESTATE, "", "move: an engage is under way");
+        return VAFM_ESTATE;
+    }
+    const double half = 0.5 * c->cp.xy_range_m;
+    if (!isfinite(x_m) || !isfinite(y_m) || fabs(x_m) > half || fabs(y_m) > half) {
+        const int bad_x = !(fabs(x_m) <= half);
+        vafm_err_set(err, VAFM_EINVAL, bad_x ? "x_m" : "y_m", "move: %s = %g m is beyond the scanner's range [%g, %g] m",
+                     bad_x ? "x_m" : "y_m", bad_x ? x_m : y_m, -half, half);
+        vafm_ctrl_push(c, VAFM_CTRL_EV_XY_RANGE, 0, bad_x ? x_m : y_m);
+        return VAFM_EINVAL;
+    }
+    if (!(speed_m_per_s <= 1e-2)) {
+        vafm_err_set(err, VAFM_EINVAL, "speed_m_per_s", "move: speed %g m/s is outside (0, 0.01] m/s (<= 0: the default)",
+                     speed_m_per_s);
+        return VAFM_EINVAL;
+    }
+    c->tx = x_m;
+    c->ty = y_m;
+    c->xy_speed = speed_m_per_s > 0 ? speed_m_per_s : c->cp.xy_speed_m_per_s;
+    c->xy_dist = 0.0;
+    c->moving = 1;
+    return 0;
+}
+
+int vafm_ctrl_z(vafm_ctrl *c, double z_m, vafm_error *err)
+{
+    if (!c)
+        return VAFM_EINVAL;
+    if (c->state == VAFM_CTRL_APPROACHING || c->state == VAFM_CTRL_WITHDRAWING) {
+        vafm_err_set(err, VAFM_ESTATE, "", "z: the controller is %s", vafm_ctrl_state_name(c->state));
+        return VAFM_ESTATE;
+    }
+    if (!(z_m >= 0.0 && z_m <= c->cp.piezo_range_m)) {
+        vafm_err_set(err, VAFM_EINVAL, "z_m", "z: %g m is outside the piezo range [0, %g] m", z_m, c->cp.piezo_range_m);
+        return VAFM_EINVAL;
+    }
+    if (c->state != VAFM_CTRL_CRASHED)
+        c->state = VAFM_CTRL_IDLE;
+    c->feedback = 0;
+    c->saturated = 0;
+    c->z_target = z_m;
+    c->z_speed = c->cp.z_speed_m_per_s;
+    c->z_moving = 1;
+    return 0;
+}
+
+int vafm_ctrl_feedback(vafm_ctrl *c, int on)
+{
+    if (!c)
+        return VAFM_EINVAL;
+    if (c->state == VAFM_CTRL_APPROACHING || c->state == VAFM_CTRL_WITHDRAWING || (on && c->state == VAFM_CTRL_CRASHED))
+        return VAFM_ESTATE;
+    if (on && !c->feedback) {
+        if (!isfinite(c->F_target))
+            c->F_target = vafm_ctrl_setpoint_abs(&c->cp, c->baseline, c->k, c->invols, c->scene.baseline_offset_V);
+        c->err_prev = c->F_target - c->force;
+        c->z_moving = 0;
+        c->state = VAFM_CTRL_ENGAGED;
+        c->lost_contact = !c->in_contact;
+    } else if (!on && c->feedback) {
+        c->state = VAFM_CTRL_IDLE;
+        c->z_target = c->piezo_z;
+        c->z_moving = 0;
+    }
+    c->feedback = on ? 1 : 0;
+    c->saturated = c->feedback ? c->saturated : 0;
+    return 0;
+}
+
+int vafm_ctrl_feedback_set(vafm_ctrl *c, double setpoint, int unit, int relative, double p_m_per_N,
+                           double i_m_per_N_s, double tau_s, vafm_error *err)
+{
+    if (!c)
+        return VAFM_EINVAL;
+    vafm_ctrl_params q = c->cp;
+    if (!isnan(setpoint))
+        q.setpoint = setpoint;
+    q.setpoint_unit = unit;
+    q.setpoint_relative = relative;
+    if (!isnan(p_m_per_N))
+        q.fb_p_m_per_N = p_m_per_N;
+    if (!isnan(i_m_per_N_s))
+        q.fb_i_m_per_N_s = i_m_per_N_s;
+    if (!isnan(tau_s))
+        q.fb_tau_s = tau_s;
+    int r = vafm_ctrl_check(&q, c->k, c->invols, err);
+    if (r)
+        return r;
+    c->cp = q;
+    /* the new setpoint counts from the last baseline (relative) */
+    if (c->state != VAFM_CTRL_APPROACHING || c->phase != VAFM_CTRL_ENGAGE_BASELINE)
+        c->F_target = vafm_ctrl_setpoint_abs(&c->cp, c->baseline, c->k, c->invols, c->scene.baseline_offset_V);
+    return 0;
+}
