@@ -1,0 +1,255 @@
+# SPDX-License-Identifier: MIT
+"""The live web panel (issue #28) in a real browser: Debian's chromium, headless, driven by selenium through
+chromium-driver. vafmd and the panel (clients/web/vafm_web.py) are started; the page's own buttons are
+pressed. Screenshots go to $VAFM_WEB_ARTEFACTS (the build dir). Every wait has an explicit condition and a
+generous bound (a loaded 2-core machine); no sleep is an assertion."""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import pytest
+from selenium import webdriver
+from selenium.webdriver.chrome.options import Options
+from selenium.webdriver.chrome.service import Service
+
+from vafmd_harness import HEADER, Daemon
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+BRIDGE = os.path.join(HERE, "..", "clients", "web", "vafm_web.py")
+ART = os.environ.get("VAFM_WEB_ARTEFACTS") or tempfile.mkdtemp(prefix="vafm-web-")
+VAFM = os.environ.get("VAFM_CLI")
+WAIT = 30.0
+
+
+def wait_for(what, cond, timeout=WAIT, every=0.05):
+    deadline = time.monotonic() + timeout
+    while True:
+        v = cond()
+        if v:
+            return v
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(every)
+
+
+def browser(url):
+    o = Options()
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,780",
+              "--disable-dev-shm-usage", "--disable-background-timer-throttling",
+              "--disable-renderer-backgrounding", "--disable-backgrounding-occluded-windows"):
+        o.add_argument(a)
+    o.binary_location = "/usr/bin/chromium"
+    d = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=o)
+    d.set_script_timeout(20)
+    d.get(url)
+    wait_for("the page's WebSocket", lambda: d.execute_script("return window.vafmPanel && window.vafmPanel.connected"))
+    wait_for("hello", lambda: d.execute_script("return window.vafmPanel.hello !== null"))
+    return d
+
+
+@pytest.fixture
+def panel():
+    os.makedirs(ART, exist_ok=True)
+    d = Daemon("--speed", "0.5")
+    # a rate at which a block holds 1000 samples: the decimation keeps ~64 of them (B = 31)
+    assert d.cmd({"cmd": "set", "values": {"sample_rate_Hz": 200000.0}})["status"] == "ok"
+    ready = os.path.join(d.dir, "web-ready")
+    args = [sys.executable, BRIDGE, "--daemon", d.rep, "--listen", "127.0.0.1:0", "--ready-file", ready]
+    if VAFM:
+        args += ["--vafm", VAFM]
+    web = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    drivers = []
+    try:
+        wait_for("the panel to listen", lambda: os.path.exists(ready) or web.poll() is not None)
+        assert web.poll() is None, web.communicate()
+        url = open(ready).read().strip()
+        yield d, url, drivers
+    finally:
+        for drv in drivers:
+            drv.quit()
+        web.terminate()
+        try:
+            web.wait(10)
+        except subprocess.TimeoutExpired:
+            web.kill()
+        assert d.stop() == 0
+
+
+def reference_points(blocks, events, B):
+    """The display rule of docs/web.md, written again here from the raw stream: pieces cut at multiples of B
+    (run samples) and at segment changes, min and max force_N of each piece in sample order."""
+    seg_changes = {e["sample"]: {"approach": 0, "retract": 1, "dwell": 2, "tune": 3}[e["to"]]
+                   for e in events if e.get("kind") == "segment"}
+    idx_all, force, height = [], [], []
+    for h, frames in blocks:
+        first, n, seg0 = h[6], h[7], h[9]
+        f = np.frombuffer(frames[2], "<f8")
+        hm = np.frombuffer(frames[0], "<f8")
+        seg = np.full(n, seg0)
+        for s, to in seg_changes.items():
+            if first <= s < first + n:
+                seg[s - first:] = to
+        start = 0
+        for k in range(1, n + 1):
+            if k == n or (first + k) % B == 0 or seg[k] != seg[k - 1]:
+                piece = f[start:k]
+                lo, hi = start + int(np.argmin(piece)), start + int(np.argmax(piece))
+                for j in sorted({lo, hi}):
+                    idx_all.append(first + j)
+                    force.append(f[j])
+                    height.append(hm[j])
+                start = k
+    return np.array(idx_all, dtype=float), np.array(force), np.array(height)
+
+
+def collect(sub, run_id, timeout=60):
+    blocks, events, deadline = [], [], time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not sub.poll(1000):
+            continue
+        parts = sub.recv_multipart()
+        if parts[0] == b"data":
+            h = HEADER.unpack(parts[1])
+            if h[4] == run_id:
+                blocks.append((h, parts[2:]))
+        elif parts[0] in (b"event", b"run.end"):
+            j = json.loads(parts[1])
+            if j.get("run_id") == run_id:
+                if parts[0] == b"event":
+                    events.append(j)
+                else:
+                    return blocks, events, j
+    raise AssertionError(f"no run.end of run {run_id}")
+
+
+def js(d, expr):
+    return d.execute_script("return " + expr)
+
+
+def last_reply(d, label):
+    return js(d, f"window.vafmPanel.replies.filter(r => r.label === {json.dumps(label)}).slice(-1)[0] || null")
+
+
+def test_panel_in_a_browser(panel):
+    d, url, drivers = panel
+    a = browser(url)
+    drivers.append(a)
+    b = browser(url)  # a second viewer, open from the start
+    drivers.append(b)
+    sub = d.sub(greet=True)
+
+    # the scope scrolls with the clock and draws the run: two screenshots of it differ
+    a.save_screenshot(os.path.join(ART, "web-idle.png"))
+    shot1 = a.find_element("id", "scope").screenshot_as_png
+
+    # --- a curve, by the page's own button ---
+    n_before = len(js(a, "window.vafmPanel.replies"))
+    a.find_element("id", "btn-curve").click()
+    rep = wait_for("the curve's reply", lambda: last_reply(a, "curve") if len(js(a, "window.vafmPanel.replies")) > n_before else None)
+    assert rep["reply"]["status"] == "ok", rep
+    rid = rep["reply"]["run_id"]
+    # the state panel shows the run, then idle
+    wait_for("the state panel to show the run", lambda: js(a, "(document.getElementById('state-run') || {}).textContent") == str(rid))
+    assert js(a, "document.getElementById('state-daemon').textContent") in ("running", "starting")
+    shot2 = a.find_element("id", "scope").screenshot_as_png
+    blocks, events, end = collect(sub, rid)
+    assert end["status"] == "ok" and len(blocks) == end["blocks"] and end["blocks"] > 5, end
+    wait_for("the state panel to show idle", lambda: js(a, "(document.getElementById('state-daemon') || {}).textContent") == "idle"
+             and js(a, "document.getElementById('state-run')") is None)
+    assert shot1 != shot2, "the scope did not move"
+
+    # --- the points the page holds are the streamed samples after the decimation rule ---
+    B = wait_for("run.start in the page", lambda: js(a, f"window.vafmPanel.runs[{rid}] && window.vafmPanel.runs[{rid}].start "
+                                                         f"&& window.vafmPanel.runs[{rid}].start.block_samples")) // 32
+    assert B == 31
+    ref_i, ref_f, ref_h = reference_points(blocks, events, B)
+    assert end["samples"] > 20 * len(ref_i) / 2 > 0  # decimated: about 2 points per 31 samples
+    for drv in (a, b):
+        # the bridge sends a run's last points before its run.end, on the same socket: once the page has the
+        # run.end it has every point
+        wait_for("the run.end in the page", lambda: js(drv, f"window.vafmPanel.runs[{rid}].end !== null"))
+        pts = js(drv, f"window.vafmPanel.points({rid})")
+        assert np.array_equal(np.array(pts["i"]), ref_i)
+        assert np.array_equal(np.array(pts["force_N"]), ref_f)  # bit for bit: doubles through JSON-free frames
+        assert np.array_equal(np.array(pts["height_m"]), ref_h)
+    a.save_screenshot(os.path.join(ART, "web-curve.png"))
+
+    # --- an injected fault appears in the fault list (a late block of the next run) ---
+    plan = {"script": [{"kind": "late", "run": rid + 1, "block": 1, "delay_s": 0.05}]}
+    el = a.find_element("id", "fault-plan")
+    el.clear()
+    el.send_keys(json.dumps(plan))
+    a.find_element("id", "btn-faults").click()
+    wait_for("the plan's reply", lambda: last_reply(a, "faults"))
+    assert last_reply(a, "faults")["reply"]["status"] == "ok"
+    b.find_element("id", "btn-curve").click()  # the second browser drives too
+    wait_for("the second curve's reply", lambda: last_reply(b, "curve"))
+    assert last_reply(b, "curve")["reply"]["run_id"] == rid + 1
+    for drv in (a, b):
+        wait_for("the fault in the fault list", lambda: "late" in drv.find_element("id", "fault-list").text
+                 and f"run {rid + 1}" in drv.find_element("id", "fault-list").text)
+
+    # --- a bad setting shows the daemon's error, worded as the daemon words it ---
+    direct = d.cmd({"cmd": "set", "values": {"k_N_per_m": 1e99}})
+    assert direct["status"] == "error"
+    wait_for("idle", lambda: d.cmd({"cmd": "status"})["state"] == "idle")
+    el = a.find_element("id", "set-text")
+    el.clear()
+    el.send_keys("k_N_per_m=1e99")
+    a.find_element("id", "btn-set").click()
+    wait_for("the set's reply", lambda: last_reply(a, "set"))
+    shown = a.find_element("id", "messages").text
+    assert direct["message"] in shown and direct["code"] in shown, (shown, direct)
+    # a value typed with its unit is sent in SI (vafm ctl's units)
+    if VAFM:
+        el.clear()
+        el.send_keys("v_approach_m_per_s=2um/s")
+        n = len(js(a, "window.vafmPanel.replies"))
+        a.find_element("id", "btn-set").click()
+        wait_for("the second set's reply", lambda: len(js(a, "window.vafmPanel.replies")) > n)
+        assert last_reply(a, "set")["reply"]["status"] == "ok", last_reply(a, "set")
+        assert d.cmd({"cmd": "get", "names": ["v_approach_m_per_s"]})["values"]["v_approach_m_per_s"] == pytest.approx(2e-6, rel=1e-12)
+
+    # --- a browser that joins now sees the same curve (the bridge's snapshot) ---
+    c = browser(url)
+    drivers.append(c)
+    wait_for("the snapshot", lambda: js(c, f"window.vafmPanel.runs[{rid}] && window.vafmPanel.runs[{rid}].end !== null"))
+    pts = js(c, f"window.vafmPanel.points({rid})")
+    assert np.array_equal(np.array(pts["i"]), ref_i) and np.array_equal(np.array(pts["force_N"]), ref_f)
+    a.save_screenshot(os.path.join(ART, "web-panel.png"))
+    sub.close(0)
+
+
+@pytest.mark.parametrize("listen,token", [("0.0.0.0:0", None), ("127.0.0.1:0", "s3cret")])
+def test_token(listen, token):
+    """Bound to any address but loopback the panel requires a token (generated and printed when none is
+    given); --token asks for one on loopback too. Without it, or with a wrong one, page and socket are 403.
+    (The requests go to 127.0.0.1 only.)"""
+    import urllib.error
+    import urllib.request
+    d = Daemon()
+    try:
+        ready = os.path.join(d.dir, "web-ready")
+        web = subprocess.Popen([sys.executable, BRIDGE, "--daemon", d.rep, "--listen", listen, "--ready-file", ready]
+                               + (["--token", token] if token else []), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            wait_for("the panel to listen", lambda: os.path.exists(ready) or web.poll() is not None)
+            assert web.poll() is None, web.communicate()
+            url = open(ready).read().strip()
+            assert "?token=" in url and (token is None or url.endswith("?token=" + token)), url
+            port = url.split("/")[2].rsplit(":", 1)[1]
+            base, tok = f"http://127.0.0.1:{port}/", url.split("?token=")[1]
+            for bad in ("", "?token=wrong", "ws?token=wrong"):
+                with pytest.raises(urllib.error.HTTPError) as e:
+                    urllib.request.urlopen(base + bad, timeout=10)
+                assert e.value.code == 403
+            assert urllib.request.urlopen(base + "?token=" + tok, timeout=10).status == 200
+        finally:
+            web.terminate()
+            web.wait(10)
+    finally:
+        assert d.stop() == 0
