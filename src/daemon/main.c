@@ -15,6 +15,7 @@
 #include <zmq.h>
 #include "daemon/cmd_json.h"
 #include "daemon/daemon.h"
+#include "daemon/nanonis.h"
 #include "vafm/wire.h"
 
 static volatile sig_atomic_t s_stop;
@@ -40,6 +41,10 @@ static const char s_usage[] =
     "                     With curve_secret_key, both sockets require CURVE (40-character Z85 keys as from\n"
     "                     zmq_curve_keypair) and only clients whose public key is listed are served.\n"
     "  --curve-required   refuse to start unless CURVE is configured (also on loopback)\n"
+    "  --nanonis [HOST:]PORT  also serve the Nanonis TCP programming interface there (docs/nanonis.md;\n"
+    "                     its usual port is 6501; HOST default 127.0.0.1). Config: \"nanonis\": \"[HOST:]PORT\"\n"
+    "  --nanonis-allow-remote  allow a non-loopback HOST for --nanonis: the protocol has NO authentication,\n"
+    "                     anyone who reaches the port drives the instrument (config \"nanonis_allow_remote\")\n"
     "  --preset NAME      scene preset (replaces the config file's; default " VAFM_TOOLS_DEFAULT_PRESET ")\n"
     "  --speed F          pacing speed factor in [0.01, 1000] (1: real time)\n"
     "  --free-run         no pacing: release blocks as fast as they are computed\n"
@@ -159,8 +164,9 @@ int main(int argc, char **argv)
     static vafmd d;
     json_t *cfg_faults = NULL; /* the config file's fault plan, installed once the rings exist */
     const char *rep_ep = VAFMD_DEFAULT_REP, *pub_ep = VAFMD_DEFAULT_PUB, *config = NULL, *preset = NULL;
-    const char *speed = NULL, *sens = NULL, *hwm = NULL;
-    int free_run = 0, curve_required = 0;
+    const char *speed = NULL, *sens = NULL, *hwm = NULL, *nanonis = NULL;
+    int free_run = 0, curve_required = 0, nanonis_remote = 0;
+    char nanonis_buf[300];
     char rep_buf[512], pub_buf[512];
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
@@ -178,6 +184,10 @@ int main(int argc, char **argv)
             free_run = 1;
         else if (!strcmp(a, "--curve-required"))
             curve_required = 1;
+        else if (!strcmp(a, "--nanonis"))
+            dst = &nanonis;
+        else if (!strcmp(a, "--nanonis-allow-remote"))
+            nanonis_remote = 1;
         else if (!strcmp(a, "--rep"))
             dst = &rep_ep;
         else if (!strcmp(a, "--pub"))
@@ -236,6 +246,27 @@ int main(int argc, char **argv)
             }
             curve_required |= json_is_true(v);
         }
+        if ((v = json_object_get(cfg, "nanonis")) != NULL) { /* the Nanonis port (docs/nanonis.md) */
+            if (json_is_string(v) && strlen(json_string_value(v)) < sizeof nanonis_buf)
+                snprintf(nanonis_buf, sizeof nanonis_buf, "%s", json_string_value(v));
+            else if (json_is_integer(v))
+                snprintf(nanonis_buf, sizeof nanonis_buf, "%lld", (long long)json_integer_value(v));
+            else {
+                fprintf(stderr, "vafmd: config '%s': \"nanonis\" must be \"[HOST:]PORT\" or a port number\n", config);
+                json_decref(cfg);
+                return 2;
+            }
+            if (!nanonis) /* the flag wins */
+                nanonis = nanonis_buf;
+        }
+        if ((v = json_object_get(cfg, "nanonis_allow_remote")) != NULL) {
+            if (!json_is_boolean(v)) {
+                fprintf(stderr, "vafmd: config '%s': \"nanonis_allow_remote\" must be true or false\n", config);
+                json_decref(cfg);
+                return 2;
+            }
+            nanonis_remote |= json_is_true(v);
+        }
         if (s_curve_config(&d, json_object_get(cfg, "curve_secret_key"), json_object_get(cfg, "curve_public_key"),
                            json_object_get(cfg, "curve_clients"))) {
             json_decref(cfg);
@@ -245,7 +276,7 @@ int main(int argc, char **argv)
         const char *key;
         json_object_foreach(cfg, key, v) {
             if (!strcmp(key, "rep") || !strcmp(key, "pub") || !strcmp(key, "hwm") || !strncmp(key, "curve_", 6) ||
-                !strcmp(key, "faults"))
+                !strcmp(key, "faults") || !strncmp(key, "nanonis", 7))
                 continue;
             json_object_set(set, key, v);
         }
@@ -353,6 +384,10 @@ int main(int argc, char **argv)
     s_bind_address(rep_ep, rep_bind, sizeof rep_bind);
     s_bind_address(pub_ep, pub_bind, sizeof pub_bind);
     const char *failed = zmq_bind(d.rep, rep_bind) ? rep_ep : zmq_bind(d.pub, pub_bind) ? pub_ep : NULL;
+    /* the Nanonis interface (nanonis.h) is a client of both sockets, over inproc */
+    if (!failed && nanonis)
+        failed = zmq_bind(d.rep, VAFMD_NANONIS_CMD_EP) ? VAFMD_NANONIS_CMD_EP
+                 : zmq_bind(d.pub, VAFMD_NANONIS_PUB_EP) ? VAFMD_NANONIS_PUB_EP : NULL;
     if (failed) {
         fprintf(stderr, "vafmd: cannot bind %s: %s\n", failed, zmq_strerror(errno));
         if (d.auth.zap)
@@ -429,8 +464,20 @@ int main(int argc, char **argv)
         fprintf(stderr, "vafmd: cannot start the simulation or the writer thread\n");
         return 1;
     }
+    if (nanonis) {
+        char nerr[512];
+        int ncode = 1;
+        if (vafmd_nanonis_start(d.zctx, nanonis, nanonis_remote, nerr, sizeof nerr, &ncode)) {
+            fprintf(stderr, "vafmd: %s\n", nerr);
+            d.exit_status = ncode;
+            *d.stop = 1; /* stop as a signal does: the threads are running */
+        } else
+            fprintf(stderr, "vafmd: Nanonis TCP interface on %s%s\n", nanonis,
+                    nanonis_remote ? " (remote hosts allowed: no authentication)" : "");
+    }
     fprintf(stderr, "vafmd %s: commands on %s, stream on %s\n", VAFMD_VERSION, rep_ep, pub_ep);
-    int rc = vafmd_control_loop(&d);
+    int rc = d.exit_status ? 0 : vafmd_control_loop(&d);
+    vafmd_nanonis_stop();
 
     vafmd_sim_cmd q;
     memset(&q, 0, sizeof q);

@@ -1,0 +1,443 @@
+# SPDX-License-Identifier: MIT
+"""vafmd's Nanonis TCP programming interface (docs/nanonis.md), driven by a client written from the
+vendor's specification (TCPProtocol_SPM, "TCP Protocol" chapter and the functions' layouts) with plain
+sockets and struct: 40-byte big-endian headers, the error status and description at the end of every
+response body. No vendor code, no PDF needed."""
+import math
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from vafmd_harness import Daemon, free_port
+
+HDR = struct.Struct(">32sih2x")    # request: command name, body size, send-response flag, 2 unused
+RHDR = struct.Struct(">32si4x")    # response: command name, body size, 4 unused
+
+
+class NanonisError(Exception):
+    pass
+
+
+class Conn:
+    """One connection to the Nanonis port, spec-only."""
+
+    def __init__(self, port, timeout=30.0):
+        self.s = socket.create_connection(("127.0.0.1", port), timeout=timeout)
+
+    def close(self):
+        self.s.close()
+
+    def send(self, name, body=b"", respond=1, size=None):
+        n = name.encode() if isinstance(name, str) else name
+        self.s.sendall(HDR.pack(n, len(body) if size is None else size, respond) + body)
+
+    def recv_exact(self, n):
+        b = b""
+        while len(b) < n:
+            k = self.s.recv(n - len(b))
+            if not k:
+                raise ConnectionError("closed")
+            b += k
+        return b
+
+    def response(self):
+        name, size = RHDR.unpack(self.recv_exact(40))
+        return name.rstrip(b"\0").decode("latin-1"), self.recv_exact(size)
+
+    def call(self, name, body=b"", ok=True):
+        """Send and read the response: (body without its error part, error status, description)."""
+        self.send(name, body)
+        rname, b = self.response()
+        assert rname == name
+        return split_error(b, ok)
+
+
+def split_error(b, ok=True):
+    """The error part is the last 8 + L bytes: status (u32), L (i32), description. Found from the end by
+    trying each L (the description is ASCII)."""
+    for L in range(0, len(b) - 7):
+        at = len(b) - 8 - L
+        st, dl = struct.unpack_from(">Ii", b, at)
+        if dl == L and st in (0, 1):
+            desc = b[at + 8:].decode()
+            if ok and st:
+                raise NanonisError(desc)
+            return b[:at], st, desc
+    raise AssertionError(f"no error part in {b!r}")
+
+
+def strings(b, off, count):
+    out = []
+    for _ in range(count):
+        (n,) = struct.unpack_from(">i", b, off)
+        out.append(b[off + 4:off + 4 + n].decode())
+        off += 4 + n
+    return out, off
+
+
+def f32(x):
+    return struct.pack(">f", x)
+
+
+def i32(x):
+    return struct.pack(">i", x)
+
+
+def u16(x):
+    return struct.pack(">H", x)
+
+
+def u32(x):
+    return struct.pack(">I", x)
+
+
+@pytest.fixture
+def nd():
+    port = free_port()
+    d = Daemon("--free-run", "--nanonis", f"127.0.0.1:{port}")
+    d.port = port
+    deadline = time.time() + 10
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            break
+        except OSError:
+            assert time.time() < deadline, "the Nanonis port did not open"
+            time.sleep(0.05)
+    yield d
+    assert d.stop() == 0
+
+
+def names_get(c, cmd="Signals.NamesGet"):
+    b, _, _ = c.call(cmd)
+    size, count = struct.unpack_from(">ii", b, 0)
+    names, end = strings(b, 8, count)
+    assert end == len(b) and size == end - 8
+    return names
+
+
+def test_signals(nd):
+    c = Conn(nd.port)
+    names = names_get(c)
+    assert names[:4] == ["Z (m)", "Deflection (V)", "Deflection (m)", "Force (N)"]
+    assert "Tip height (m)" in names and "Bias (V)" in names
+    assert names_get(c, "Signals.MeasNamesGet") == names
+    # before any run: the scene at rest, Z = start height
+    start = nd.cmd({"cmd": "get", "names": ["start_height_m"]})["values"]["start_height_m"]
+    b, _, _ = c.call("Signals.ValGet", i32(0) + u32(1))
+    assert struct.unpack(">f", b)[0] == pytest.approx(start, rel=1e-6)
+    b, _, _ = c.call("Signals.ValsGet", i32(3) + i32(0) + i32(3) + i32(1) + u32(0))
+    n, *vals = struct.unpack(">i3f", b)
+    assert n == 3 and vals[0] == pytest.approx(start, rel=1e-6) and vals[1] == 0 and vals[2] == 0
+    # calibration: Deflection (m) per volt is the InvOLS, Force (N) per volt k·InvOLS
+    v = nd.cmd({"cmd": "get", "names": ["sensitivity_m_per_V", "k_N_per_m", "adc_range_V"]})["values"]
+    b, _, _ = c.call("Signals.CalibrGet", i32(2))
+    assert struct.unpack(">ff", b) == pytest.approx((v["sensitivity_m_per_V"], 0), rel=1e-6)
+    b, _, _ = c.call("Signals.CalibrGet", i32(3))
+    assert struct.unpack(">ff", b)[0] == pytest.approx(v["sensitivity_m_per_V"] * v["k_N_per_m"], rel=1e-6)
+    b, _, _ = c.call("Signals.RangeGet", i32(1))
+    assert struct.unpack(">ff", b) == pytest.approx((v["adc_range_V"] / 2, -v["adc_range_V"] / 2))
+    # a bad index: an error naming it, zero return arguments, the connection still usable
+    b, st, desc = c.call("Signals.ValGet", i32(99) + u32(0), ok=False)
+    assert st == 1 and "99" in desc and b == b"\0" * 4
+    b, st, desc = c.call("Signals.ValsGet", i32(200) + u32(0), ok=False)
+    assert st == 1 and "200" in desc
+    b, st, desc = c.call("Signals.ValGet", i32(0), ok=False)  # a short body names the argument
+    assert st == 1 and "Wait for newest data" in desc
+    assert names_get(c)[0] == "Z (m)"
+    c.close()
+
+
+def test_bias(nd):
+    c = Conn(nd.port)
+    c.call("Bias.Set", f32(0.25))
+    b, _, _ = c.call("Bias.Get")
+    assert struct.unpack(">f", b)[0] == pytest.approx(0.25)
+    _, st, desc = c.call("Bias.Set", f32(50.0), ok=False)
+    assert st == 1 and "Bias value" in desc
+    b, _, _ = c.call("Signals.ValGet", i32(names_get(c).index("Bias (V)")) + u32(0))
+    assert struct.unpack(">f", b)[0] == pytest.approx(0.25)
+    c.close()
+
+
+def test_zspectr_props_roundtrip(nd):
+    c = Conn(nd.port)
+    c.call("ZSpectr.Open")
+    c.call("ZSpectr.ChsSet", i32(3) + i32(0) + i32(1) + i32(3))
+    b, _, _ = c.call("ZSpectr.ChsGet")
+    (n,) = struct.unpack_from(">i", b, 0)
+    idx = struct.unpack_from(f">{n}i", b, 4)
+    (size,) = struct.unpack_from(">i", b, 4 + 4 * n)
+    names, end = strings(b, 8 + 4 * n, n)
+    assert idx == (0, 1, 3) and names == ["Z (m)", "Deflection (V)", "Force (N)"] and end == len(b)
+    assert size == end - (8 + 4 * n)
+    _, st, desc = c.call("ZSpectr.ChsSet", i32(1) + i32(127), ok=False)
+    assert st == 1 and "127" in desc
+    c.call("ZSpectr.PropsSet", u16(2) + i32(64) + u16(3) + u16(0) + u16(0) + u16(0))
+    b, _, _ = c.call("ZSpectr.PropsGet")
+    bwd, pts, psize, pn = struct.unpack_from(">Hiii", b, 0)
+    params, off = strings(b, 14, pn)
+    fsize, fn = struct.unpack_from(">ii", b, off)
+    fixed, off = strings(b, off + 8, fn)
+    sweeps, autosave, dialog, saveall = struct.unpack_from(">HHHH", b, off)
+    assert off + 8 == len(b)
+    assert (bwd, pts, sweeps) == (0, 64, 3) and "Integration time (s)" in params and fixed[1] == "Z sweep distance (m)"
+    c.call("ZSpectr.PropsSet", u16(1) + i32(0) + u16(0) + u16(0) + u16(0) + u16(0))  # 0: no change
+    b, _, _ = c.call("ZSpectr.PropsGet")
+    assert struct.unpack_from(">Hi", b, 0) == (1, 64)
+    c.call("ZSpectr.AdvPropsSet", f32(0.01) + u16(1) + u16(0) + u16(2))
+    b, _, _ = c.call("ZSpectr.AdvPropsGet")
+    assert struct.unpack(">fHHH", b) == (pytest.approx(0.01), 1, 0, 0)
+    c.call("ZSpectr.RangeSet", f32(5e-9) + f32(150e-9))
+    b, _, _ = c.call("ZSpectr.RangeGet")
+    assert struct.unpack(">ff", b) == pytest.approx((5e-9, 150e-9))
+    t = (0.1, 0.0, 100.0, 2e-4, 1e-3, 0.0, 0.05)
+    c.call("ZSpectr.TimingSet", struct.pack(">7f", *t))
+    b, _, _ = c.call("ZSpectr.TimingGet")
+    assert struct.unpack(">7f", b) == pytest.approx(t)
+    _, st, desc = c.call("ZSpectr.TimingSet", struct.pack(">7f", 0.1, 0, 100, 0, 0, 0, 0), ok=False)
+    assert st == 1 and "Integration time" in desc
+    c.call("ZSpectr.RetractDelaySet", f32(0.02))
+    b, _, _ = c.call("ZSpectr.RetractDelayGet")
+    assert struct.unpack(">f", b)[0] == pytest.approx(0.02)
+    c.call("ZSpectr.RetractSet", u16(1) + f32(2e-9) + i32(3) + u16(0))
+    b, _, _ = c.call("ZSpectr.RetractGet")
+    assert struct.unpack(">HfiH", b) == (1, pytest.approx(2e-9), 3, 0)
+    c.call("ZSpectr.RetractSet", u16(2) + f32(2e-9) + i32(-1) + u16(2))  # off; -1, 2: no change
+    b, _, _ = c.call("ZSpectr.RetractGet")
+    assert struct.unpack(">HfiH", b) == (0, pytest.approx(2e-9), 3, 0)
+    for setn, getn in (("ZSpectr.Retract2ndSet", "ZSpectr.Retract2ndGet"),
+                       ("ZSpectr.RetractSecondSet", "ZSpectr.RetractSecondGet")):
+        c.call(setn, i32(3) + f32(1.5) + i32(1) + u16(1))  # Set 3 = AND, Get reports 2 = AND
+        b, _, _ = c.call(getn)
+        assert struct.unpack(">ifiH", b) == (2, 1.5, 1, 1)
+        c.call(setn, i32(1) + f32(0) + i32(-1) + u16(2))  # -No-
+        b, _, _ = c.call(getn)
+        assert struct.unpack(">ifiH", b)[0] == 0
+    b, _, _ = c.call("ZSpectr.StatusGet")
+    assert struct.unpack(">I", b) == (0,)
+    c.call("ZSpectr.Stop")  # nothing running: fine
+    c.close()
+
+
+def zspectr_start(c, get_data=1, base=b""):
+    b, _, _ = c.call("ZSpectr.Start", u32(get_data) + i32(len(base)) + base)
+    size, count = struct.unpack_from(">ii", b, 0)
+    names, off = strings(b, 8, count)
+    assert size == off - 8
+    rows, cols = struct.unpack_from(">ii", b, off)
+    data = np.frombuffer(b, dtype=">f4", count=rows * cols, offset=off + 8).reshape(rows, cols)
+    off += 8 + 4 * rows * cols
+    (np_,) = struct.unpack_from(">i", b, off)
+    params = struct.unpack_from(f">{np_}f", b, off + 4)
+    assert off + 4 + 4 * np_ == len(b)
+    return names, data, params
+
+
+def setup_sweep(c, points=100, t_int=1e-3, t_settle=0.0, dist=200e-9, bwd=1, retract=(1, 5e-9, 3, 0)):
+    c.call("ZSpectr.ChsSet", i32(3) + i32(3) + i32(1) + i32(5))
+    c.call("ZSpectr.PropsSet", u16(bwd) + i32(points) + u16(1) + u16(0) + u16(0) + u16(0))
+    c.call("ZSpectr.RangeSet", f32(0) + f32(dist))
+    c.call("ZSpectr.TimingSet", struct.pack(">7f", 0.1, 0, 100, t_settle, t_int, 0, 0))
+    c.call("ZSpectr.RetractSet", u16(retract[0]) + f32(retract[1]) + i32(retract[2]) + u16(retract[3]))
+
+
+def test_zspectr_force_curve(nd):
+    """A Z spectroscopy runs a force curve on vafm's physics: the forward sweep approaches until the
+    auto-retract (Force > 5 nN), the backward sweep shows the adhesion; the scene is left as it was."""
+    c = Conn(nd.port)
+    before = nd.cmd({"cmd": "get"})["values"]
+    setup_sweep(c)
+    names, data, params = zspectr_start(c)
+    assert names == ["Z (m)", "Force (N)", "Deflection (V)", "Tip height (m)",
+                     "Z [bwd] (m)", "Force [bwd] (N)", "Deflection [bwd] (V)", "Tip height [bwd] (m)"]
+    assert data.shape == (8, 100)
+    z, f, zb, fb = data[0], data[1], data[4], data[5]
+    start = before["start_height_m"]
+    reached = np.isfinite(z)
+    assert reached[0] and not reached.all()  # the trigger cut the approach short
+    assert z[0] == pytest.approx(start - 200e-9 / 100 / 2, rel=0.02)  # the mean over point 0
+    assert np.all(np.diff(z[reached]) < 0)  # approaching: Z decreases
+    assert f[reached][-1] > 2e-9  # repulsive at the end of the approach, near the 5 nN trigger
+    assert np.nanmin(fb) < -1e-9  # adhesion on the way back (tensile: negative)
+    assert np.allclose(zb[reached], z[reached], rtol=0, atol=3e-9)  # backward point i at forward point i's Z
+    assert params[5] >= 1 and params[7] == 1  # run id, triggered
+    after = nd.cmd({"cmd": "get"})["values"]
+    assert after == before
+    # the live signals follow the last sample (the end of the curve: back at the start height)
+    b, _, _ = c.call("Signals.ValGet", i32(0) + u32(0))
+    assert struct.unpack(">f", b)[0] == pytest.approx(start, abs=3e-9)
+    # no data asked: empty arrays
+    b, _, _ = c.call("ZSpectr.Start", u32(0) + i32(0))
+    assert b == b"\0" * 20
+    c.close()
+
+
+def test_zspectr_timing_and_settling(nd):
+    """N points of (settling + integration) each: the sweep's time; settling shortens the average."""
+    nd.cmd({"cmd": "set", "values": {"free_run": False, "speed": 1}})
+    c = Conn(nd.port)
+    setup_sweep(c, points=50, t_int=2e-3, bwd=2, retract=(2, 0, 0, 0))  # auto-retract off
+    t0 = time.monotonic()
+    names, data, params = zspectr_start(c)
+    wall = time.monotonic() - t0
+    assert data.shape == (4, 50) and np.isfinite(data).all()  # no trigger: the whole range
+    assert 2 * 50 * 2e-3 <= wall < 2 * 50 * 2e-3 + 2.0  # forward and return at 1x
+    dz = np.diff(data[0])
+    assert dz == pytest.approx(-200e-9 / 50, rel=1e-3)
+
+
+def test_zspectr_2nd_condition_refused(nd):
+    c = Conn(nd.port)
+    c.call("ZSpectr.Retract2ndSet", i32(2) + f32(0) + i32(0) + u16(0))
+    _, st, desc = c.call("ZSpectr.Start", u32(1) + i32(0), ok=False)
+    assert st == 1 and "2nd condition" in desc
+    b, _, _ = c.call("ZSpectr.StatusGet")
+    assert struct.unpack(">I", b) == (0,)
+    c.close()
+
+
+NOT_YET = ["ZCtrl.OnOffSet", "ZCtrl.OnOffGet", "ZCtrl.ZPosSet", "ZCtrl.ZPosGet", "ZCtrl.SetpntSet",
+           "ZCtrl.SetpntGet", "ZCtrl.GainSet", "ZCtrl.GainGet", "ZCtrl.Withdraw", "ZCtrl.LimitsSet",
+           "ZCtrl.LimitsGet", "ZCtrl.StatusGet", "ZCtrl.TipLiftSet", "ZCtrl.TipLiftGet", "ZCtrl.Home",
+           "ZCtrl.HomePropsSet", "ZCtrl.HomePropsGet", "ZCtrl.SwitchOffDelaySet", "ZCtrl.SwitchOffDelayGet",
+           "Motor.StartMove", "Motor.StartClosedLoop", "Motor.StopMove", "Motor.PosGet", "Motor.StepCounterGet",
+           "Motor.FreqAmpGet", "Motor.FreqAmpSet", "AutoApproach.Open", "AutoApproach.OnOffSet",
+           "AutoApproach.OnOffGet", "FolMe.XYPosSet", "FolMe.XYPosGet", "FolMe.SpeedSet", "FolMe.SpeedGet",
+           "FolMe.Stop"]
+
+
+def test_not_yet(nd):
+    c = Conn(nd.port)
+    for name in NOT_YET:
+        _, st, desc = c.call(name, ok=False)
+        assert st == 1 and name in desc and "not yet" in desc and "always-on controller" in desc
+    b, st, _ = c.call("FolMe.XYPosGet", u32(1), ok=False)
+    assert st == 1 and b == b"\0" * 16  # the return arguments, zero, before the error
+    c.close()
+
+
+def test_framing_errors(nd):
+    c = Conn(nd.port)
+    # unknown command: named, the connection stays usable
+    _, st, desc = c.call("Foo.Bar", ok=False)
+    assert st == 1 and "Foo.Bar" in desc
+    c.send(b"\xff\x01junk", b"abc")
+    name, b = c.response()
+    _, st, desc = split_error(b, ok=False)
+    assert st == 1 and "\\xff" in desc
+    # split over many segments, byte by byte
+    msg = HDR.pack(b"Bias.Set", 4, 1) + f32(0.5)
+    for ch in msg:
+        c.s.sendall(bytes([ch]))
+        time.sleep(0.001)
+    assert c.response()[0] == "Bias.Set"
+    # several requests in one segment, answered in order
+    c.s.sendall(HDR.pack(b"Bias.Get", 0, 1) + HDR.pack(b"Signals.NamesGet", 0, 1) + HDR.pack(b"Bias.Get", 0, 1))
+    got = [c.response() for _ in range(3)]
+    assert [g[0] for g in got] == ["Bias.Get", "Signals.NamesGet", "Bias.Get"]
+    assert struct.unpack(">f", got[0][1][:4])[0] == 0.5
+    # send-response flag 0: executed, nothing sent back
+    c.send("Bias.Set", f32(0.75), respond=0)
+    b, _, _ = c.call("Bias.Get")
+    assert struct.unpack(">f", b)[0] == 0.75
+    c.close()
+    # a negative size: an error, then the connection is closed
+    c = Conn(nd.port)
+    c.send("Bias.Get", b"", size=-5)
+    _, b = c.response()
+    _, st, desc = split_error(b, ok=False)
+    assert st == 1 and "negative" in desc
+    assert c.s.recv(1) == b""
+    c.close()
+    # a body larger than the bound: the same, without reading it
+    c = Conn(nd.port)
+    c.send("Bias.Set", b"", size=1 << 30)
+    _, b = c.response()
+    _, st, desc = split_error(b, ok=False)
+    assert st == 1 and "65536" in desc
+    assert c.s.recv(1) == b""
+    c.close()
+    # garbage then close, a half header then close: the daemon goes on
+    for junk in (b"\x00" * 7, bytes(range(256)) * 3):
+        s = socket.create_connection(("127.0.0.1", nd.port))
+        s.sendall(junk)
+        s.close()
+    c = Conn(nd.port)
+    assert names_get(c)[0] == "Z (m)"
+    c.close()
+    assert nd.cmd({"cmd": "status"})["status"] == "ok"
+
+
+def test_four_connections(nd):
+    conns = [Conn(nd.port) for _ in range(4)]
+    # a fifth is closed at once (the server has four)
+    extra = socket.create_connection(("127.0.0.1", nd.port), timeout=5)
+    try:
+        extra.sendall(HDR.pack(b"Bias.Get", 0, 1))
+        assert extra.recv(40) == b""
+    except ConnectionResetError:  # closed before it read the request
+        pass
+    extra.close()
+    errors = []
+
+    def work(c, k):
+        try:
+            for i in range(50):
+                b, _, _ = c.call("Signals.ValsGet", i32(2) + i32(0) + i32(1) + u32(0))
+                assert struct.unpack_from(">i", b)[0] == 2
+                names_get(c)
+        except Exception as e:  # noqa: BLE001 (reported below)
+            errors.append(e)
+
+    th = [threading.Thread(target=work, args=(c, k)) for k, c in enumerate(conns)]
+    for t in th:
+        t.start()
+    for t in th:
+        t.join()
+    assert not errors
+    for c in conns:
+        c.close()
+    time.sleep(0.3)  # the slots are freed: a new connection is served
+    c = Conn(nd.port)
+    assert names_get(c)[0] == "Z (m)"
+    c.close()
+
+
+def test_fault_plan(nd):
+    """The fault plan acts on Nanonis requests as on JSON ones: busy → an error status, reply_delay → a
+    late response, no_reply → no response (the Nanonis client times out); each shows in `faults`."""
+    c = Conn(nd.port, timeout=5)
+    r = nd.cmd({"cmd": "faults", "plan": {"script": [
+        {"kind": "busy", "cmd": "status"},
+        {"kind": "reply_delay", "cmd": "status", "delay_s": 0.5},
+        {"kind": "no_reply", "cmd": "get"}]}})
+    assert r["status"] == "ok"
+    _, st, desc = c.call("Bias.Get", ok=False)
+    assert st == 1 and "busy" in desc
+    t0 = time.monotonic()
+    c.call("Bias.Get")
+    assert time.monotonic() - t0 >= 0.5
+    c.s.settimeout(2)
+    c.send("Signals.ValGet", i32(0) + u32(0))
+    with pytest.raises(socket.timeout):
+        c.response()
+    c.close()
+    kinds = [f["kind"] for f in nd.cmd({"cmd": "faults"})["last"]]
+    assert kinds == ["busy", "reply_delay", "no_reply"]
+
+
+def test_loopback_only(tmp_path):
+    """Another interface only with the explicit option (the protocol has no authentication)."""
+    import subprocess
+    from vafmd_harness import VAFMD
+    p = subprocess.run([VAFMD, "--rep", f"ipc://{tmp_path}/r", "--pub", f"ipc://{tmp_path}/p",
+                        "--nanonis", f"0.0.0.0:{free_port()}"], capture_output=True, timeout=20)
+    assert p.returncode == 2 and b"no authentication" in p.stderr and b"--nanonis-allow-remote" in p.stderr
+    p = subprocess.run([VAFMD, "--rep", f"ipc://{tmp_path}/r", "--pub", f"ipc://{tmp_path}/p",
+                        "--nanonis", "127.0.0.1:0"], capture_output=True, timeout=20)
+    assert p.returncode == 2 and b"PORT" in p.stderr
