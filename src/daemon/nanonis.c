@@ -581,11 +581,17 @@ static void s_accept(void)
     int fd = accept(s.lfd, NULL, NULL);
     if (fd < 0)
         return;
-    s_reap(0);
     int slot = -1;
-    for (int i = 0; i < VAFMD_NANONIS_MAX_CONN && slot < 0; i++)
-        if (!s.conn[i])
-            slot = i;
+    /* a connection the client closed just before holds its slot until its thread has seen the end: wait
+     * for that a moment (up to 0.5 s) before a new one is turned away */
+    for (int t = 0; t < 50 && slot < 0 && !nn_quitting(); t++) {
+        s_reap(0);
+        for (int i = 0; i < VAFMD_NANONIS_MAX_CONN && slot < 0; i++)
+            if (!s.conn[i])
+                slot = i;
+        if (slot < 0)
+            nanosleep(&(struct timespec){ 0, 10000000 }, NULL);
+    }
     nn_conn *c = slot >= 0 ? calloc(1, sizeof *c) : NULL;
     if (!c) { /* a fifth connection: closed at once (the server has four) */
         close(fd);
