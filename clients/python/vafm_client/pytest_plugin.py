@@ -67,6 +67,8 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
+    if config.getoption("vafmd"):
+        find_vafmd(config)  # an explicit --vafmd that is not an executable: a usage error at once
     config.addinivalue_line("markers", "vafm(preset=None, speed=None, args=(), share=None, transport=None, "
                             "log=True): how the vafmd fixture starts its daemon (a preset, 'free' or a multiple "
                             "of real time, extra vafmd arguments, 'test' or 'module', 'ipc' or 'tcp', HDF5 "
