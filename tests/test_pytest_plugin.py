@@ -161,3 +161,23 @@ def test_faults(vafmd, vafm_faults, vafm_stream):
     vafmd.assert_nothing_dropped([], reported=[1])
 """)
     r.assert_outcomes(passed=1)
+
+
+def test_paced_and_logs_kept_or_removed(pytester):
+    src = """
+import os, time
+def test_paced(vafmd, vafm_stream):
+    assert vafmd.client.get("free_run", "speed") == {"free_run": %s, "speed": %s}
+    t = time.monotonic()
+    vafm_stream.run(vafmd.client.curve(index=0)["run_id"])
+    print("WALL", time.monotonic() - t, "FOLDER", vafmd.folder)
+"""
+    r = run(pytester, src % ("False", "2.0"), "-s", "--vafm-speed", "2")
+    r.assert_outcomes(passed=1)
+    wall, folder = re.search(r"WALL (\S+) FOLDER (\S+)", r.stdout.str()).groups()
+    assert float(wall) >= 0.3004 / 2 * 0.95   # contact-silica's curve: 0.3004 s of samples at 2x real time
+    assert not [f for f in os.listdir(folder) if f.startswith("vafmd")]   # a passing test: logs removed
+    r = run(pytester, src % ("True", "1.0"), "-s", "--vafm-keep-logs")
+    r.assert_outcomes(passed=1)
+    wall, folder = re.search(r"WALL (\S+) FOLDER (\S+)", r.stdout.str()).groups()
+    assert {"vafmd-1.h5", "vafmd.stderr"} <= set(os.listdir(folder))

@@ -182,6 +182,7 @@ class Instrument:
         self.log_path = self.folder if log else None  # the folder of its log files (see log())
         self._log_parts = []
         self.expected_status = 0
+        self.failed = False  # a test that used it failed: its logs are kept
         self.client = None
         self.monitor = None
         self._streams = []
@@ -428,11 +429,9 @@ def _start(request, folder, opts):
                       log=opts.get("log", True))
 
 
-def _finish(request, inst, keep):
+def _finish(inst, keep):
     problems = inst.stop()
-    failed = any(getattr(request.node, f"vafm_rep_{w}", None) is not None and
-                 getattr(request.node, f"vafm_rep_{w}").failed for w in ("setup", "call"))
-    if not (keep or failed or problems):
+    if not (keep or inst.failed or problems):  # a passing test leaves no log behind (--vafm-keep-logs keeps it)
         for p in [*inst._log_parts, inst.stderr_path]:
             if os.path.exists(p):
                 os.unlink(p)
@@ -447,7 +446,7 @@ def vafmd_module(request, tmp_path_factory):
     inst = _start(request, tmp_path_factory.mktemp("vafmd"), opts)
     request.node.vafm_instruments = getattr(request.node, "vafm_instruments", []) + [inst]
     yield inst
-    _finish(request, inst, request.config.getoption("vafm_keep_logs"))
+    _finish(inst, request.config.getoption("vafm_keep_logs"))
 
 
 @pytest.fixture
@@ -463,7 +462,7 @@ def vafmd(request, tmp_path):
     inst = _start(request, tmp_path, opts)
     request.node.vafm_instruments = [inst]
     yield inst
-    _finish(request, inst, request.config.getoption("vafm_keep_logs"))
+    _finish(inst, request.config.getoption("vafm_keep_logs"))
 
 
 @pytest.fixture
@@ -549,9 +548,9 @@ def vafm_faults(vafmd):
 def pytest_runtest_makereport(item, call):
     outcome = yield
     rep = outcome.get_result()
-    setattr(item, f"vafm_rep_{rep.when}", rep)
     if rep.failed:
         for inst in getattr(item, "vafm_instruments", []):
+            inst.failed = True
             rep.sections.append((f"vafmd stderr (pid {inst.proc.pid}, {inst.rep})", inst.stderr() or "(empty)"))
             if inst._log_parts:
                 rep.sections.append(("vafmd log", "\n".join(inst._log_parts)))
