@@ -66,6 +66,10 @@ has python3-vafm-client /usr/lib/python3/dist-packages/vafm_client/__init__.py \
 cat "$TMP"/*.list | grep -v '/$' | sort | uniq -d >"$TMP/dup"
 [ -s "$TMP/dup" ] && bad "no file is in two packages" "$(head -3 "$TMP/dup")" || ok "no file is in two packages"
 
+has python3-vafm-client /usr/lib/python3/dist-packages/vafm_client/pytest_plugin.py \
+    "/usr/lib/python3/dist-packages/vafm_client-$(dpkg-deb -f "${DEBS[python3-vafm-client]}" Version | sed 's/-[^-]*$//').dist-info/entry_points.txt" \
+    /usr/share/doc/python3-vafm-client/examples/pytest_acquisition/test_acquire.py
+
 # the packages extracted (no installation) and used from there
 ROOT=$TMP/root
 for p in vafm libvafm0 libvafm-dev python3-vafm-client; do dpkg-deb -x "${DEBS[$p]}" "$ROOT"; done
@@ -121,5 +125,24 @@ if PYTHONPATH=$ROOT/usr/lib/python3/dist-packages /usr/bin/python3 -c \
 else
     bad "python3 imports the extracted vafm_client $VERSION" "$(tail -3 "$TMP/py")"
 fi
+
+# the pytest plugin, found by its pytest11 entry point in the extracted dist-info (no -p), and vafmd on PATH:
+# the packaged example acquisition module's tests, its expected failure (the careless module) included
+EX=$TMP/pytest_acquisition
+cp -r "$ROOT/usr/share/doc/python3-vafm-client/examples/pytest_acquisition" "$EX" 2>/dev/null &&
+    find "$EX" -name '*.gz' -exec gunzip {} + 2>/dev/null
+if [ -f "$EX/test_acquire.py" ] &&
+    PATH=$ROOT/usr/bin:$PATH PYTHONPATH=$ROOT/usr/lib/python3/dist-packages PYTHONDONTWRITEBYTECODE=1 VAFMD= \
+    /usr/bin/python3 -m pytest -p no:cacheprovider -rxs "$EX" >"$TMP/pytest" 2>&1 &&
+    grep -Eq "^=+ 3 passed, 1 xfailed in" "$TMP/pytest"; then
+    ok "the packaged example's tests pass through the extracted pytest plugin: $(tail -1 "$TMP/pytest" | tr -d =)"
+else
+    bad "the packaged example's tests through the extracted pytest plugin (entry point, vafmd on PATH)" \
+        "$(tail -5 "$TMP/pytest" 2>/dev/null)"
+fi
+PYTHONPATH=$ROOT/usr/lib/python3/dist-packages /usr/bin/python3 -m pytest --trace-config --co -q "$EX" 2>&1 |
+    grep -q "registered: <module 'vafm_client.pytest_plugin' from '$ROOT/" &&
+    ok "pytest loads the plugin from the extracted package" ||
+    bad "pytest loads the plugin from the extracted package" "$(grep -i vafm "$TMP/pytest" | head -3)"
 
 harness_done
