@@ -12,7 +12,9 @@ the HDF5 loader).
     f = load_h5("curves.h5")                         # HDF5 files of protocol/hdf5.md (any program's)
 
 The 72-byte data header is decoded here with struct, per wire.md §4 (no C code is imported).
-`Daemon` (vafm_client.spawn) starts a private vafmd on ipc:// endpoints, for tests and examples.
+`Daemon` (vafm_client.spawn) starts a private vafmd on ipc:// endpoints, for tests and examples;
+`vafm_client.pytest_plugin` gives each pytest test a vafmd (fixture `vafmd`; docs/daemon.md, "Testing your
+acquisition code").
 """
 from .client import (CHANNELS, DEFAULT_PUB, DEFAULT_REP, HEADER, MAGIC, Client, DaemonError, GapError,
                      Header, Run, Stream, TransportError, TruncatedError, decode_header)

@@ -164,8 +164,9 @@ class _Monitor(threading.Thread):
 
 class Instrument:
     """A vafmd started for a test. `rep`, `pub` (endpoints), `client` (a connected Client), `stream()` (a new
-    Stream, closed at teardown), `log_path` (its HDF5 log: every completed curve, the ground truth),
-    `stderr_path`, `proc`. The assert_* methods check what acquisition code must get right."""
+    Stream, closed at teardown), `log()` (every curve it logged, with its ground truth; the HDF5 files are
+    in `log_path`, the test's folder, None without logging), `stderr_path`, `proc`, `folder`. The assert_*
+    methods check what acquisition code must get right."""
 
     def __init__(self, vafmd, folder, args=(), transport="ipc", log=True, start_timeout=10.0):
         self.folder = str(folder)
