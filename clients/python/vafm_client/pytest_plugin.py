@@ -499,7 +499,7 @@ def vafm_scene(vafmd):
                 try:
                     values[n] = quantity(v, info[n].get("unit") or "")
                     break
-                except ValueError as e:
+                except ValueError:
                     errs.append(f"{n} [{info[n].get('unit')}]")
             else:
                 raise ValueError(f"{word}={v!r}: give a unit of one of {', '.join(errs)}")
