@@ -4,8 +4,8 @@
 # `meson install` into a temporary root, then, from outside the source tree, what a user and a developer do
 # with an installation: the installed vafm runs a curve and `vafm study hysteresis --quick` with its figure
 # (the plotter found beside the binary, not in the source tree), a small C program builds against the
-# installed client library through pkg-config and runs, Debian's python3 imports the installed client, and
-# the man pages, the service unit and its configuration are there. Usage: test_install.sh BUILD_DIR.
+# installed client library through pkg-config and runs, Debian's python3 imports the installed client (and
+# pytest its plugin, by entry point, on the installed vafmd), and the man pages, the service unit and its configuration are there. Usage: test_install.sh BUILD_DIR.
 # Release build only (meson.build says why).
 set -u
 
@@ -118,6 +118,26 @@ if PYTHONPATH=$PYDIR /usr/bin/python3 -c 'import vafm_client, sys; print(vafm_cl
     ok "Debian's python3 imports the installed client ($(cat "$TMP/py"))"
 else
     bad "Debian's python3 imports the installed client" "$(cat "$TMP/py")"
+fi
+# the pytest plugin, by its pytest11 entry point (the installed dist-info), on the installed vafmd: the first
+# test of docs/daemon.md "Testing your acquisition code"
+cat >test_first.py <<'PY'
+from vafm_client import Client, Stream
+
+def take_curve(rep, pub, index):                 # your acquisition code
+    with Client(rep) as c, Stream(pub) as s:
+        return s.run(c.curve(index=index)["run_id"])
+
+def test_first_curve(vafmd, vafm_scene):
+    vafm_scene("contact-silica", setpoint="1nN")   # a preset plus overrides with units
+    run = take_curve(vafmd.rep, vafmd.pub, 0)
+    vafmd.assert_curves_match_log([{"index": 0, "force_N": run["force_N"], "height_m": run["height_m"]}])
+PY
+if PYTHONPATH=$PYDIR PYTHONDONTWRITEBYTECODE=1 VAFMD= /usr/bin/python3 -m pytest -p no:cacheprovider \
+    --vafmd "$ROOT/bin/vafmd" test_first.py >"$TMP/pytest" 2>&1 && grep -Eq "^=+ 1 passed in" "$TMP/pytest"; then
+    ok "pytest finds the installed plugin by its entry point; the first test passes on the installed vafmd"
+else
+    bad "the installed pytest plugin (entry point) runs the first test" "$(tail -5 "$TMP/pytest")"
 fi
 for f in share/man/man1/vafm.1 share/man/man1/vafmd.1 lib/systemd/system/vafmd.service etc/vafm/vafmd.json share/vafm/study_plot.py; do
     [ -s "$ROOT/$f" ] && ok "installed: $f" || bad "installed: $f"
