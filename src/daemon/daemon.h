@@ -101,9 +101,9 @@ typedef struct vafmd_sim_cmd {
 
 /* ---- HDF5 logging (log.c) ------------------------------------------------------------------------
  * The simulation thread copies each released block of a logged curve into a log block taken from a
- * preallocated pool and pushes a pointer through the log ring (SPSC, never waits: a full ring, or an
- * empty pool, drops the block, counts an overflow and marks the curve broken; a broken curve is not
- * written). The writer thread assembles the curve, appends it, with a flush, when its LOG_END arrives,
+ * preallocated pool and pushes a pointer through the log ring (SPSC; a paced run never waits: a full
+ * ring, or an empty pool, drops the block, counts an overflow and marks the curve broken; a broken curve
+ * is not written; a free run waits for room instead, sim_thread.c "Free run"). The writer thread assembles the curve, appends it, with a flush, when its LOG_END arrives,
  * and gives each block back through the free ring (a second SPSC ring, writer → simulation thread).
  * The pool's design and lifetime: sim_thread.c, "The log block pool". */
 enum vafmd_log_item_type { VAFMD_LOG_BEGIN = 1, VAFMD_LOG_BLOCK = 2, VAFMD_LOG_END = 3 };

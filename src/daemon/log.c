@@ -5,8 +5,10 @@
  * protocol/hdf5.md and flushes after every curve, so a killed daemon loses at most the curve in
  * progress. The arrays in the file are copies of the very doubles that were streamed (bit for bit).
  *
- * The simulation thread never waits for this thread: the ring is bounded and a full ring costs the
- * curve (counted), not time. The log blocks come from the simulation thread's preallocated pool and go
+ * A paced run never waits for this thread: the ring is bounded and a full ring costs the curve (counted),
+ * not time; a free run waits for room instead and loses nothing (sim_thread.c, "Free run"). Each curve
+ * whose run.end said "pending" gets exactly one notice, from here (its end item) or, when its end item
+ * was lost, from the simulation thread; the counters count each curve once, where its notice comes from. The log blocks come from the simulation thread's preallocated pool and go
  * back to it through the free ring (sim_thread.c, "The log block pool"). This thread polls the ring
  * (1 ms naps when it is empty); the writer object is handed over by the control thread through the
  * atomic log state (OFF → ON) and handed back, closed, by this thread (STOPPING → OFF).
@@ -153,9 +155,7 @@ static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
 {
     switch (it->type) {
     case VAFMD_LOG_BEGIN:
-        if (c->begin) /* the previous curve's end was lost to a full ring */
-            atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
-        s_curve_reset(c);
+        s_curve_reset(c); /* a curve still open lost its end item: the simulation thread counted it */
         c->begin = it->ptr;
         it->ptr = NULL;
         break;
@@ -180,10 +180,13 @@ static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
     }
     case VAFMD_LOG_END: {
         const vafmd_log_end *e = it->ptr;
-        if (!c->begin || c->begin->run_id != it->run_id) {
-            atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed); /* its begin was lost */
-            if (e->ok)
+        if (!c->begin || c->begin->run_id != it->run_id) { /* its begin was lost */
+            if (e->ok) {
+                atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
                 s_notice(L, it->run_id, 0, 0);
+            } else
+                atomic_fetch_add_explicit(&L->curves_skipped, 1, memory_order_relaxed);
+            s_curve_reset(c);
             break;
         }
         if (!e->ok)
@@ -247,9 +250,7 @@ void *vafmd_log_main(void *arg)
              * no run is in progress, after its end was pushed) */
             vafm_error e;
             memset(&e, 0, sizeof e);
-            if (c.begin)
-                atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
-            s_curve_reset(&c);
+            s_curve_reset(&c); /* a curve still open lost its end item: the simulation thread counted it */
             faults_of = NULL; /* the next log starts a list of its own */
             if (vafm_recorder_close(&L->w, NULL, &e))
                 s_set_err(L, "closing the file: %s%s", e.message, "");

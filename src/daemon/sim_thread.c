@@ -754,8 +754,8 @@ static void s_pool_prepare(s_ctx *x, int logged, size_t block_n)
 
 /* Hand one item to the writer thread without waiting: a full ring loses it (counted) and the curve. A
  * lost block goes back to its pool, a lost begin/end item is freed (they are allocated once per run, at
- * its start and end, not per block). */
-static void s_log_push(s_run *r, int type, void *ptr)
+ * its start and end, not per block). @return 1 if the writer has it. */
+static int s_log_push(s_run *r, int type, void *ptr)
 {
     vafmd_log_item it = { type, r->cmd.run_id, ptr };
     if (!ptr || !vafmd_ring_push(&r->log->ring, &it)) {
@@ -765,6 +765,45 @@ static void s_log_push(s_run *r, int type, void *ptr)
             free(ptr);
         r->log_broken = 1;
         atomic_fetch_add_explicit(&r->log->overflows, 1, memory_order_relaxed);
+        return 0;
+    }
+    return 1;
+}
+
+/* ---- Free run: the simulation waits for the writer ---------------------------------------------------
+ * A paced run never waits for the writer (a block that finds no room costs its curve, counted). A free
+ * run has no deadline to keep, so it loses nothing: it releases a logged block only when the ring has
+ * room for it AND for the curve's end item, and its pool a free block (so the end item always fits,
+ * after a block as after the begin item); otherwise the block stays in the FIFO and the loop comes back
+ * (commands, notices and heartbeats go on meanwhile). 0.6.2 dropped instead: a 16 x 16 free-run map lost
+ * up to 164 of its 256 curves to a busy writer, and their end items with them (issue #29). */
+static int s_log_room(s_ctx *x, size_t need)
+{
+    return vafmd_ring_room(&x->d->log.ring) >= need;
+}
+
+/* A logged free-run block may be released now (see above). Without a pool (it could not be allocated)
+ * every block overflows anyway: nothing to wait for. */
+static int s_log_ready(s_ctx *x)
+{
+    vafmd_log_pool *p = x->pool;
+    if (!p)
+        return 1;
+    if (!p->n_free)
+        s_pool_reclaim(&x->d->log);
+    return p->n_free && s_log_room(x, 2);
+}
+
+static void s_log_notices(s_ctx *x);
+
+/* A free run's begin item: wait until the ring has room for it and the end item (the writer frees a slot
+ * within one curve append, milliseconds), publishing the writer's notices meanwhile (the writer may be
+ * waiting for room for them). Given up at shutdown (then the item may be lost, counted). */
+static void s_log_wait_room(s_ctx *x)
+{
+    while (!s_log_room(x, 2) && !atomic_load_explicit(&x->d->quitting, memory_order_acquire) && !*x->d->stop) {
+        s_log_notices(x);
+        s_sleep_until(s_now() + 100000);
     }
 }
 
@@ -834,6 +873,7 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
     s_run *r = &x->run;
     vafmd_shared *sh = &x->d->sh;
     int silent = r->fault_silent; /* truncate/kill: no run.end, not logged (faults.md) */
+    const uint64_t run_id = r->cmd.run_id; /* for after s_run_free */
     if (r->drop_left) { /* a drop fault that outlasted the run: record the blocks it did drop */
         r->drop_rec.p0 -= (double)r->drop_left;
         r->drop_left = 0;
@@ -909,21 +949,29 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
                                                    s_num_or_null(res.detach_force_N)));
         }
     }
-    int log_pending = 0;
+    int log_pending = 0, log_lost = 0;
     if (r->log) {
+        vafm_curve_result lres;
+        log_pending = !strcmp(status, "ok") && !err_code && !silent && s_run_result(r, &lres) == 0;
         vafmd_log_end *le = calloc(1, sizeof *le);
         if (le) {
-            le->ok = !strcmp(status, "ok") && !err_code && !silent;
+            le->ok = log_pending;
             le->broken = r->log_broken;
             le->force_altered = r->force_altered;
-            if (s_run_result(r, &le->result))
-                le->ok = 0;
-            log_pending = le->ok;
+            if (log_pending)
+                le->result = lres;
         }
-        s_log_push(r, VAFMD_LOG_END, le);
+        /* an end item the writer does not get (a full ring: paced runs only, or no memory): this thread
+         * counts the curve and, if pending, says log_failed itself after run.end; the writer, which then
+         * finds the curve's begin still open at the next begin or at the stop, counts nothing */
+        if (!s_log_push(r, VAFMD_LOG_END, le)) {
+            log_lost = log_pending;
+            atomic_fetch_add_explicit(log_pending ? &r->log->curves_dropped : &r->log->curves_skipped, 1,
+                                      memory_order_relaxed);
+        }
     }
     /* "pending": the writer thread will append it; the event "logged" (or "log_failed") says when it is
-     * durable in the file. null: this run is not logged. */
+     * durable in the file, exactly one of them for each pending run. null: this run is not logged. */
     json_object_set_new(j, "log", log_pending ? json_string("pending") : json_null());
     int ok = !strcmp(status, "ok") && !err_code;
     if (cp && ok && !silent)
@@ -948,6 +996,8 @@ static void s_run_end(s_ctx *x, const char *status, int err_code)
             s_send_text(x, "run.end", text);
         free(text);
     }
+    if (log_lost)
+        s_send_json(x, "event", json_pack("{s:I,s:s}", "run_id", (json_int_t)run_id, "kind", "log_failed"));
     if (cp && job_over)
         s_camp_end(x, ok ? "ok" : failed ? "error" : "aborted", failed ? msg : NULL, 0);
 }
@@ -1031,6 +1081,8 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
                                (int)(c->index / (uint64_t)c->camp->map.nx), NULL, &lb->pixel, NULL);
             }
         }
+        if (c->set.free_run) /* loses nothing: waits for room (a campaign's curve has it already) */
+            s_log_wait_room(x);
         s_log_push(r, VAFMD_LOG_BEGIN, lb);
     }
     atomic_store_explicit(&sh->run_id, c->run_id, memory_order_relaxed);
@@ -1296,6 +1348,10 @@ static void s_run_step(s_ctx *x)
         r->hold_until = 0;
     }
     while (r->qn > 0 && (r->cmd.set.free_run || now >= r->q[r->qhead].deadline)) {
+        if (r->cmd.set.free_run && r->log && !r->log_broken && !s_log_ready(x)) {
+            s_sleep_until(now + 100000); /* the writer is behind: wait for it (free run loses nothing) */
+            return;
+        }
         if (__builtin_expect(x->fp != NULL, 0) && s_fault_release(x, now))
             return; /* held (late, jitter, stall) or over (truncate, kill) */
         s_release(x, now);
@@ -1328,6 +1384,8 @@ static void s_camp_next(s_ctx *x)
     vafmd_shared *sh = &x->d->sh;
     uint64_t g = cp->next, first = cp->spec.first_curve;
     size_t point = (size_t)(g / cp->spec.curves_per_point);
+    if (cp->log && cp->set.free_run && !s_log_room(x, 2))
+        return; /* free run: the next curve's begin waits for the writer (the loop looks again within 1 ms) */
     if (cp->is_map && g != first && !cp->set.free_run) {
         /* the lateral move from the last pixel to this one takes instrument time (paced: at the speed factor) */
         int64_t now = s_now();

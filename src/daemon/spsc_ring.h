@@ -45,6 +45,14 @@ static inline int vafmd_ring_push(vafmd_ring *r, const void *item)
     return 1;
 }
 
+/** Producer side: free slots now (the consumer may free more at any time, never fewer). */
+static inline size_t vafmd_ring_room(vafmd_ring *r)
+{
+    size_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
+    size_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
+    return r->cap - (h - t);
+}
+
 /** Consumer side. @return 1 if an item was popped into out, 0 if the ring is empty. */
 static inline int vafmd_ring_pop(vafmd_ring *r, void *out)
 {
