@@ -684,6 +684,10 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     sc.type = VAFMD_SIM_START;
     sc.kind = VAFMD_RUN_CURVE;
     sc.camp = cp;
+    /* read before the push: from it on cp belongs to the simulation thread, which frees it at
+     * campaign.end, possibly before this thread runs again (0.6.2 read cp->total after the push:
+     * ThreadSanitizer, issue #29) */
+    const uint64_t curves = cp->total - c->camp_first;
     if (!vafmd_ring_push(&d->ring, &sc)) {
         vafmd_feed_release(&cp->feed);
         vafm_sim_destroy(&cp->sim);
@@ -692,7 +696,6 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
         return NULL;
     }
-    uint64_t curves = cp->total - c->camp_first; /* cp belongs to the simulation thread from here */
     d->next_campaign_id++;
     d->camp_total = curves + c->camp_first;
     d->camp_first = c->camp_first;
