@@ -1386,6 +1386,48 @@ def test_log_kill9_keeps_every_curve_said_logged(tmp_path):
     vafm_info_ok(path)
 
 
+def test_log_kill9_resume_map_first_index(tmp_path):
+    """Issue #29, item 6 (a segfault seen once): a logged free-run 4 x 4 map killed (-9) mid-way, the daemon
+    restarted, `log` with resume, the map again from first_index 10: campaign.end comes (6 curves), each
+    pending is logged, the file keeps what the killed daemon made durable and gains the 6, and the daemon
+    exits 0. Under ThreadSanitizer a loop of this found the control thread reading the campaign after
+    handing it over (control.c, s_campaign); that race is not reproduced here deterministically."""
+    h5py = pytest.importorskip("h5py")
+    spec = {"nx": 4, "ny": 4, "size_x_m": 6e-6, "size_y_m": 6e-6, "pattern": "dome"}
+    path = tmp_path / "resume.h5"
+    d = Daemon("--preset", "cell-liquid", "--free-run")
+    try:
+        assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+        assert d.cmd({"cmd": "map", "map": spec})["status"] == "ok"
+        time.sleep(0.1)
+        d.proc.kill()  # SIGKILL: no clean-up at all
+        d.proc.wait(timeout=10)
+    finally:
+        d.stop()
+    d = Daemon("--preset", "cell-liquid", "--free-run")
+    try:
+        s = d.sub()
+        settle(d, s)
+        r = d.cmd({"cmd": "log", "path": str(path), "resume": True})
+        assert r["status"] == "ok", r
+        kept = r["curves_in_file"]
+        r = d.cmd({"cmd": "map", "map": spec, "first_index": 10})
+        assert r["status"] == "ok" and r["curves"] == 16 and r["first_index"] == 10, r
+        runs, notices, cend = collect_logged_campaign(s, r["campaign_id"])
+        assert (cend["status"], cend["curves_done"], cend["first_index"]) == ("ok", 6, 10), cend
+        assert sorted(notices.values()) == ["logged"] * 6, notices
+        log = d.cmd({"cmd": "log", "stop": True})["log"]
+        assert (log["curves"], log["curves_dropped"], log["error"]) == (6, 0, None), log
+        with h5py.File(path, "r") as f:
+            assert len(f.keys()) == kept + 6
+            assert [f[str(kept + i)].attrs["grid index x"] + 4 * f[str(kept + i)].attrs["grid index y"]
+                    for i in range(6)] == list(range(10, 16))
+        vafm_info_ok(path)
+    finally:
+        rc = d.stop()
+    assert rc == 0
+
+
 def test_huge_curves_refused_before_they_start(tmp_path):
     """Issue #18, finding 5: a scene whose curve would have more samples than a curve may have is refused by
     `set` (invalid_scene: each value is in its range, the scene they make is not; naming the field); with logging on, a curve longer than the writer assembles in
