@@ -19,6 +19,7 @@
 
 #include "vafm/detector.h"
 #include "vafm/integrator.h"
+#include "vafm/segments.h"
 #include "vafm/sim.h"
 #include "vafm/theory.h"
 #include "core/batch.h"
@@ -311,7 +312,12 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
 
     K->t = 0.0;
     K->u_spr = s->uspr_start;
-    double v0 = scene == S_SCENE_CURVE ? rd->v_approach : 0.0;
+    /* the support's speed in the first phase (the body's initial velocity is drawn about it): the approach's,
+     * or the first segment's of a list */
+    double v0 = scene != S_SCENE_CURVE ? 0.0 : !s->list ? rd->v_approach
+                : s->seg[0].kind == VAFM_SEGMENT_EXTEND  ? s->seg[0].speed_m_per_s / s->nm.sc.speed_m_per_s
+                : s->seg[0].kind == VAFM_SEGMENT_RETRACT ? -(s->seg[0].speed_m_per_s / s->nm.sc.speed_m_per_s)
+                                                         : 0.0;
     s->pz.on = 0;
     if (scene == S_SCENE_CURVE && vafm_piezo_on(&s->p))
         vafm_piezo_begin(&s->pz, &s->p, s->uspr_start * L);
@@ -380,6 +386,7 @@ int vafm_sim_curve_begin(vafm_sim *s, uint64_t index)
                      "scene is at the tune's sample rate, and a force curve's cost there was not checked");
         return VAFM_EINVAL;
     }
+    s->list = 0;
     s_begin(s, index, S_SCENE_CURVE);
     return 0;
 }
@@ -392,6 +399,7 @@ int vafm_sim_tune_begin(vafm_sim *s, uint64_t index)
     int rc = vafm_numerics_check_tune(&s->p, &s->nm, s->tune_only, &s->err);
     if (rc)
         return rc;
+    s->list = 0;
     s_begin(s, index, S_SCENE_TUNE);
     return 0;
 }
@@ -591,10 +599,10 @@ static void s_flush(vafm_sim *s, vafm_sample_fn fn, void *user, int *stop)
     s->nblk = 0;
 }
 
-static void s_start_retract(vafm_sim *s)
+static void s_start_retract_at(vafm_sim *s, double v_retract)
 {
     vafm_kernel *K = &s->K;
-    s_set_speed(s, -s->nm.r.v_retract);
+    s_set_speed(s, -v_retract);
     s->need_prepare = 1; /* the drift term changed with v_spr */
     s->t_retract0 = K->t;
     s->uspr_turn = s_ucmd(s);
@@ -605,9 +613,20 @@ static void s_start_retract(vafm_sim *s)
                                                    : 4.0 * fmax(s->uspr_turn - end, 0.0) + s->margin + 1.0;
 }
 
+static void s_start_retract(vafm_sim *s)
+{
+    s_start_retract_at(s, s->nm.r.v_retract);
+}
+
+static void s_list_logic(vafm_sim *s, double force);
+
 static void s_phase_logic(vafm_sim *s, double force)
 {
     vafm_kernel *K = &s->K;
+    if (s->list) {
+        s_list_logic(s, force);
+        return;
+    }
     switch (s->phase) {
     case S_PH_APPROACH: {
         /* a relative setpoint counts from the baseline: the mean of the approach's first samples (before this
@@ -679,6 +698,227 @@ static void s_phase_logic(vafm_sim *s, double force)
     }
 }
 
+/* ---- segment lists (vafm/segments.h) ------------------------------------------------------------ */
+
+/* The command at this sample boundary (with the piezo model: the one the actuator is driven to now). */
+static inline double s_ucmd_boundary(const vafm_sim *s)
+{
+    return s->pz.on ? s->ucmd_next : s_ucmd(s);
+}
+
+static inline int s_force_type(int ch)
+{
+    return ch == VAFM_SEGMENT_TRIGGER_FORCE || ch == VAFM_SEGMENT_TRIGGER_DEFLECTION_V;
+}
+
+/* A modulation's next interval: the command goes to h0 + A·sin(2π f τ) at the next boundary. */
+static void s_list_modulate(vafm_sim *s, const vafm_segment_spec *g)
+{
+    const vafm_scale *sc = &s->nm.sc;
+    const double Ts = s->nm.Ts;
+    const double tau_s = (s->K.t + Ts - s->seg_t0) * sc->time_s;
+    const double target = s->seg_u0 - g->amplitude_m / sc->length_m * sin(2.0 * M_PI * g->frequency_Hz * tau_s);
+    s_set_speed(s, (target - s_ucmd_boundary(s)) / Ts);
+    s->need_prepare = 1;
+}
+
+/* Enter segment i of the list at this sample boundary (force: the sample's, reduced); pauses and
+ * modulations of no whole sample are skipped; past the last segment the run is done. first: the run's
+ * start (s_begin set the first phase's speed). */
+static void s_list_enter(vafm_sim *s, size_t i, double force, int first)
+{
+    vafm_kernel *K = &s->K;
+    const vafm_scale *sc = &s->nm.sc;
+    const double L = sc->length_m, rate = s->p.sample_rate_Hz;
+    const int prev_force_trig = i > 0 && s->seg[i - 1].kind == VAFM_SEGMENT_EXTEND && s_force_type(s->seg[i - 1].trigger);
+    for (; i < s->nseg; i++, first = 0) {
+        const vafm_segment_spec *g = &s->seg[i];
+        s->iseg = i;
+        s->seg_label = g->label >= 0 ? g->label : (int)i;
+        s->seg_u0 = s_ucmd(s);
+        s->seg_t0 = K->t;
+        s->base_sum = 0.0;
+        s->base_n = 0;
+        s->dec = g->sample_rate_Hz > 0 ? lround(rate / g->sample_rate_Hz) : 1;
+        s->seg_ch = g->trigger;
+        s->seg_op = g->trigger_op;
+        switch (g->trigger) {
+        case VAFM_SEGMENT_TRIGGER_FORCE: s->seg_thr = g->trigger_value / sc->force_N; break;
+        case VAFM_SEGMENT_TRIGGER_DEFLECTION_V:
+            s->seg_thr = (g->trigger_value - (g->trigger_relative ? 0.0 : s->p.baseline_offset_V)) *
+                         s->p.sensitivity_m_per_V * s->p.k_N_per_m / sc->force_N;
+            break;
+        case VAFM_SEGMENT_TRIGGER_HEIGHT: s->seg_thr = -g->trigger_value / L; break;
+        case VAFM_SEGMENT_TRIGGER_TIME: s->seg_thr = g->trigger_value / sc->time_s; break;
+        default: s->seg_thr = 0.0; break;
+        }
+        const double v = g->speed_m_per_s / sc->speed_m_per_s;
+        switch (g->kind) {
+        case VAFM_SEGMENT_EXTEND:
+            if (!first) {
+                s_set_speed(s, v);
+                s->need_prepare = 1;
+            }
+            s->seg_ulim = g->distance_m > 0 ? s->seg_u0 + g->distance_m / L : s->uspr_zlimit;
+            s->phase = S_PH_APPROACH;
+            return;
+        case VAFM_SEGMENT_RETRACT:
+            if (g->end != VAFM_SEGMENT_END_TRAVEL) {
+                s_start_retract_at(s, v);
+            } else {
+                s_set_speed(s, -v);
+                s->need_prepare = 1;
+                s->t_retract0 = K->t;
+                s->uspr_turn = s_ucmd(s);
+                K->fs_min = INFINITY;
+                s->phase = S_PH_RETRACT;
+                s->seg_ulim = s->seg_u0 - g->distance_m / L;
+            }
+            return;
+        case VAFM_SEGMENT_PAUSE: {
+            s->seg_left = lround(g->duration_s * rate);
+            if (s->seg_left <= 0)
+                continue;
+            const double tau = g->feedback_s > 0         ? g->feedback_s
+                               : s->p.dwell_feedback_s > 0 ? s->p.dwell_feedback_s
+                                                           : 10.0 / rate;
+            s->fb_gain = 1.0 / (s->nm.r.k * tau / sc->time_s);
+            if (!isnan(g->hold_force_N))
+                s->F_hold = g->hold_force_N / sc->force_N;
+            else if (!prev_force_trig)
+                s->F_hold = force;
+            s_set_speed(s, g->pause_mode == VAFM_PAUSE_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0);
+            s->need_prepare = 1;
+            s->phase = S_PH_DWELL;
+            return;
+        }
+        default: /* modulate */
+            s->seg_left = lround(g->duration_s * rate);
+            if (s->seg_left <= 0)
+                continue;
+            s->seg_u0 = s_ucmd_boundary(s);
+            s->phase = S_PH_DWELL;
+            s_list_modulate(s, g);
+            return;
+        }
+    }
+    s->iseg = s->nseg;
+    s->phase = S_PH_DONE;
+}
+
+/* A list's sample boundary: the running segment's trigger and end (force: the sample's, reduced). */
+static void s_list_logic(vafm_sim *s, double force)
+{
+    vafm_kernel *K = &s->K;
+    const vafm_segment_spec *g = &s->seg[s->iseg];
+    double base = 0.0;
+    int armed = 1;
+    if (g->trigger_relative) {
+        /* the baseline: the mean of the segment's first samples before this one (as the curve's relative setpoint) */
+        armed = s->base_n > 0;
+        base = armed ? s->base_sum / s->base_n : 0.0;
+        if (s->base_n < VAFM_BASELINE_SAMPLES) {
+            s->base_sum += force;
+            s->base_n++;
+        }
+    }
+    int trig = 0;
+    switch (s->seg_ch) {
+    case VAFM_SEGMENT_TRIGGER_FORCE:
+    case VAFM_SEGMENT_TRIGGER_DEFLECTION_V:
+        trig = armed && (s->seg_op == VAFM_SEGMENT_ABOVE ? force - base >= s->seg_thr : force - base <= s->seg_thr);
+        break;
+    case VAFM_SEGMENT_TRIGGER_HEIGHT: /* height falls as the command u rises */
+        trig = s->seg_op == VAFM_SEGMENT_BELOW ? s_ucmd(s) >= s->seg_thr : s_ucmd(s) <= s->seg_thr;
+        break;
+    case VAFM_SEGMENT_TRIGGER_TIME: trig = K->t - s->seg_t0 >= s->seg_thr; break;
+    default: break;
+    }
+    if (s->seg_ch != VAFM_SEGMENT_TRIGGER_TIME)
+        trig = trig && !s->trigger_off; /* fault injection: a trigger that never fires */
+    int done = 0;
+    switch (g->kind) {
+    case VAFM_SEGMENT_EXTEND:
+        s->F_hold = s_force_type(s->seg_ch) ? s->seg_thr + base : force;
+        if (!trig && s_ucmd(s) >= s->seg_ulim) {
+            if (s->seg_ch != VAFM_SEGMENT_TRIGGER_NONE)
+                s->flags |= VAFM_CURVE_NO_TRIGGER;
+            trig = 1;
+        }
+        done = trig;
+        break;
+    case VAFM_SEGMENT_RETRACT:
+        if (trig)
+            done = 1;
+        else if (g->end == VAFM_SEGMENT_END_START) {
+            /* back to the run's start height, whatever the tip did on the way (a fixed ramp) */
+            if (s_ucmd(s) <= s->uspr_start) {
+                if (K->in_contact)
+                    s->flags |= VAFM_CURVE_NO_DETACH;
+                done = 1;
+            }
+        } else if (g->end == VAFM_SEGMENT_END_DETACH) {
+            const double travel = s->uspr_turn - s_ucmd(s);
+            if (!K->in_contact && s->detached_in_retract && s->uspr_detach - K->u_spr >= s->margin)
+                done = 1;
+            else if (!K->in_contact && !s->detached_in_retract &&
+                     s_ucmd(s) <= fmin(s->uspr_start, s->uspr_turn) - s->margin)
+                done = 1;
+            else if (travel >= s->retract_travel_max) {
+                if (K->in_contact)
+                    s->flags |= VAFM_CURVE_NO_DETACH;
+                done = 1;
+            }
+        } else if (s_ucmd(s) <= s->seg_ulim)
+            done = 1;
+        break;
+    case VAFM_SEGMENT_PAUSE:
+        if (trig || --s->seg_left <= 0)
+            done = 1;
+        else if (g->pause_mode == VAFM_PAUSE_FORCE) {
+            s_set_speed(s, s->fb_gain * (s->F_hold - force));
+            s->need_prepare = 1;
+        }
+        break;
+    default: /* modulate */
+        if (trig || --s->seg_left <= 0)
+            done = 1;
+        else
+            s_list_modulate(s, g);
+        break;
+    }
+    if (done)
+        s_list_enter(s, s->iseg + 1, force, 0);
+}
+
+int vafm_sim_segments_begin(vafm_sim *s, uint64_t index, const vafm_segment_spec *segs, size_t n)
+{
+    if (!s)
+        return VAFM_EINVAL;
+    memset(&s->err, 0, sizeof s->err);
+    if (s->tune_only) {
+        vafm_err_set(&s->err, VAFM_EINVAL, "", "this simulation runs thermal tunes only (vafm_sim_new_tune)");
+        return VAFM_EINVAL;
+    }
+    int r = vafm_segments_validate(segs, n, &s->p, &s->err);
+    if (r)
+        return r;
+    memcpy(s->seg, segs, n * sizeof *segs);
+    s->nseg = n;
+    s->list = 1;
+    s->dec_n = 0;
+    s_begin(s, index, S_SCENE_CURVE);
+    s_list_enter(s, 0, s->K.f, 1);
+    return 0;
+}
+
+int vafm_sim_segment_current(const vafm_sim *s)
+{
+    if (!s || !s->list || s->scene != S_SCENE_CURVE || s->phase == S_PH_DONE)
+        return -1;
+    return (int)s->iseg;
+}
+
 /* The live scene's sample boundary: the commander sees sample j of the block and says where the support is
  * at the end of the next interval; the support moves there at a constant speed. */
 static void s_live_logic(vafm_sim *s, size_t j)
@@ -713,11 +953,47 @@ int vafm_sim_live_begin(vafm_sim *s, uint64_t stream, double height0_m, vafm_liv
     s->live_fn = fn;
     s->live_user = user;
     s->live_h0_m = height0_m;
+    s->list = 0;
     s_begin(s, stream, S_SCENE_LIVE);
     return 0;
 }
 
 static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sample_fn fn, void *user);
+/* Decimation of a list's segment: add the sample in block slot j (reduced force: force) to the running sums.
+ * @return 1 once the output sample is complete (dec samples). */
+static int s_dec_add(vafm_sim *s, size_t j, double force)
+{
+    const double v[7] = { s->bt[j], s->bh[j], s->pz.on ? s->bha[j] : 0.0, s->bd[j], s->bf[j], s->btip[j], force };
+    const int mean = s->p.antialias == VAFM_ANTIALIAS_MEAN;
+    for (int c = 0; c < 7; c++)
+        s->dec_sum[c] = mean && s->dec_n > 0 ? s->dec_sum[c] + v[c] : v[c];
+    s->dec_n++;
+    return s->dec_n >= s->dec;
+}
+
+/* Write the gathered output sample (the mean of the dec_n samples, or the last of them with antialias
+ * point) into block slot j, labelled seg. */
+static void s_dec_emit(vafm_sim *s, size_t j, int seg, int in_retract)
+{
+    const double w = s->p.antialias == VAFM_ANTIALIAS_MEAN ? 1.0 / (double)s->dec_n : 1.0;
+    s->bt[j] = s->dec_sum[0] * w;
+    s->bh[j] = s->dec_sum[1] * w;
+    if (s->pz.on)
+        s->bha[j] = s->dec_sum[2] * w;
+    s->bd[j] = s->dec_sum[3] * w;
+    s->bf[j] = s->dec_sum[4] * w;
+    s->btip[j] = s->dec_sum[5] * w;
+    s->bseg[j] = (uint8_t)seg;
+    const double force = s->dec_sum[6] * w;
+    s->dec_n = 0;
+    s->sample_index++;
+    if (in_retract) {
+        s->retract_samples++;
+        if (force < s->sample_min_force)
+            s->sample_min_force = force;
+    }
+}
+
 
 int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user)
 {
@@ -745,11 +1021,14 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
             s->phase = S_PH_DONE;
             break;
         }
-        int seg = s->phase == S_PH_APPROACH ? VAFM_SEG_APPROACH
+        int seg = s->list                   ? s->seg_label
+                  : s->phase == S_PH_APPROACH ? VAFM_SEG_APPROACH
                   : s->phase == S_PH_DWELL  ? VAFM_SEG_DWELL
                   : s->phase == S_PH_TUNE   ? VAFM_SEG_TUNE
                   : s->phase == S_PH_LIVE   ? VAFM_SEG_LIVE
                                             : VAFM_SEG_RETRACT;
+        /* a list's retract segments carry the curve's retract observables, whatever their label */
+        const int in_retract = s->list ? s->phase == S_PH_RETRACT : seg == VAFM_SEG_RETRACT;
         int r = s_step_interval(s, budget);
         if (r == 3)
             return VAFM_SIM_BATCH_WAIT; /* the samples stay in the block: the batch kernel runs this interval on */
@@ -778,7 +1057,7 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
             t_m = K->t;
         }
         double defl = uspr_m - u_m, force = K->k * defl;
-        size_t j = s->nblk++;
+        size_t j = s->nblk;
         s->bt[j] = t_m * sc->time_s;
         s->bh[j] = s_height(s, -uspr_m * sc->length_m, s->bt[j]);
         if (s->pz.on) { /* the files' piezo height is the command; where the support was is the actual one */
@@ -790,16 +1069,32 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         s->bf[j] = force * sc->force_N;
         s->btip[j] = s_height(s, -u_m * sc->length_m, s->bt[j]);
         s->bseg[j] = (uint8_t)seg;
-        s->sample_index++;
-        if (seg == VAFM_SEG_RETRACT) {
-            s->retract_samples++;
-            if (force < s->sample_min_force)
-                s->sample_min_force = force;
+        if (s->list && (s->dec > 1 || s->dec_n > 0)) {
+            /* a segment at a lower rate: its output sample gathers dec samples of the scene's rate (the triggers
+             * act on each of them, as a controller's fast loop) */
+            if (s_dec_add(s, j, force)) {
+                s_dec_emit(s, j, seg, in_retract);
+                s->nblk++;
+            }
+        } else {
+            s->nblk++;
+            s->sample_index++;
+            if (in_retract) {
+                s->retract_samples++;
+                if (force < s->sample_min_force)
+                    s->sample_min_force = force;
+            }
         }
+        const size_t iseg0 = s->iseg;
         if (s->phase == S_PH_LIVE)
             s_live_logic(s, j);
         else
             s_phase_logic(s, force);
+        if (s->list && s->dec_n > 0 && (s->iseg != iseg0 || s->phase == S_PH_DONE)) {
+            /* the segment ended inside an output sample: the part gathered is its last sample */
+            s_dec_emit(s, s->nblk, seg, in_retract);
+            s->nblk++;
+        }
         if (s->pz.on && s->phase != S_PH_DONE)
             s_piezo_next(s);
         if (s->nblk == S_BLOCK)
@@ -870,6 +1165,18 @@ static int s_run_all(vafm_sim *s, vafm_sample_fn fn, void *user)
 int vafm_sim_curve(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user, vafm_curve_result *out)
 {
     int r = vafm_sim_curve_begin(s, index);
+    if (r)
+        return r;
+    r = s_run_all(s, fn, user);
+    if (out)
+        vafm_sim_result(s, out);
+    return r;
+}
+
+int vafm_sim_segments(vafm_sim *s, uint64_t index, const vafm_segment_spec *segs, size_t n, vafm_sample_fn fn,
+                      void *user, vafm_curve_result *out)
+{
+    int r = vafm_sim_segments_begin(s, index, segs, n);
     if (r)
         return r;
     r = s_run_all(s, fn, user);

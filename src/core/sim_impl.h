@@ -11,6 +11,7 @@
 #ifndef VAFM_CORE_SIM_IMPL_H
 #define VAFM_CORE_SIM_IMPL_H
 
+#include "vafm/segments.h"
 #include "vafm/sim.h"
 #include "core/internal.h"
 #include "core/kernel.h"
@@ -85,6 +86,21 @@ struct vafm_sim {
     void *live_user;
     double live_h0_m;   /* the support's height above the surface at the start, m */
     vafm_free_ou ou_live; /* exact free transition over a whole sample interval (live scene, far from the surface) */
+    /* a segment list (vafm_sim_segments_begin; list = 0: the plain curve). The phase follows the segment's
+     * motion (APPROACH: extend, DWELL: pause or modulate, RETRACT: retract) so that contact events, the
+     * retract's observables and the step choice treat it as the curve treats its own segments. */
+    int list;
+    size_t nseg, iseg;      /* the list's length and the running segment */
+    vafm_segment_spec seg[VAFM_SEGMENTS_MAX];
+    int seg_label;          /* the running segment's label (the samples' segment channel) */
+    long seg_left;          /* pause, modulate: samples left */
+    double seg_u0, seg_t0;  /* the command and the time at the segment's start (reduced) */
+    double seg_ulim;        /* extend: command ≥ this ends it; retract (end travel): command ≤ this */
+    double seg_thr;         /* trigger threshold: force (reduced, baseline not added), command (reduced), time */
+    int seg_ch, seg_op;     /* trigger channel and comparison in use (NONE when off) */
+    int seg_force_trig;     /* the last extend ended on its force-type trigger (a pause may hold that level) */
+    long dec, dec_n;        /* decimation of the running segment, and base samples accumulated */
+    double dec_sum[7];      /* their sums (t, h, h measured, deflection, force, tip; reduced force) */
     /* output block */
     size_t nblk;
     double *bt, *bh, *bd, *bf, *btip, *bha;
