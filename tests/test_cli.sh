@@ -489,4 +489,25 @@ else
     bad "foreign-file checks" "$TH5 not built (it is built with the tests: meson setup -Dtests=true)"
 fi
 
+# --segments: a 4-segment list (baseline pause, extend to 3 nN, a force pause at a quarter of the rate, retract
+# to the detachment): every sample labelled with its segment in order, the pause's 100 samples as 25; refusals
+# name the segment and the field, or the unknown key
+cat >"$TMP/seg4.json" <<'JSON'
+{"segments": [
+  {"kind": "pause", "duration_s": 0.005},
+  {"kind": "extend", "speed_m_per_s": 1e-6, "trigger": {"channel": "force", "op": ">", "value": 3e-9}},
+  {"kind": "pause", "mode": "force", "duration_s": 0.01, "sample_rate_Hz": 2500},
+  {"kind": "retract", "speed_m_per_s": 1e-6, "end": "detach"}
+]}
+JSON
+run samples --segments "$TMP/seg4.json"
+segs=$(tail -n +2 "$TMP/out" | awk -F, 'BEGIN { ok = 1 } $6 < last { ok = 0 } { last = $6; n[$6]++ }
+    END { print ok, n[0] + 0, (n[1] > 0), n[2] + 0, (n[3] > 0) }')
+if [ "$rc" -eq 0 ] && [ "$segs" = "1 50 1 25 1" ]; then ok "samples --segments: 4 segments in order, labelled"
+else bad "samples --segments" "exit $rc, '$segs'"; fi
+printf '{"segments": [{"kind": "retract", "speed_m_per_s": 0, "distance_m": 1e-7}]}' >"$TMP/segbad.json"
+expect_fail "--segments: a bad speed names the segment and field" 2 "segment 0" speed_m_per_s -- run --segments "$TMP/segbad.json"
+printf '[{"kind": "extend", "sped": 1}]' >"$TMP/segbad.json"
+expect_fail "--segments: an unknown key is named" 2 "segments[0].sped" -- run --segments "$TMP/segbad.json"
+
 harness_done

@@ -2,6 +2,8 @@
 /* `vafm run` (one curve, a readable summary) and `vafm samples` (one curve or tune as CSV). */
 #include "cli/cli.h"
 #include "vafm/detector.h"
+#include "vafm/segments.h"
+#include "record/record.h"
 
 /* ---- vafm run ------------------------------------------------------------------------------------ */
 
@@ -9,6 +11,24 @@ static int s_index_arg(const vafm_cli_args *a, uint64_t *index)
 {
     *index = 0;
     return a->val[O_INDEX] ? vafm_cli_parse_u64("--index", a->val[O_INDEX], 0, UINT64_MAX, index) : 0;
+}
+
+/* Begin curve `index`, or with --segments the file's list. @return 0, a VAFM_E* code of the simulation, or
+ * VAFM_CLI_EXIT_USAGE + 1000 when the file is unreadable or refused (reported). */
+static int s_begin_run(const vafm_cli_args *a, vafm_sim *sim, uint64_t index)
+{
+    if (!a->val[O_SEGMENTS])
+        return vafm_sim_curve_begin(sim, index);
+    vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
+    size_t n = 0;
+    vafm_error err;
+    int r = vafm_segments_load_file(a->val[O_SEGMENTS], segs, VAFM_SEGMENTS_MAX, &n, &err);
+    int invalid = !r && (r = vafm_segments_validate(segs, n, vafm_sim_params(sim), &err)) != 0;
+    if (r) {
+        vafm_cli_error("%s%s%s", invalid ? a->val[O_SEGMENTS] : "", invalid ? ": " : "", err.message);
+        return 1000 + VAFM_CLI_EXIT_USAGE;
+    }
+    return vafm_sim_segments_begin(sim, index, segs, n);
 }
 
 /* The scene, the --index and a simulation for it: the common start of vafm run and vafm samples. */
@@ -44,7 +64,16 @@ int vafm_cli_cmd_run(const vafm_cli_args *a)
     fflush(stdout);
     vafm_cli_progress pg;
     vafm_cli_progress_init(&pg, a);
-    int r = vafm_sim_curve_begin(sim, index);
+    if (a->on[O_TUNE] && a->val[O_SEGMENTS]) {
+        vafm_cli_error("--segments and --tune exclude each other");
+        vafm_sim_destroy(&sim);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    int r = s_begin_run(a, sim, index);
+    if (r >= 1000) {
+        vafm_sim_destroy(&sim);
+        return r - 1000;
+    }
     if (!r)
         r = vafm_cli_advance_all(sim, NULL, NULL, &pg);
     double wall = vafm_cli_now() - pg.t0;
@@ -106,7 +135,18 @@ int vafm_cli_cmd_samples(const vafm_cli_args *a)
     }
     vafm_cli_progress pg;
     vafm_cli_progress_init(&pg, a);
-    int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : vafm_sim_curve_begin(sim, index);
+    if (a->on[O_TUNE] && a->val[O_SEGMENTS]) {
+        vafm_cli_error("--segments and --tune exclude each other");
+        vafm_cli_close_out(f, a->val[O_CSV], 1);
+        vafm_sim_destroy(&sim);
+        return VAFM_CLI_EXIT_USAGE;
+    }
+    int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : s_begin_run(a, sim, index);
+    if (r >= 1000) {
+        vafm_cli_close_out(f, a->val[O_CSV], 1);
+        vafm_sim_destroy(&sim);
+        return r - 1000;
+    }
     int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
     s_out o = { .f = f };
     o.hm = vafm_detector_height_differs(&sc.p);

@@ -43,6 +43,7 @@ static const s_option s_options[VAFM_CLI_NOPT] = {
     [O_SIZE] = { "--size", NULL, 1 },       [O_PATTERN] = { "--pattern", NULL, 1 },
     [O_PPARAM] = { "--pattern-param", NULL, 1 },
     [O_SAMPLE] = { "--sample", NULL, 1 },  [O_KERNEL] = { "--kernel", NULL, 1 },
+    [O_SEGMENTS] = { "--segments", NULL, 1 },
 };
 
 #define M(o) (1u << (o))
@@ -357,10 +358,11 @@ static int s_cmd_help(const vafm_cli_args *a)
 /* ---- the command table ------------------------------------------------------------------------ */
 
 static const vafm_cli_command s_commands[] = {
-    { "run", vafm_cli_cmd_run, S_GENERAL | M(O_INDEX) | M(O_PROGRESS) | M(O_QUIET), 1,
+    { "run", vafm_cli_cmd_run, S_GENERAL | M(O_INDEX) | M(O_PROGRESS) | M(O_QUIET) | M(O_SEGMENTS), 1,
       "one force curve with a readable summary (the default command)",
-      "vafm run [SCENE] [--index N] [--progress] [--quiet]\n"
+      "vafm run [SCENE] [--index N] [--segments FILE.json] [--progress] [--quiet]\n"
       "  --index N            curve index = its random stream (default 0)\n"
+      "  --segments FILE      run this segment list instead of the scene's curve (docs/instrument.md, Segments)\n"
       "  --progress           report progress on stderr even when it is not a terminal\n"
       "  -q, --quiet          no progress\n", 0, NULL },
     { "curves", vafm_cli_cmd_curves,
@@ -380,10 +382,13 @@ static const vafm_cli_command s_commands[] = {
       "  --k LIST             spring constants, N/m\n"
       "  --progress           report progress on stderr even when it is not a terminal\n"
       "  -q, --quiet          no progress (and no summary when the CSV goes to stdout)\n", 0, NULL },
-    { "samples", vafm_cli_cmd_samples, S_GENERAL | M(O_INDEX) | M(O_CSV) | M(O_TUNE) | M(O_PROGRESS) | M(O_QUIET), 1,
+    { "samples", vafm_cli_cmd_samples,
+      S_GENERAL | M(O_INDEX) | M(O_CSV) | M(O_TUNE) | M(O_PROGRESS) | M(O_QUIET) | M(O_SEGMENTS), 1,
       "one curve's (or a thermal tune's) output samples as CSV",
-      "vafm samples [SCENE] [--index N] [--csv FILE|-] [--tune]\n"
+      "vafm samples [SCENE] [--index N] [--csv FILE|-] [--tune] [--segments FILE.json]\n"
       "  --index N            curve index (default 0)\n"
+      "  --segments FILE      a segment list instead of the scene's curve; segment = the segment's position\n"
+      "                       in the list (or its label)\n"
       "  --csv FILE|-         output file (default '-': stdout);\n"
       "                       columns time_s,height_m,deflection_m,force_N,tip_m,segment\n"
       "                       (segment 0 approach, 1 retract, 2 dwell, 3 tune)\n"

@@ -23,6 +23,7 @@
 #include "h5/h5.h"
 #include "vafm/map.h"
 #include "vafm/params.h"
+#include "vafm/segments.h"
 #include "vafm/sim.h"
 
 #ifdef __cplusplus
@@ -141,6 +142,15 @@ VAFM_API void vafm_h5_curve_from_sim(vafm_h5_curve *c, const vafm_samples *s, co
  *  that numbers rows by group sets it afterwards. */
 VAFM_API void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vafm_params *p,
                                      const vafm_curve_result *r);
+
+/** Parse a segment list from JSON text ({"segments": [...]} or a bare array; docs/instrument.md, "Segments")
+ *  into out (at most cap segments); *n receives the count. Only the syntax is checked here (names, types,
+ *  unknown keys, refused with err->field "segments[i].key"); vafm_segments_validate checks the values against
+ *  a scene. @return 0 or VAFM_EINVAL. */
+VAFM_API int vafm_segments_from_json(const char *text, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err);
+/** vafm_segments_from_json on a file's text (at most 1 MiB; err->message names the file). @return as it, or
+ *  VAFM_ENOMEM. */
+VAFM_API int vafm_segments_load_file(const char *path, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err);
 
 #ifdef __cplusplus
 }

@@ -1,0 +1,223 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Segment lists as JSON (vafm/segments.h; the layout in docs/instrument.md, "Segments"): parsed with jansson
+ * here, outside the core, which takes the struct. Either {"segments": [...]} or a bare array; each segment
+ * an object with "kind" and the fields of vafm_segment_spec by name; a trigger as
+ * {"channel": "force"|"deflection_V"|"height"|"time", "op": ">"|"<", "value": x, "relative": bool}; the
+ * enumerations by name ("extend", "pause", "force", "detach", ...). Unknown keys are refused, naming them.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <jansson.h>
+
+#include "record/record.h"
+#include "vafm/segments.h"
+
+static int s_err(vafm_error *err, const char *field, const char *fmt, const char *a, const char *b)
+{
+    if (err) {
+        err->code = VAFM_EINVAL;
+        size_t l = strlen(field);
+        if (l >= sizeof err->field)
+            l = sizeof err->field - 1; /* a long unknown key: its name is cut here, whole in the message */
+        memcpy(err->field, field, l);
+        err->field[l] = '\0';
+        snprintf(err->message, sizeof err->message, fmt, a, b);
+    }
+    return VAFM_EINVAL;
+}
+
+/* index of name in the '|'-separated list, or -1 */
+static int s_choice(const char *list, const char *name)
+{
+    int i = 0;
+    size_t n = strlen(name);
+    for (const char *p = list; *p; i++) {
+        const char *e = strchr(p, '|');
+        size_t len = e ? (size_t)(e - p) : strlen(p);
+        if (len == n && !strncmp(p, name, n))
+            return i;
+        if (!e)
+            break;
+        p = e + 1;
+    }
+    return -1;
+}
+
+static int s_enum(const json_t *v, const char *list, const char *field, int *out, vafm_error *err)
+{
+    int c = json_is_string(v) ? s_choice(list, json_string_value(v)) : -1;
+    if (c < 0)
+        return s_err(err, field, "%s: want one of %s", field, list);
+    *out = c;
+    return 0;
+}
+
+static int s_real(const json_t *v, const char *field, double *out, vafm_error *err)
+{
+    if (json_is_null(v)) { /* hold_force_N: null is "the trigger level or the force at the start" */
+        *out = NAN;
+        return 0;
+    }
+    if (!json_is_number(v))
+        return s_err(err, field, "%s: want a number in SI units%s", field, "");
+    *out = json_number_value(v);
+    return 0;
+}
+
+static int s_trigger(const json_t *t, vafm_segment_spec *g, const char *pre, vafm_error *err)
+{
+    char f[96];
+    if (!json_is_object(t)) {
+        snprintf(f, sizeof f, "%s.trigger", pre);
+        return s_err(err, f, "%s: want an object {\"channel\", \"op\", \"value\", \"relative\"}%s", f, "");
+    }
+    const char *key;
+    json_t *v;
+    json_object_foreach((json_t *)t, key, v) {
+        snprintf(f, sizeof f, "%s.trigger.%s", pre, key);
+        int rc = 0;
+        if (!strcmp(key, "channel"))
+            rc = s_enum(v, "none|force|deflection_V|height|time", f, &g->trigger, err);
+        else if (!strcmp(key, "op"))
+            rc = s_enum(v, ">|<", f, &g->trigger_op, err);
+        else if (!strcmp(key, "value"))
+            rc = s_real(v, f, &g->trigger_value, err);
+        else if (!strcmp(key, "relative")) {
+            if (!json_is_boolean(v))
+                return s_err(err, f, "%s: want true or false%s", f, "");
+            g->trigger_relative = json_is_true(v);
+        } else
+            return s_err(err, f, "%s: unknown key (known: channel, op, value, relative)%s", f, "");
+        if (rc)
+            return rc;
+    }
+    return 0;
+}
+
+int vafm_segments_from_json(const char *text, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err)
+{
+    if (err)
+        memset(err, 0, sizeof *err);
+    if (!text || !out || !n)
+        return s_err(err, "segments", "no text or no output given%s%s", "", "");
+    *n = 0;
+    json_error_t je;
+    json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &je);
+    if (!root) {
+        char where[64];
+        snprintf(where, sizeof where, "line %d column %d", je.line, je.column);
+        return s_err(err, "segments", "not JSON (%s): %s", where, je.text);
+    }
+    json_t *arr = json_is_object(root) ? json_object_get(root, "segments") : root;
+    int rc = 0;
+    if (json_is_object(root) && json_object_size(root) != 1)
+        rc = s_err(err, "segments", "a segment file is {\"segments\": [...]} and nothing else%s%s", "", "");
+    else if (!json_is_array(arr) || json_array_size(arr) < 1 || json_array_size(arr) > cap ||
+             json_array_size(arr) > VAFM_SEGMENTS_MAX) {
+        char lim[32];
+        snprintf(lim, sizeof lim, "%d", VAFM_SEGMENTS_MAX);
+        rc = s_err(err, "segments", "want an array of 1 to %s segments%s", lim, "");
+    }
+    for (size_t i = 0; !rc && i < json_array_size(arr); i++) {
+        vafm_segment_spec *g = &out[i];
+        vafm_segment_spec_default(g);
+        json_t *o = json_array_get(arr, i);
+        char pre[48], f[96];
+        snprintf(pre, sizeof pre, "segments[%zu]", i);
+        if (!json_is_object(o)) {
+            rc = s_err(err, pre, "%s: want an object with \"kind\"%s", pre, "");
+            break;
+        }
+        const char *key;
+        json_t *v;
+        json_object_foreach(o, key, v) {
+            snprintf(f, sizeof f, "%s.%s", pre, key);
+            if (!strcmp(key, "kind"))
+                rc = s_enum(v, "extend|retract|pause|modulate", f, &g->kind, err);
+            else if (!strcmp(key, "speed_m_per_s"))
+                rc = s_real(v, f, &g->speed_m_per_s, err);
+            else if (!strcmp(key, "distance_m"))
+                rc = s_real(v, f, &g->distance_m, err);
+            else if (!strcmp(key, "trigger"))
+                rc = s_trigger(v, g, pre, err);
+            else if (!strcmp(key, "end"))
+                rc = s_enum(v, "travel|detach|start", f, &g->end, err);
+            else if (!strcmp(key, "duration_s"))
+                rc = s_real(v, f, &g->duration_s, err);
+            else if (!strcmp(key, "mode"))
+                rc = s_enum(v, "height|force", f, &g->pause_mode, err);
+            else if (!strcmp(key, "hold_force_N"))
+                rc = s_real(v, f, &g->hold_force_N, err);
+            else if (!strcmp(key, "feedback_s"))
+                rc = s_real(v, f, &g->feedback_s, err);
+            else if (!strcmp(key, "amplitude_m"))
+                rc = s_real(v, f, &g->amplitude_m, err);
+            else if (!strcmp(key, "frequency_Hz"))
+                rc = s_real(v, f, &g->frequency_Hz, err);
+            else if (!strcmp(key, "sample_rate_Hz"))
+                rc = s_real(v, f, &g->sample_rate_Hz, err);
+            else if (!strcmp(key, "label")) {
+                if (!json_is_integer(v) || json_integer_value(v) < -1 || json_integer_value(v) > 254)
+                    rc = s_err(err, f, "%s: want an integer from -1 to 254%s", f, "");
+                else
+                    g->label = (int)json_integer_value(v);
+            } else
+                rc = s_err(err, f, "%s: unknown key (known: kind, speed_m_per_s, distance_m, trigger, end, duration_s, "
+                           "mode, hold_force_N, feedback_s, amplitude_m, frequency_Hz, sample_rate_Hz, label)%s", f, "");
+            if (rc)
+                break;
+        }
+        if (!rc && !json_object_get(o, "kind"))
+            rc = s_err(err, pre, "%s: \"kind\" is required (extend, retract, pause, modulate)%s", pre, "");
+        if (!rc)
+            *n = i + 1;
+    }
+    json_decref(root);
+    if (rc)
+        *n = 0;
+    return rc;
+}
+
+int vafm_segments_load_file(const char *path, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err)
+{
+    enum { S_MAX_BYTES = 1 << 20 }; /* 64 segments take a few kB */
+    if (err)
+        memset(err, 0, sizeof *err);
+    FILE *f = path ? fopen(path, "rb") : NULL;
+    if (!f)
+        return s_err(err, "segments", "%s: cannot open the segment file%s", path ? path : "(null)", "");
+    char *buf = malloc(S_MAX_BYTES + 1);
+    size_t len = buf ? fread(buf, 1, S_MAX_BYTES + 1, f) : 0;
+    const int bad = ferror(f);
+    fclose(f);
+    if (!buf)
+        return VAFM_ENOMEM;
+    int rc;
+    if (bad)
+        rc = s_err(err, "segments", "%s: cannot read the segment file%s", path, "");
+    else if (len > S_MAX_BYTES)
+        rc = s_err(err, "segments", "%s: the segment file exceeds 1 MiB%s", path, "");
+    else {
+        buf[len] = '\0';
+        rc = vafm_segments_from_json(buf, out, cap, n, err);
+        if (rc && err) { /* prefix the file's name (cut to fit) */
+            char msg[sizeof err->message];
+            size_t lp = strlen(path), lm = strlen(err->message);
+            if (lp > sizeof msg / 4)
+                lp = sizeof msg / 4;
+            if (lp + 2 + lm >= sizeof msg)
+                lm = sizeof msg - lp - 3;
+            memcpy(msg, path, lp);
+            memcpy(msg + lp, ": ", 2);
+            memcpy(msg + lp + 2, err->message, lm);
+            msg[lp + 2 + lm] = '\0';
+            memcpy(err->message, msg, sizeof msg);
+        }
+    }
+    free(buf);
+    return rc;
+}
