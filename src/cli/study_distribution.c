@@ -183,23 +183,30 @@ int vafm_study_distribution(vafm_study_ctx *ctx)
         int ok = vafm_theory_mfpt_pull(red.gamma, red.k, kT, zeta, red.m, 0.0, &v_red, 1, &tp) == 0;
         size_t n = vafm_study_collect(&r, pt, VAFM_OBS_DETACH_FORCE, 1e9, z);
         vafm_study_stat s = vafm_study_stats(z, n);
-        fprintf(o, "| %.1f | %.4f | %.4f ± %.4f | %.4f ± %.4f |\n", r.T[pt],
-                (q.F_det - red.k * yd) * sc.force_N * 1e9, ok ? tp.mean_F * sc.force_N * 1e9 : NAN,
-                ok ? tp.sd_F * sc.force_N * 1e9 : NAN, s.mean, s.se);
+        char mfpt[64] = "n/a (the theory call failed)"; /* never a NaN in the report */
+        if (ok && isfinite(tp.mean_F) && isfinite(tp.sd_F))
+            snprintf(mfpt, sizeof mfpt, "%.4f ± %.4f", tp.mean_F * sc.force_N * 1e9, tp.sd_F * sc.force_N * 1e9);
+        fprintf(o, "| %.1f | %.4f | %s | %.4f ± %.4f |\n", r.T[pt], (q.F_det - red.k * yd) * sc.force_N * 1e9, mfpt,
+                s.mean, s.se);
     }
     /* the regime (as `vafm theory`): energy lost per oscillation at the barrier, δ = η·(36/5)ΔV/(ω·kT) */
     vafm_theory_pull tp;
-    vafm_theory_mfpt_pull(red.gamma, red.k, red.kT, zeta, red.m, 0.0, &v_red, 1, &tp);
+    memset(&tp, 0, sizeof tp); /* a failed call leaves it unset: the regime is then not stated */
+    int tp_ok = vafm_theory_mfpt_pull(red.gamma, red.k, red.kT, zeta, red.m, 0.0, &v_red, 1, &tp) == 0;
     double y0 = tp.mean_y > 0 ? tp.mean_y : 0.0, w = sqrt(sqrt(2.0 * q.F2 * red.k * y0) / red.m);
     double delta = 7.2 * vafm_theory_barrier(&q, red.k, y0) / w / red.kT;
-    fprintf(o, "\nDHS assumes overdamped motion; the MFPT column multiplies the exact overdamped rate by Kramers' "
-               "spatial-diffusion factor for the mass. Here, at the reference temperature, the well frequency at "
-               "the rupture point is ω/η = %.3g (so DHS does not apply) and the energy lost per oscillation at the "
-               "barrier is δ = %.2g k_BT: %s\n\n",
-            w, delta, delta > 5.0 ? "spatial diffusion, where the MFPT rate with Kramers' factor applies."
-                      : "Kramers' turnover / energy-diffusion regime, where even the corrected rate overestimates "
-                        "escape; the theory columns are for scale, and the simulation should detach later (at "
-                        "higher force) than they say.");
+    if (!tp_ok || !isfinite(w) || !isfinite(delta) || w <= 0)
+        fprintf(o, "\nThe regime at the reference temperature cannot be stated: the MFPT theory call failed there.\n\n");
+    else {
+        fprintf(o, "\nDHS assumes overdamped motion; the MFPT column multiplies the exact overdamped rate by Kramers' "
+                   "spatial-diffusion factor for the mass. Here, at the reference temperature, the well frequency at "
+                   "the rupture point is ω/η = %.3g (so DHS does not apply) and the energy lost per oscillation at the "
+                   "barrier is δ = %.2g k_BT: %s\n\n",
+                w, delta, delta > 5.0 ? "spatial diffusion, where the MFPT rate with Kramers' factor applies."
+                          : "Kramers' turnover / energy-diffusion regime, where even the corrected rate overestimates "
+                            "escape; the theory columns are for scale, and the simulation should detach later (at "
+                            "higher force) than they say.");
+    }
     fprintf(o, "**Paper comparison.** The paper shows (Fig. 2) an asymmetric bell-shaped distribution for this "
                "scene from > 2000 curves and (Fig. 3) lower and broader distributions at higher temperature, fitted "
                "by skew-Gaussian densities; it gives no numbers for the fits. Here, at the reference temperature, "
