@@ -134,6 +134,7 @@ study() {
         "grep -q '^## Cost and error budget' '$dir/report.md' && grep -q 'curves/s' '$dir/report.md'"
     check "$name: report names the observable" "grep -q 'pulloff_spring_N\|pulloff_sampled_N' '$dir/report.md'"
     check "$name: report compares with the paper" "grep -q 'Paper comparison' '$dir/report.md'"
+    check "$name: report has no nan (a reference the theory cannot give is n/a)" "! grep -qiw nan '$dir/report.md'"
     local f
     for f in "$@"; do
         check "$name: $f written" "[ -s '$dir/$f' ]"

@@ -110,6 +110,8 @@ int vafm_study_velocity_thermal(vafm_study_ctx *ctx)
                 double zeta = dyn ? 1.0 : 0.01;
                 vafm_theory_pull tp;
                 int ok = vafm_theory_mfpt_pull(gamma, k, kTl[it], zeta, dyn ? 0.0 : 0.01, 0.0, &vl[iv], 1, &tp) == 0;
+                if (!ok) /* the CSV then says NaN, never an unset value */
+                    tp.mean_y = tp.sd_y = tp.mean_F = NAN;
                 double yd = vafm_theory_dhs_mean_y(&q, k, kTl[it], vl[iv], zeta) + zeta * vl[iv] / k;
                 if (!(s2.se >= ctx->min_se))
                     ctx->min_se = s2.se;
@@ -129,9 +131,17 @@ int vafm_study_velocity_thermal(vafm_study_ctx *ctx)
                 fprintf(c, "%s,%g,%g,%zu,%.8g,%.8g,%.3g,%.8g,%.8g,%.8g,%.3g,%.8g,%.6g,%.3g,%.6g,%.6g,%.8g,%.6g\n",
                         dyn ? "brownian" : "langevin", kTl[it], vl[iv], n, F0s, s2.mean, s2.se, F0s - s2.mean, F0d,
                         s3.mean, s3.se, F0d - s3.mean, sy.mean, sy.se, tp.mean_y, tp.sd_y, tp.mean_F / q.F_jkr, yd);
-                fprintf(o, "| %s | %g | %g | %zu | %.4f ± %.4f | %.4f | %.4f ± %.4f | %.4f ± %.4f | %.4f ± %.4f | %.4f | %.4f |\n",
+                /* what the theory cannot give (DHS where Λ ≤ 1, a failed MFPT call) is n/a in the report, never nan */
+                char th[64] = "n/a", dhs[32] = "n/a", mf[32] = "n/a";
+                if (ok && isfinite(tp.mean_y) && isfinite(tp.sd_y))
+                    snprintf(th, sizeof th, "%.4f ± %.4f", tp.mean_y, tp.sd_y);
+                if (isfinite(yd))
+                    snprintf(dhs, sizeof dhs, "%.4f", yd);
+                if (isfinite(mF))
+                    snprintf(mf, sizeof mf, "%.4f", mF);
+                fprintf(o, "| %s | %g | %g | %zu | %.4f ± %.4f | %.4f | %.4f ± %.4f | %.4f ± %.4f | %s | %s | %s |\n",
                         dyn ? "BD" : "LD", kTl[it], vl[iv], n, s2.mean, s2.se, F0s - s2.mean, F0d - s3.mean, s3.se,
-                        sy.mean, sy.se, tp.mean_y, tp.sd_y, yd, mF);
+                        sy.mean, sy.se, th, dhs, mf);
             }
             free(x);
             vafm_study_run_free(&r0);
