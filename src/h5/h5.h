@@ -35,6 +35,12 @@ extern "C" {
  *  A reader refuses another major version; a newer minor version only adds root attributes. */
 #define VAFM_H5_FORMAT_MAJOR 1
 #define VAFM_H5_FORMAT_MINOR 1
+/** The minor version of a file whose curves run a segment list (vafm_h5_writer_set_segments): "1.2". Only
+ *  such files get it (others stay 1.1, byte for byte): a 1.1 reader would take a list's segment 1 for the
+ *  retract. */
+#define VAFM_H5_FORMAT_MINOR_SEGMENTS 2
+/** The most segments a file's list may hold (segment values are uint8 positions below the count). */
+#define VAFM_H5_SEGMENTS_MAX 255
 
 /** The most samples a curve (each of its channels) may have, written or read: 2^25 = 33,554,432 (a
  *  3.4 s curve at 8 MS/s has 27 M; five float64 channels of this length take 1.3 GB). A reader checks
@@ -76,7 +82,8 @@ typedef struct vafm_h5_meta {
     double grid_size_x_m;           /**< "grid size x", m */
     double grid_size_y_m;           /**< "grid size y", m */
     int64_t point_count;            /**< "point count" (write: always the datasets' length) */
-    int64_t segment_count;          /**< "segment count" (2 for force-distance) */
+    int64_t segment_count;          /**< "segment count" (2 for force-distance; a segment list's length; write:
+                                         −1 in a file with a list means the list's) */
     int64_t grid_shape_x;           /**< "grid shape x", pixels */
     int64_t grid_shape_y;           /**< "grid shape y", pixels */
     int64_t grid_index_x;           /**< "grid index x" */
@@ -91,7 +98,8 @@ typedef struct vafm_h5_curve {
     const double *force_N;           /**< "force", N, positive repulsive (required) */
     const double *height_measured_m; /**< "height (measured)", m, decreasing toward the sample */
     const double *height_piezo_m;    /**< "height (piezo)", m, decreasing toward the sample */
-    const uint8_t *segment;          /**< "segment": 0 approach, 1 retract, 2 dwell (required) */
+    const uint8_t *segment;          /**< "segment": 0 approach, 1 retract, 2 dwell (required); a segment list's
+                                          curve ("segment count" ≠ 2): the segment's position in the list */
     const double *time_s;            /**< "time", s, from 0, increasing (optional in others' files) */
     const double *tip_position_m;    /**< "tip position" = height (measured) + force / spring constant */
     vafm_h5_meta meta;
@@ -123,6 +131,9 @@ typedef struct vafm_h5_provenance {
     const char *created;          /**< "vafm created": UTC time the file was created, ISO 8601 */
     uint64_t seed;                /**< "vafm seed" */
     size_t truth_rows;            /**< ground-truth rows present */
+    const char *segments_json;    /**< "vafm segments" (format 1.2): {"segments": [...]}, the list every curve
+                                       ran; NULL: none (force-distance curves) */
+    int segment_count;            /**< segments of that list, 0: none */
 } vafm_h5_provenance;
 
 /** Writer options. */
@@ -190,6 +201,23 @@ VAFM_API int vafm_h5_provenance_check(const vafm_params *scene, const vafm_campa
  */
 VAFM_API int vafm_h5_resume_check(const char *path, const vafm_params *scene, const vafm_campaign_spec *grid,
                                   vafm_error *err);
+/** vafm_h5_resume_check for a run of a segment list: segments_json as vafm_h5_writer_set_segments takes it
+ *  (NULL: none; vafm_h5_resume_check passes NULL) must equal the file's "vafm segments". Same returns. */
+VAFM_API int vafm_h5_resume_check_segments(const char *path, const vafm_params *scene,
+                                           const vafm_campaign_spec *grid, const char *segments_json,
+                                           vafm_error *err);
+
+/**
+ * Record that every curve of the file runs one segment list (vafm/segments.h): the root attribute
+ * "vafm segments" = json, a JSON object {"segments": [...]} of 1 to VAFM_H5_SEGMENTS_MAX objects (the
+ * recorder writes vafm_segments_to_json's text), and format version 1.2. Each curve then has "segment
+ * count" = the list's length and segment values below it (afmformats' multi-segment convention, hdf5.md
+ * "Segments"). Call before vafm_h5_writer_set_provenance and the first curve. On resume, json must equal the
+ * file's list (a file with a list can only be resumed with it, one without only without).
+ * @return 0, VAFM_EINVAL (not such a text; on resume another list, or a file without one), VAFM_ESTATE
+ *         (provenance or curves already written), VAFM_EIO.
+ */
+VAFM_API int vafm_h5_writer_set_segments(vafm_h5_writer *w, const char *json, vafm_error *err);
 
 /**
  * Append one curve as group "<count>". The curve is checked against the layout first (lengths,

@@ -23,6 +23,7 @@ typedef struct s_ctx {
     int64_t *point_count; /* per curve, for V4 */
     double *spring;       /* per curve, for V4 */
     int format_minor;     /* of "vafm format version" */
+    int nsegs;            /* segments of "vafm segments" (V6), 0: none */
     int map;              /* the grid is a force map's ("map" in "vafm grid", V5) */
     vafm_h5_meta grid0;   /* curve 0's grid attributes (V5) */
 } s_ctx;
@@ -338,7 +339,7 @@ static int s_group(s_ctx *x, uint64_t num)
             goto done;
         }
     }
-    if ((rule = vafm_h5i_rule_segment(data[VAFM_H5I_SEGMENT], n, &at))) {
+    if ((rule = vafm_h5i_rule_segment(data[VAFM_H5I_SEGMENT], n, m.segment_count, x->nsegs > 0, &at))) {
         vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L12] %s: %s/segment: sample %zu is %u: %s", x->path, obj, at,
                      ((uint8_t *)data[VAFM_H5I_SEGMENT])[at], rule);
         goto done;
@@ -363,9 +364,15 @@ static int s_group(s_ctx *x, uint64_t num)
             vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[V2] %s: %s: vafm writes '%s' in every curve", x->path, obj, miss);
             goto done;
         }
-        if (m.segment_count != 2) {
-            vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[V2] %s: %s: 'segment count' is %lld (force-distance: 2)",
-                         x->path, obj, (long long)m.segment_count);
+        if (x->nsegs && m.segment_count != x->nsegs) {
+            vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[V6] %s: %s: 'segment count' is %lld, the file's segment list "
+                         "('" VAFM_H5I_A_SEGMENTS "') has %d", x->path, obj, (long long)m.segment_count, x->nsegs);
+            goto done;
+        }
+        if (!x->nsegs && m.segment_count != 2) {
+            vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[V2] %s: %s: 'segment count' is %lld (force-distance: 2; "
+                         "another count needs a segment list, '" VAFM_H5I_A_SEGMENTS "', format 1.%d: V6)", x->path, obj,
+                         (long long)m.segment_count, VAFM_H5_FORMAT_MINOR_SEGMENTS);
             goto done;
         }
     }
@@ -511,6 +518,24 @@ static int s_check(s_ctx *x)
         if (!ok)
             FAIL("V1", "/", "'" VAFM_H5I_A_FORMAT "' is '%s', not \"%d.MINOR\"", v, VAFM_H5_FORMAT_MAJOR);
         x->format_minor = mi;
+        /* V6: a segment list is a format 1.2 file's, and a 1.2 file has one */
+        int has_segs = H5Aexists(x->file, VAFM_H5I_A_SEGMENTS) > 0;
+        if (has_segs && mi < VAFM_H5_FORMAT_MINOR_SEGMENTS)
+            FAIL("V6", "/", "'" VAFM_H5I_A_SEGMENTS "' in a format %s file (a segment list needs format %d.%d: a reader "
+                 "of 1.%d would read a list's segment 1 as the retract)", v, VAFM_H5_FORMAT_MAJOR,
+                 VAFM_H5_FORMAT_MINOR_SEGMENTS, VAFM_H5_FORMAT_MINOR);
+        if (!has_segs && mi == VAFM_H5_FORMAT_MINOR_SEGMENTS)
+            FAIL("V6", "/", "format %s without '" VAFM_H5I_A_SEGMENTS "' (1.%d is the format of files with a segment "
+                 "list; others are 1.%d)", v, VAFM_H5_FORMAT_MINOR_SEGMENTS, VAFM_H5_FORMAT_MINOR);
+        if (has_segs) {
+            if ((rc = s_vlen_str(x, "V6", x->file, "/", VAFM_H5I_A_SEGMENTS, &s)))
+                return rc;
+            x->nsegs = vafm_h5i_segments_count(s);
+            free(s);
+            if (x->nsegs < 1)
+                FAIL("V6", "/", "'" VAFM_H5I_A_SEGMENTS "' is not a segment list {\"segments\": [1 to %d objects]}",
+                     VAFM_H5_SEGMENTS_MAX);
+        }
         x->has_prov = H5Aexists(x->file, VAFM_H5I_A_SCENE) > 0;
         if (x->has_prov) {
             static const char *json[] = { VAFM_H5I_A_SCENE, VAFM_H5I_A_GRID };

@@ -642,14 +642,51 @@ int vafm_h5i_group_name(const char *name, uint64_t *out)
     return 1;
 }
 
-const char *vafm_h5i_rule_segment(const uint8_t *seg, size_t n, size_t *at)
+const char *vafm_h5i_rule_segment(const uint8_t *seg, size_t n, int64_t count, int list, size_t *at)
 {
+    /* L12: a force-distance curve (count absent or 2) labels 0 approach, 1 retract, 2 dwell; a curve of
+     * another count (a segment list: afmformats' multi-segment convention) labels each sample with its
+     * segment's position in the list, 0..count−1 */
+    int two = !list && (count < 0 || count == 2);
+    unsigned lim = two ? 3u : count > 256 ? 256u : (unsigned)count;
     for (size_t i = 0; i < n; i++)
-        if (seg[i] > 2) {
+        if (seg[i] >= lim) {
             *at = i;
-            return "segment values are 0 (approach), 1 (retract) or 2 (dwell)";
+            return two ? "segment values are 0 (approach), 1 (retract) or 2 (dwell)"
+                       : "segment values are below 'segment count' (a segment list: the segment's position)";
         }
     return NULL;
+}
+
+int vafm_h5i_segments_count(const char *s)
+{
+    /* {"segments": [{...}, ...]}: the one key, an array of 1..VAFM_H5_SEGMENTS_MAX objects, nothing after */
+    if (!s || !vafm_h5i_json_object_ok(s))
+        return -1;
+    const char *p = s_ws(s_ws(s) + 1);
+    if (strncmp(p, "\"segments\"", 10))
+        return -1;
+    p = s_ws(p + 10);
+    if (*p != ':')
+        return -1;
+    p = s_ws(p + 1);
+    if (*p != '[')
+        return -1;
+    p = s_ws(p + 1);
+    int n = 0;
+    while (*p == '{') {
+        if (++n > VAFM_H5_SEGMENTS_MAX || !(p = s_json_value(p, 1)))
+            return -1;
+        p = s_ws(p);
+        if (*p == ',')
+            p = s_ws(p + 1);
+        else
+            break;
+    }
+    if (n < 1 || *p != ']')
+        return -1;
+    p = s_ws(p + 1);
+    return *p == '}' && !*s_ws(p + 1) ? n : -1;
 }
 
 const char *vafm_h5i_rule_finite(const double *x, size_t n, size_t *at)

@@ -47,6 +47,7 @@
 #define VAFM_H5I_A_GRID "vafm grid"
 #define VAFM_H5I_A_SEED "vafm seed"
 #define VAFM_H5I_A_CREATED "vafm created"
+#define VAFM_H5I_A_SEGMENTS "vafm segments" /* format 1.2: the segment list of every curve */
 #define VAFM_H5I_A_TRUTH "vafm ground truth"           /* merged table */
 #define VAFM_H5I_A_TRUTH_PART "vafm ground truth from " /* + first curve: rows of one flush */
 
@@ -191,7 +192,12 @@ int vafm_h5i_group_name(const char *name, uint64_t *out);
 
 /** Channel rules shared by the writer (before writing) and the checker (after reading). Each returns
  *  NULL when the rule holds, else a static description of the rule, with *at the first bad sample. */
-const char *vafm_h5i_rule_segment(const uint8_t *seg, size_t n, size_t *at);
+/* L12 with the curve's 'segment count' (−1 absent): 0/1/2 when it is absent or 2, else below it; list 1 (a
+ * file with "vafm segments", V6): below it always. */
+const char *vafm_h5i_rule_segment(const uint8_t *seg, size_t n, int64_t count, int list, size_t *at);
+/* The number of segments of a "vafm segments" text ({"segments": [objects]}, 1 to VAFM_H5_SEGMENTS_MAX),
+ * or −1 when it is not such a text. */
+int vafm_h5i_segments_count(const char *s);
 const char *vafm_h5i_rule_time(const double *t, size_t n, size_t *at);
 const char *vafm_h5i_rule_tip(const double *tip, const double *hm, const double *f, double k, size_t n,
                               size_t *at);
@@ -260,6 +266,9 @@ struct vafm_h5_writer {
     size_t nrows, caprows;
     size_t rows_in_file; /* rows [0, rows_in_file) are in the file */
     int parts_in_file;   /* rows sit in flush parts: merge on close */
+    char *segs;          /* "vafm segments": the file's list (set or found on resume), NULL: none */
+    int nsegs;           /* its segments, 0: none */
+    int segs_given;      /* the caller gave the list (vafm_h5_writer_set_segments) */
 };
 
 /** The file access properties of every file the writer opens: the 1.8 format, strong close, the journal. */

@@ -31,6 +31,8 @@ struct vafm_h5_reader {
     size_t n;
     vafm_h5i_curvebuf buf;
     char *software, *software_version, *scene, *grid, *created;
+    char *segments; /* "vafm segments" (format 1.2), NULL: none */
+    int nsegs;
     int is_vafm, fmt_major, fmt_minor;
     uint64_t seed;
     vafm_h5i_row *rows; /* sorted by curve */
@@ -539,7 +541,7 @@ int vafm_h5i_curve_read(hid_t file, const char *path, uint64_t group, int read_d
     }
     if (read_data) {
         size_t at = 0;
-        const char *rule = vafm_h5i_rule_segment(out->segment, n, &at);
+        const char *rule = vafm_h5i_rule_segment(out->segment, n, out->meta.segment_count, 0, &at);
         if (rule) {
             vafm_h5i_err(err, rc = VAFM_EFORMAT, obj, "%s: /%s/segment: value %u at sample %zu (%s)", path, gname,
                          out->segment[at], at, rule);
@@ -610,6 +612,7 @@ void vafm_h5_reader_destroy(vafm_h5_reader **rp)
     free(r->scene);
     free(r->grid);
     free(r->created);
+    free(r->segments);
     free(r->rows);
     r->tag = 0xdeadbeefu;
     free(r);
@@ -677,8 +680,14 @@ static int s_reader_open(vafm_h5_reader *r, const char *path, vafm_error *err)
         r->fmt_minor = mi;
         if ((rc = s_root_string(r->file, path, VAFM_H5I_A_SCENE, 1, &r->scene, err)) ||
             (rc = s_root_string(r->file, path, VAFM_H5I_A_GRID, 0, &r->grid, err)) ||
-            (rc = s_root_string(r->file, path, VAFM_H5I_A_CREATED, 0, &r->created, err)))
+            (rc = s_root_string(r->file, path, VAFM_H5I_A_CREATED, 0, &r->created, err)) ||
+            (rc = s_root_string(r->file, path, VAFM_H5I_A_SEGMENTS, 0, &r->segments, err)))
             return rc;
+        if (r->segments && (r->nsegs = vafm_h5i_segments_count(r->segments)) < 1) {
+            vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: root attribute '" VAFM_H5I_A_SEGMENTS "' is not a segment list "
+                         "{\"segments\": [...]} (hdf5.md V6)", path);
+            return VAFM_EFORMAT;
+        }
         if (H5Aexists(r->file, VAFM_H5I_A_SEED) > 0) {
             vafm_h5i_val v;
             if (vafm_h5i_attr_get(r->file, VAFM_H5I_A_SEED, &v)) {
@@ -845,6 +854,8 @@ int vafm_h5_reader_provenance(const vafm_h5_reader *r, vafm_h5_provenance *out)
     out->created = r->created;
     out->seed = r->seed;
     out->truth_rows = r->nrows;
+    out->segments_json = r->segments;
+    out->segment_count = r->segments ? r->nsegs : 0;
     return 0;
 }
 

@@ -145,10 +145,25 @@ int vafm_h5i_writer_resume(vafm_h5_writer *w, vafm_error *err)
         free(fmt);
         return VAFM_EFORMAT;
     }
-    if (mi != VAFM_H5_FORMAT_MINOR) { /* its rows and scene lack fields this version writes */
-        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %s, this vafm writes %d.%d; "
-                     "resume it with the vafm version that wrote it", w->path, fmt, VAFM_H5_FORMAT_MAJOR,
-                     VAFM_H5_FORMAT_MINOR);
+    if (s_read_root_str(w->file, VAFM_H5I_A_SEGMENTS, &w->segs)) {
+        vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: the stored segment list cannot be read",
+                          w->path);
+        free(fmt);
+        return VAFM_EFORMAT;
+    }
+    /* a file with a segment list is 1.2, one without 1.1: an older minor's rows and scene lack fields this
+     * version writes */
+    if (mi != (w->segs ? VAFM_H5_FORMAT_MINOR_SEGMENTS : VAFM_H5_FORMAT_MINOR)) {
+        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %s%s, this vafm writes %d.%d "
+                     "(%d.%d with a segment list); resume it with the vafm version that wrote it", w->path, fmt,
+                     w->segs ? " with a segment list" : "", VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR,
+                     VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR_SEGMENTS);
+        free(fmt);
+        return VAFM_EFORMAT;
+    }
+    if (w->segs && (w->nsegs = vafm_h5i_segments_count(w->segs)) < 1) {
+        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: root attribute '" VAFM_H5I_A_SEGMENTS "' is not a "
+                     "segment list {\"segments\": [...]} (hdf5.md V6)", w->path);
         free(fmt);
         return VAFM_EFORMAT;
     }

@@ -189,6 +189,7 @@ void vafm_h5_writer_destroy(vafm_h5_writer **wp)
     free(w->scene);
     free(w->grid);
     free(w->rows);
+    free(w->segs);
     w->tag = 0xdeadbeefu;
     free(w);
     *wp = NULL;
@@ -372,6 +373,12 @@ int vafm_h5_provenance_check(const vafm_params *scene, const vafm_campaign_spec 
 
 int vafm_h5_resume_check(const char *path, const vafm_params *scene, const vafm_campaign_spec *grid, vafm_error *err)
 {
+    return vafm_h5_resume_check_segments(path, scene, grid, NULL, err);
+}
+
+int vafm_h5_resume_check_segments(const char *path, const vafm_params *scene, const vafm_campaign_spec *grid,
+                                  const char *segments_json, vafm_error *err)
+{
     if (!path || !scene) {
         vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_resume_check: no path or scene given");
         return VAFM_EINVAL;
@@ -388,10 +395,16 @@ int vafm_h5_resume_check(const char *path, const vafm_params *scene, const vafm_
     else if (!pv.is_vafm || pv.format_major != VAFM_H5_FORMAT_MAJOR)
         vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x", path,
                      VAFM_H5_FORMAT_MAJOR);
-    else if (pv.format_minor != VAFM_H5_FORMAT_MINOR)
+    else if (pv.format_minor != (pv.segments_json ? VAFM_H5_FORMAT_MINOR_SEGMENTS : VAFM_H5_FORMAT_MINOR))
         vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %d.%d, this vafm writes "
-                     "%d.%d; resume it with the vafm version that wrote it", path, pv.format_major, pv.format_minor,
-                     VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR);
+                     "%d.%d (%d.%d with a segment list); resume it with the vafm version that wrote it", path,
+                     pv.format_major, pv.format_minor, VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR, VAFM_H5_FORMAT_MAJOR,
+                     VAFM_H5_FORMAT_MINOR_SEGMENTS);
+    else if (!pv.segments_json != !segments_json || (segments_json && strcmp(pv.segments_json, segments_json)))
+        vafm_h5i_err(err, rc = VAFM_EINVAL, "segments", "%s: cannot be resumed: %s", path,
+                     !pv.segments_json ? "the file holds no segment list ('" VAFM_H5I_A_SEGMENTS "'), this run has one"
+                     : !segments_json ? "the file holds a segment list ('" VAFM_H5I_A_SEGMENTS "'), this run has none"
+                                      : "this run's segment list differs from the file's ('" VAFM_H5I_A_SEGMENTS "')");
     else if (vafm_params_to_json(scene, sj, S_JSON_MAX) < 0 || s_grid_json(grid, gj, S_JSON_MAX))
         vafm_h5i_err(err, rc = VAFM_EINVAL, "", "%s: the scene or grid does not fit in %d bytes of JSON", path,
                      S_JSON_MAX);
@@ -422,7 +435,11 @@ int vafm_h5_writer_set_provenance(vafm_h5_writer *w, const vafm_params *scene, c
         goto done;
     }
     if (w->has_prov) { /* resume: the run must continue the same campaign */
-        rc = s_prov_compare(w->path, w->scene, w->grid, sj, gj, err);
+        if (w->segs && !w->segs_given)
+            vafm_h5i_err(err, rc = VAFM_EINVAL, "segments", "%s: cannot be resumed: the file holds a segment list ('"
+                         VAFM_H5I_A_SEGMENTS "'), this run has none", w->path);
+        else
+            rc = s_prov_compare(w->path, w->scene, w->grid, sj, gj, err);
         goto done;
     }
     if (w->count > 0) {
@@ -452,13 +469,80 @@ done:
     return rc;
 }
 
+int vafm_h5_writer_set_segments(vafm_h5_writer *w, const char *json, vafm_error *err)
+{
+    if (!w || w->tag != S_TAG || !json) {
+        vafm_h5i_err(err, VAFM_EINVAL, "segments", "vafm_h5_writer_set_segments: no writer or list given");
+        return VAFM_EINVAL;
+    }
+    int n = vafm_h5i_segments_count(json);
+    if (n < 1 || strlen(json) >= S_JSON_MAX) {
+        vafm_h5i_err(err, VAFM_EINVAL, "segments", "%s: a segment list is a JSON object {\"segments\": [...]} of 1 to %d "
+                     "objects, at most %d bytes", w->path, VAFM_H5_SEGMENTS_MAX, S_JSON_MAX - 1);
+        return VAFM_EINVAL;
+    }
+    if (w->o.resume && (w->has_prov || w->segs)) { /* the stored list, if any, was read by the resume */
+        if (!w->segs || strcmp(w->segs, json)) {
+            vafm_h5i_err(err, VAFM_EINVAL, "segments", "%s: cannot be resumed: %s", w->path,
+                         w->segs ? "this run's segment list differs from the file's ('" VAFM_H5I_A_SEGMENTS "')"
+                                 : "the file holds no segment list ('" VAFM_H5I_A_SEGMENTS "'), this run has one");
+            return VAFM_EINVAL;
+        }
+        w->segs_given = 1;
+        return 0;
+    }
+    if (w->has_prov || w->count > 0 || w->segs) {
+        vafm_h5i_err(err, VAFM_ESTATE, "segments", "%s: the segment list must be set once, before the provenance and "
+                     "the first curve", w->path);
+        return VAFM_ESTATE;
+    }
+    char *copy = strdup(json);
+    if (!copy) {
+        vafm_h5i_err(err, VAFM_ENOMEM, "", "%s: out of memory", w->path);
+        return VAFM_ENOMEM;
+    }
+    char ver[32];
+    snprintf(ver, sizeof ver, "%d.%d", VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR_SEGMENTS);
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    int rc = 0;
+    if (vafm_h5i_put_str(w->file, VAFM_H5I_A_SEGMENTS, json) || vafm_h5i_put_str(w->file, VAFM_H5I_A_FORMAT, ver) ||
+        H5Fflush(w->file, H5F_SCOPE_GLOBAL) < 0) {
+        vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: the segment list cannot be written", w->path);
+        free(copy);
+    } else {
+        w->segs = copy;
+        w->nsegs = n;
+        w->segs_given = 1;
+    }
+    vafm_h5i_quiet_end(&q);
+    return rc;
+}
+
 /* ---- appending curves ----------------------------------------------------------------------------- */
+
+/* The "segment count" curve c gets: a file with a list: the list's length (−1 asks for it). */
+static int64_t s_seg_count(const vafm_h5_writer *w, const vafm_h5_curve *c)
+{
+    return w->nsegs && c->meta.segment_count < 0 ? w->nsegs : c->meta.segment_count;
+}
 
 static int s_check_curve(const vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth,
                          vafm_error *err)
 {
     const char *p = w->path;
     unsigned long long g = (unsigned long long)w->count;
+    int64_t sc = s_seg_count(w, c);
+    if (w->nsegs ? sc != w->nsegs : w->has_prov && sc >= 0 && sc != 2) {
+        if (w->nsegs)
+            vafm_h5i_err(err, VAFM_EINVAL, "segment count", "%s: curve %llu: 'segment count' is %lld, the file's segment "
+                         "list has %d (hdf5.md V6)", p, g, (long long)sc, w->nsegs);
+        else
+            vafm_h5i_err(err, VAFM_EINVAL, "segment count", "%s: curve %llu: 'segment count' is %lld in a file without a "
+                         "segment list (force-distance: 2; a list: vafm_h5_writer_set_segments, hdf5.md V2)", p, g,
+                         (long long)sc);
+        return VAFM_EINVAL;
+    }
     if (!c->force_N || !c->segment || !(c->height_measured_m || c->height_piezo_m)) {
         vafm_h5i_err(err, VAFM_EINVAL, !c->force_N ? "force" : !c->segment ? "segment" : "height (measured)",
                      "%s: curve %llu: force, segment and a height are required", p, g);
@@ -474,7 +558,7 @@ static int s_check_curve(const vafm_h5_writer *w, const vafm_h5_curve *c, const 
         const void *data = *(const void *const *)((const char *)c + ch->offset);
         if (!data)
             continue;
-        const char *rule = ch->is_segment ? vafm_h5i_rule_segment(data, c->n, &at)
+        const char *rule = ch->is_segment ? vafm_h5i_rule_segment(data, c->n, s_seg_count(w, c), w->nsegs > 0, &at)
                            : i == VAFM_H5I_TIME ? vafm_h5i_rule_time(data, c->n, &at)
                                                 : vafm_h5i_rule_finite(data, c->n, &at);
         if (rule) {
@@ -602,6 +686,7 @@ static int s_write_meta(vafm_h5_writer *w, hid_t g, const vafm_h5_curve *c)
     if (!m.imaging_mode)
         m.imaging_mode = "force-distance";
     m.point_count = (int64_t)c->n;
+    m.segment_count = s_seg_count(w, c);
     if (w->o.stamp_time && !m.date && !m.time) {
         s_now(date, tod, NULL);
         m.date = date;
