@@ -53,7 +53,12 @@ typedef struct vafm_recorder_opts {
     void (*on_durable)(void *user, uint64_t curves);
     void *user;              /**< for on_durable */
     int keep_intact;         /**< resume: vafm_h5_writer_opts.keep_intact (default 0) */
-    uint8_t reserved[28];
+    /** Every curve runs this segment list (vafm_segments_to_json's text; NULL, the default: force-distance
+     *  curves): the file gets it as "vafm segments" and format 1.2 (vafm_h5_writer_set_segments), each curve
+     *  "segment count" = its length and no approach/retract attributes (rates, speeds, durations, setpoint:
+     *  the list has each segment's own). A resume needs the file's list. Borrowed for vafm_recorder_open. */
+    const char *segments_json;
+    uint8_t reserved[16];
 } vafm_recorder_opts;
 
 /** Fill o with the defaults. */
@@ -150,6 +155,11 @@ VAFM_API void vafm_h5_truth_from_sim(vafm_h5_truth *t, uint64_t point, const vaf
 VAFM_API int vafm_segments_from_json(const char *text, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err);
 /** vafm_segments_from_json on a file's text (at most 1 MiB; err->message names the file). @return as it, or
  *  VAFM_ENOMEM. */
+/** The list as the text vafm_segments_from_json reads back to the same specs: {"segments": [...]} with every
+ *  field of every segment (defaults included; hold_force_N NaN as null), reals to 17 digits. The recorder
+ *  stores it in a file ("vafm segments", protocol/hdf5.md). @return the text (free() it), or NULL (n out of
+ *  [1, VAFM_SEGMENTS_MAX], a value not finite, out of memory). */
+VAFM_API char *vafm_segments_to_json(const vafm_segment_spec *segs, size_t n);
 VAFM_API int vafm_segments_load_file(const char *path, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err);
 
 #ifdef __cplusplus

@@ -29,6 +29,7 @@ struct vafm_recorder {
     uint64_t pending;     /* curves appended since */
     int stop;             /* the flusher ends */
     int has_prov;         /* provenance recorded (or compared) */
+    int list;             /* the curves run a segment list (opts.segments_json) */
     int werr_code;        /* the first writer error (sticky) */
     vafm_error werr;
     void (*on_durable)(void *, uint64_t);
@@ -189,9 +190,12 @@ int vafm_recorder_open(vafm_recorder **out, const char *path, const vafm_recorde
     /* a resume that would be refused (another scene or grid) is refused before a byte of the file changes */
     int rc = scene ? vafm_h5_provenance_check(scene, grid, err) : 0; /* before any file is touched */
     if (!rc && wo.resume && scene)
-        rc = vafm_h5_resume_check(path, scene, grid, err);
+        rc = vafm_h5_resume_check_segments(path, scene, grid, o.segments_json, err);
     if (!rc)
         rc = vafm_h5_writer_open(&r->w, path, &wo, err);
+    if (!rc && o.segments_json)
+        rc = vafm_h5_writer_set_segments(r->w, o.segments_json, err);
+    r->list = o.segments_json != NULL;
     if (!rc && scene) {
         rc = vafm_h5_writer_set_provenance(r->w, scene, grid, err);
         r->has_prov = !rc;
@@ -226,6 +230,12 @@ int vafm_recorder_append(vafm_recorder *r, const vafm_record_curve *c, vafm_erro
     vafm_h5_curve_from_sim(&hc, c->samples, c->params, c->result);
     if (c->measured_force)
         hc.tip_position_m = NULL;
+    if (r->list) { /* a segment list's curve: its count is the list's, its segments' rates and speeds are the list's */
+        hc.meta.segment_count = -1;
+        hc.meta.setpoint_N = hc.meta.rate_approach_Hz = hc.meta.rate_retract_Hz = NAN;
+        hc.meta.speed_approach_m_per_s = hc.meta.speed_retract_m_per_s = NAN;
+        hc.meta.duration_approach_s = hc.meta.duration_retract_s = NAN;
+    }
     if (!isnan(c->sensitivity_m_per_V))
         hc.meta.sensitivity_m_per_V = c->sensitivity_m_per_V;
     char sid[48], cid[200];

@@ -221,3 +221,47 @@ int vafm_segments_load_file(const char *path, vafm_segment_spec *out, size_t cap
     free(buf);
     return rc;
 }
+
+static json_t *s_real_json(double v)
+{
+    return isnan(v) ? json_null() : json_real(v);
+}
+
+char *vafm_segments_to_json(const vafm_segment_spec *segs, size_t n)
+{
+    static const char *const kinds[] = { "extend", "retract", "pause", "modulate" };
+    static const char *const chans[] = { "none", "force", "deflection_V", "height", "time" };
+    static const char *const ops[] = { ">", "<" };
+    static const char *const ends[] = { "travel", "detach", "start" };
+    static const char *const modes[] = { "height", "force" };
+    if (!segs || n < 1 || n > VAFM_SEGMENTS_MAX)
+        return NULL;
+    json_t *root = json_object(), *arr = json_array();
+    int bad = !root || !arr || json_object_set_new(root, "segments", arr);
+    for (size_t i = 0; !bad && i < n; i++) {
+        const vafm_segment_spec *g = &segs[i];
+        const double reals[] = { g->speed_m_per_s, g->distance_m, g->trigger_value, g->duration_s, g->feedback_s,
+                                 g->amplitude_m, g->frequency_Hz, g->sample_rate_Hz };
+        for (size_t k = 0; k < sizeof reals / sizeof reals[0]; k++)
+            bad |= !isfinite(reals[k]);
+        bad |= !(isnan(g->hold_force_N) || isfinite(g->hold_force_N));
+        bad |= g->kind < 0 || g->kind > 3 || g->trigger < 0 || g->trigger > 4 || g->trigger_op < 0 ||
+               g->trigger_op > 1 || g->end < 0 || g->end > 2 || g->pause_mode < 0 || g->pause_mode > 1 ||
+               g->label < -1 || g->label > 254;
+        if (bad)
+            break;
+        json_t *t = json_pack("{s:s, s:s, s:f, s:b}", "channel", chans[g->trigger], "op", ops[g->trigger_op], "value",
+                              g->trigger_value, "relative", g->trigger_relative != 0);
+        json_t *o = t ? json_pack("{s:s, s:f, s:f, s:o, s:s, s:f, s:s, s:o, s:f, s:f, s:f, s:f, s:i}", "kind",
+                                  kinds[g->kind], "speed_m_per_s", g->speed_m_per_s, "distance_m", g->distance_m,
+                                  "trigger", t, "end", ends[g->end], "duration_s", g->duration_s, "mode",
+                                  modes[g->pause_mode], "hold_force_N", s_real_json(g->hold_force_N), "feedback_s",
+                                  g->feedback_s, "amplitude_m", g->amplitude_m, "frequency_Hz", g->frequency_Hz,
+                                  "sample_rate_Hz", g->sample_rate_Hz, "label", g->label)
+                      : NULL;
+        bad = !o || json_array_append_new(arr, o);
+    }
+    char *text = bad ? NULL : json_dumps(root, JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(17));
+    json_decref(root);
+    return text;
+}
