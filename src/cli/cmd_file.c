@@ -165,6 +165,45 @@ static void s_info_curve_line(FILE *o, const vafm_h5_curve *c, const vafm_h5_rea
     fputc('\n', o);
 }
 
+/* The file's segment list (format 1.2, "vafm segments"), one segment a line: what each position ran. */
+static void s_info_segments(FILE *o, const vafm_h5_provenance *pv)
+{
+    static const char *const kinds[] = { "extend", "retract", "pause", "modulate" };
+    static const char *const chans[] = { "none", "force", "deflection_V", "height", "time" };
+    vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
+    size_t n = 0;
+    vafm_error err;
+    if (vafm_segments_from_json(pv->segments_json, segs, VAFM_SEGMENTS_MAX, &n, &err)) {
+        fprintf(o, "segments     %d, every curve runs the list of root attribute 'vafm segments' (it does not parse "
+                   "here: %s)\n", pv->segment_count, err.message);
+        return;
+    }
+    fprintf(o, "segments     %zu, every curve runs this list; segment = the position (afmformats' multi-segment "
+               "convention), 'segment count' %zu\n", n, n);
+    for (size_t i = 0; i < n; i++) {
+        const vafm_segment_spec *g = &segs[i];
+        fprintf(o, "  %2zu %-8s", i, g->kind >= 0 && g->kind <= 3 ? kinds[g->kind] : "?");
+        if (g->kind <= VAFM_SEGMENT_RETRACT)
+            fprintf(o, " %g m/s", g->speed_m_per_s);
+        if (g->kind <= VAFM_SEGMENT_RETRACT && g->distance_m > 0)
+            fprintf(o, ", %g m", g->distance_m);
+        if (g->kind == VAFM_SEGMENT_RETRACT && g->end != VAFM_SEGMENT_END_TRAVEL)
+            fprintf(o, ", to the %s", g->end == VAFM_SEGMENT_END_DETACH ? "detachment" : "start height");
+        if (g->kind >= VAFM_SEGMENT_PAUSE)
+            fprintf(o, " %g s", g->duration_s);
+        if (g->kind == VAFM_SEGMENT_PAUSE)
+            fprintf(o, " at constant %s", g->pause_mode == VAFM_PAUSE_FORCE ? "force" : "height");
+        if (g->kind == VAFM_SEGMENT_MODULATE)
+            fprintf(o, ", %g m at %g Hz", g->amplitude_m, g->frequency_Hz);
+        if (g->trigger > 0 && g->trigger <= 4)
+            fprintf(o, ", until %s %s %g%s", chans[g->trigger], g->trigger_op ? "<" : ">", g->trigger_value,
+                    g->trigger_relative ? " (relative)" : "");
+        if (g->sample_rate_Hz > 0)
+            fprintf(o, ", %g Hz", g->sample_rate_Hz);
+        fputc('\n', o);
+    }
+}
+
 int vafm_cli_cmd_info(const vafm_cli_args *a)
 {
     vafm_h5_reader *r = NULL;
@@ -185,10 +224,14 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
     printf("file         %s, %.4g MB, %zu curve(s)\n", a->file, vafm_cli_file_mb(a->file), n);
     s_info_prov ip;
     s_info_provenance(stdout, a->file, &pv, &ip);
-    printf("curves       points per segment (0 approach, 1 retract, 2 dwell); SI%s\n",
+    if (pv.segments_json)
+        s_info_segments(stdout, &pv);
+    printf("curves       points per segment (%s); SI%s\n",
+           pv.segments_json ? "the list's first three: positions 0, 1, 2" : "0 approach, 1 retract, 2 dwell",
            pv.is_vafm ? "; ground truth: pull-off forces tensile, nN" : "");
-    printf("  %6s %8s %8s %8s %6s %12s %12s %12s %12s", "curve", "points", "approach", "retract", "dwell",
-           "k_N_per_m", "v_appr_m/s", "v_retr_m/s", "duration_s");
+    printf("  %6s %8s %8s %8s %6s %12s %12s %12s %12s", "curve", "points", pv.segments_json ? "seg 0" : "approach",
+           pv.segments_json ? "seg 1" : "retract", pv.segments_json ? "seg 2" : "dwell", "k_N_per_m", "v_appr_m/s",
+           "v_retr_m/s", "duration_s");
     if (pv.is_vafm)
         printf(" | %5s %6s %5s %12s %12s", "point", "status", "flags", "pulloff_samp", "detach_force");
     putchar('\n');
@@ -238,7 +281,7 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
     memset(&cerr, 0, sizeof cerr);
     int ck = vafm_h5_check(a->file, &cerr);
     if (!ck)
-        printf("conformance  ok: every rule of protocol/hdf5.md (L1-L17%s)\n", pv.is_vafm ? ", V1-V5" : "");
+        printf("conformance  ok: every rule of protocol/hdf5.md (L1-L17%s)\n", pv.is_vafm ? ", V1-V6" : "");
     else
         printf("conformance  FAILED: %s\n", cerr.message[0] ? cerr.message : vafm_strerror(ck));
     if (damaged) {

@@ -13,22 +13,119 @@ static int s_index_arg(const vafm_cli_args *a, uint64_t *index)
     return a->val[O_INDEX] ? vafm_cli_parse_u64("--index", a->val[O_INDEX], 0, UINT64_MAX, index) : 0;
 }
 
-/* Begin curve `index`, or with --segments the file's list. @return 0, a VAFM_E* code of the simulation, or
- * VAFM_CLI_EXIT_USAGE + 1000 when the file is unreadable or refused (reported). */
-static int s_begin_run(const vafm_cli_args *a, vafm_sim *sim, uint64_t index)
+/* Begin curve `index`, or with --segments the file's list (into segs, *n; *n = 0 without). @return 0, a VAFM_E*
+ * code of the simulation, or VAFM_CLI_EXIT_USAGE + 1000 when the file is unreadable or refused (reported). */
+static int s_begin_run(const vafm_cli_args *a, vafm_sim *sim, uint64_t index, vafm_segment_spec *segs, size_t *n)
 {
+    *n = 0;
     if (!a->val[O_SEGMENTS])
         return vafm_sim_curve_begin(sim, index);
-    vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
-    size_t n = 0;
     vafm_error err;
-    int r = vafm_segments_load_file(a->val[O_SEGMENTS], segs, VAFM_SEGMENTS_MAX, &n, &err);
-    int invalid = !r && (r = vafm_segments_validate(segs, n, vafm_sim_params(sim), &err)) != 0;
+    int r = vafm_segments_load_file(a->val[O_SEGMENTS], segs, VAFM_SEGMENTS_MAX, n, &err);
+    int invalid = !r && (r = vafm_segments_validate(segs, *n, vafm_sim_params(sim), &err)) != 0;
     if (r) {
         vafm_cli_error("%s%s%s", invalid ? a->val[O_SEGMENTS] : "", invalid ? ": " : "", err.message);
         return 1000 + VAFM_CLI_EXIT_USAGE;
     }
-    return vafm_sim_segments_begin(sim, index, segs, n);
+    return vafm_sim_segments_begin(sim, index, segs, *n);
+}
+
+/* A run's samples, gathered for `vafm run --out` (at most VAFM_H5_MAX_SAMPLES). */
+typedef struct s_gather {
+    size_t n, cap;
+    double *t, *h, *d, *f, *tip, *hm;
+    uint8_t *seg;
+    int hm_on, full; /* height_measured_m given; the run outgrew VAFM_H5_MAX_SAMPLES or memory */
+} s_gather;
+
+static void s_gather_free(s_gather *g)
+{
+    free(g->t), free(g->h), free(g->d), free(g->f), free(g->tip), free(g->hm), free(g->seg);
+}
+
+static int s_gather_fn(void *user, const vafm_samples *b)
+{
+    s_gather *g = user;
+    if (b->n > VAFM_H5_MAX_SAMPLES - g->n)
+        return g->full = 1;
+    if (g->n + b->n > g->cap) {
+        size_t cap = g->cap ? g->cap : 4096;
+        while (cap < g->n + b->n)
+            cap *= 2;
+        if (cap > VAFM_H5_MAX_SAMPLES)
+            cap = VAFM_H5_MAX_SAMPLES;
+        double **arr[] = { &g->t, &g->h, &g->d, &g->f, &g->tip, &g->hm };
+        for (size_t k = 0; k < sizeof arr / sizeof arr[0]; k++) {
+            double *q = realloc(*arr[k], cap * sizeof *q);
+            if (!q)
+                return g->full = 2;
+            *arr[k] = q;
+        }
+        uint8_t *q = realloc(g->seg, cap);
+        if (!q)
+            return g->full = 2;
+        g->seg = q;
+        g->cap = cap;
+    }
+    size_t m = b->n * sizeof(double);
+    memcpy(g->t + g->n, b->time_s, m);
+    memcpy(g->h + g->n, b->height_m, m);
+    memcpy(g->d + g->n, b->deflection_m, m);
+    memcpy(g->f + g->n, b->force_N, m);
+    memcpy(g->tip + g->n, b->tip_m, m);
+    memcpy(g->hm + g->n, b->height_measured_m ? b->height_measured_m : b->height_m, m);
+    memcpy(g->seg + g->n, b->segment, b->n);
+    g->hm_on |= b->height_measured_m != NULL;
+    g->n += b->n;
+    return 0;
+}
+
+/* `vafm run --out FILE.h5`: the run as a one-curve file (protocol/hdf5.md; a segment list: format 1.2 with
+ * "vafm segments"), through the scene's measured chain as vafm campaign records it. @return an exit code. */
+static int s_write_run(const vafm_cli_args *a, const vafm_params *p, s_gather *g, const vafm_curve_result *res,
+                       uint64_t index, const vafm_segment_spec *segs, size_t nseg)
+{
+    vafm_samples s = { .n = g->n, .time_s = g->t, .height_m = g->h, .deflection_m = g->d, .force_N = g->f,
+                       .tip_m = g->tip, .segment = g->seg, .height_measured_m = g->hm_on ? g->hm : NULL };
+    vafm_record_curve rc = { .samples = &s, .params = p, .result = res, .sensitivity_m_per_V = p->sensitivity_m_per_V };
+    if (vafm_detector_on(p)) { /* the instrument's force and deflection (and z sensor), as vafm campaign */
+        vafm_detector det;
+        vafm_detector_begin(&det, p, index);
+        for (size_t i = 0; i < g->n; i++)
+            vafm_detector_apply(&det, g->t[i], g->h[i], g->d[i], NULL, &g->d[i], &g->f[i]);
+        if (det.zs_on) {
+            for (size_t i = 0; i < g->n; i++)
+                g->hm[i] = vafm_detector_height(&det, g->t[i], g->hm[i]);
+            s.height_measured_m = g->hm;
+        }
+        rc.measured_force = 1;
+    }
+    vafm_recorder_opts ro;
+    vafm_recorder_opts_default(&ro);
+    ro.mode = a->on[O_OVERWRITE] ? VAFM_RECORD_OVERWRITE : VAFM_RECORD_CREATE;
+    char *json = nseg ? vafm_segments_to_json(segs, nseg) : NULL;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    if (nseg && !json) {
+        vafm_cli_error("%s: the segment list cannot be written as JSON (out of memory)", a->val[O_OUT]);
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
+    ro.segments_json = json;
+    vafm_recorder *rec = NULL;
+    int r = vafm_recorder_open(&rec, a->val[O_OUT], &ro, p, NULL, &err);
+    free(json);
+    if (!r)
+        r = vafm_recorder_append(rec, &rc, &err);
+    vafm_error ce;
+    memset(&ce, 0, sizeof ce);
+    int cr = rec ? vafm_recorder_close(&rec, NULL, &ce) : 0;
+    if (r)
+        return vafm_cli_report(&err, r);
+    if (cr)
+        return vafm_cli_report(&ce, cr);
+    printf("file         %s: 1 curve, %zu samples%s\n", a->val[O_OUT], g->n,
+           nseg ? " (segment list: format 1.2, 'vafm segments')" : "");
+    return VAFM_CLI_EXIT_OK;
 }
 
 /* The scene, the --index and a simulation for it: the common start of vafm run and vafm samples. */
@@ -69,13 +166,24 @@ int vafm_cli_cmd_run(const vafm_cli_args *a)
         vafm_sim_destroy(&sim);
         return VAFM_CLI_EXIT_USAGE;
     }
-    int r = s_begin_run(a, sim, index);
+    vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
+    size_t nseg = 0;
+    int r = s_begin_run(a, sim, index, segs, &nseg);
     if (r >= 1000) {
         vafm_sim_destroy(&sim);
         return r - 1000;
     }
+    s_gather g = { 0 };
     if (!r)
-        r = vafm_cli_advance_all(sim, NULL, NULL, &pg);
+        r = vafm_cli_advance_all(sim, a->val[O_OUT] ? s_gather_fn : NULL, &g, &pg);
+    if (r == VAFM_EABORT && g.full) {
+        vafm_cli_error("%s: the run %s", a->val[O_OUT],
+                       g.full == 1 ? "has more samples than a file's curve may hold (VAFM_H5_MAX_SAMPLES, 2^25)"
+                                   : "does not fit in memory");
+        s_gather_free(&g);
+        vafm_sim_destroy(&sim);
+        return VAFM_CLI_EXIT_RUNTIME;
+    }
     double wall = vafm_cli_now() - pg.t0;
     vafm_curve_result res;
     vafm_sim_result(sim, &res);
@@ -83,12 +191,15 @@ int vafm_cli_cmd_run(const vafm_cli_args *a)
         const vafm_error *e = vafm_sim_error(sim);
         vafm_cli_error("curve %" PRIu64 " failed after %.6g s simulated: %s", index, res.duration_s,
                 e ? e->message : vafm_strerror(r));
+        s_gather_free(&g);
         vafm_sim_destroy(&sim);
         return VAFM_CLI_EXIT_RUNTIME;
     }
     vafm_sim_destroy(&sim);
     vafm_cli_print_run_result(stdout, &sc.p, &res, wall);
-    return VAFM_CLI_EXIT_OK;
+    rc = a->val[O_OUT] ? s_write_run(a, &sc.p, &g, &res, index, segs, nseg) : VAFM_CLI_EXIT_OK;
+    s_gather_free(&g);
+    return rc;
 }
 
 /* ---- vafm samples ------------------------------------------------------------------------------ */
@@ -141,7 +252,9 @@ int vafm_cli_cmd_samples(const vafm_cli_args *a)
         vafm_sim_destroy(&sim);
         return VAFM_CLI_EXIT_USAGE;
     }
-    int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : s_begin_run(a, sim, index);
+    vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
+    size_t nseg = 0;
+    int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : s_begin_run(a, sim, index, segs, &nseg);
     if (r >= 1000) {
         vafm_cli_close_out(f, a->val[O_CSV], 1);
         vafm_sim_destroy(&sim);

@@ -358,11 +358,15 @@ static int s_cmd_help(const vafm_cli_args *a)
 /* ---- the command table ------------------------------------------------------------------------ */
 
 static const vafm_cli_command s_commands[] = {
-    { "run", vafm_cli_cmd_run, S_GENERAL | M(O_INDEX) | M(O_PROGRESS) | M(O_QUIET) | M(O_SEGMENTS), 1,
+    { "run", vafm_cli_cmd_run,
+      S_GENERAL | M(O_INDEX) | M(O_PROGRESS) | M(O_QUIET) | M(O_SEGMENTS) | M(O_OUT) | M(O_OVERWRITE), 1,
       "one force curve with a readable summary (the default command)",
-      "vafm run [SCENE] [--index N] [--segments FILE.json] [--progress] [--quiet]\n"
+      "vafm run [SCENE] [--index N] [--segments FILE.json] [--out FILE.h5 [--overwrite]] [--progress] [--quiet]\n"
       "  --index N            curve index = its random stream (default 0)\n"
       "  --segments FILE      run this segment list instead of the scene's curve (docs/instrument.md, Segments)\n"
+      "  -o, --out FILE.h5    also write the curve to an HDF5 file (protocol/hdf5.md; a segment list: format 1.2,\n"
+      "                       segment = the segment's position, 'segment count' = the list's length)\n"
+      "  --overwrite          replace an existing --out file\n"
       "  --progress           report progress on stderr even when it is not a terminal\n"
       "  -q, --quiet          no progress\n", 0, NULL },
     { "curves", vafm_cli_cmd_curves,
