@@ -505,6 +505,24 @@ segs=$(tail -n +2 "$TMP/out" | awk -F, 'BEGIN { ok = 1 } $6 < last { ok = 0 } { 
     END { print ok, n[0] + 0, (n[1] > 0), n[2] + 0, (n[3] > 0) }')
 if [ "$rc" -eq 0 ] && [ "$segs" = "1 50 1 25 1" ]; then ok "samples --segments: 4 segments in order, labelled"
 else bad "samples --segments" "exit $rc, '$segs'"; fi
+# --out: the list run as a format 1.2 file ('vafm segments', segment = position, 'segment count' 4) that info
+# lists, the checker passes and export writes back with the same samples as `vafm samples`
+run run --segments "$TMP/seg4.json" --out "$TMP/seg4.h5" -q
+run info "$TMP/seg4.h5"
+if [ "$rc" -eq 0 ] && grep -q "^vafm format  1.2," "$TMP/out" && grep -q "^segments     4, every curve" "$TMP/out" &&
+   grep -q "^   2 pause    0.01 s at constant force, 2500 Hz" "$TMP/out" &&
+   grep -q "^conformance  ok" "$TMP/out"; then ok "run --segments --out: format 1.2, info lists the 4 segments, conformance ok"
+else bad "run --segments --out" "exit $rc: $(grep -E 'format|segments|conformance' "$TMP/out" | head -5)"; fi
+run samples --segments "$TMP/seg4.json" --csv "$TMP/seg4.csv"
+run export "$TMP/seg4.h5" --curve 0 --csv "$TMP/seg4x.csv"
+if [ "$rc" -eq 0 ] && cmp -s <(cut -d, -f1-2,6 "$TMP/seg4.csv") <(cut -d, -f1-2,6 "$TMP/seg4x.csv"); then
+    ok "export of the list file: time, height and segment as vafm samples wrote them"
+else bad "export of the list file" "exit $rc; $(diff <(cut -d, -f1-2,6 "$TMP/seg4.csv") <(cut -d, -f1-2,6 "$TMP/seg4x.csv") | head -3)"; fi
+run run --out "$TMP/fd.h5" -q
+run info "$TMP/fd.h5"
+if [ "$rc" -eq 0 ] && grep -q "^vafm format  1.1," "$TMP/out" && ! grep -q "^segments" "$TMP/out"; then
+    ok "run --out without a list: a format 1.1 file"
+else bad "run --out" "exit $rc"; fi
 printf '{"segments": [{"kind": "retract", "speed_m_per_s": 0, "distance_m": 1e-7}]}' >"$TMP/segbad.json"
 expect_fail "--segments: a bad speed names the segment and field" 2 "segment 0" speed_m_per_s -- run --segments "$TMP/segbad.json"
 printf '[{"kind": "extend", "sped": 1}]' >"$TMP/segbad.json"

@@ -1683,6 +1683,172 @@ static void test_resume_trailing(void)
 
 /* ---- main ------------------------------------------------------------------------------------------- */
 
+/* ---- segment lists (issue #26 §4): format 1.2, 'vafm segments', rules L12/V2/V6 ---------------------------- */
+
+#define S_SEG4 "{\"segments\": [{\"kind\": \"pause\"}, {\"kind\": \"extend\"}, {\"kind\": \"pause\"}, {\"kind\": \"retract\"}]}"
+
+/* A synthetic curve as a 4-segment list's: sample i in segment 4i/n (its position), 'segment count' 4. */
+static void seg4_make(syn *s, size_t n, uint64_t index)
+{
+    syn_make(s, n, 0.05, index);
+    for (size_t i = 0; i < n; i++)
+        s->seg[i] = (uint8_t)(4 * i / n);
+    s->c.meta.segment_count = 4;
+}
+
+/* A 4-segment list file of `count` curves (resume: continue it). @return 0 or the first error. */
+static int seg4_file(const char *path, int resume, int count, const char *list, vafm_error *e)
+{
+    vafm_params p;
+    s_fig4(&p);
+    vafm_h5_writer_opts o;
+    vafm_h5_writer_opts_default(&o);
+    o.resume = resume;
+    vafm_h5_writer *w = NULL;
+    int rc = vafm_h5_writer_open(&w, path, &o, e);
+    if (!rc && list)
+        rc = vafm_h5_writer_set_segments(w, list, e);
+    if (!rc)
+        rc = vafm_h5_writer_set_provenance(w, &p, NULL, e);
+    for (int i = (int)(w ? vafm_h5_writer_count(w) : 0); i < count && !rc; i++) {
+        syn s;
+        seg4_make(&s, 400 + 13 * (size_t)i, (uint64_t)i);
+        rc = vafm_h5_writer_append(w, &s.c, &s.truth, e);
+        syn_free(&s);
+    }
+    int rc2 = w ? vafm_h5_writer_close(&w, e) : 0;
+    return rc ? rc : rc2;
+}
+
+/* Edit a copy of a list file with plain HDF5: kind 0 sets sample 7 of curve 1 to 4 (≥ the count); 1 drops the
+ * list and says 1.1 (a count with no list); 2 keeps the list and says 1.1; 3 drops the list and keeps 1.2. */
+static void seg4_hostile(const char *src, const char *dst, int kind)
+{
+    size_t n = 0;
+    unsigned char *b = s_slurp(src, &n);
+    s_spit(dst, b, n);
+    free(b);
+    hid_t f = H5Fopen(dst, H5F_ACC_RDWR, H5P_DEFAULT);
+    ENSURE(f >= 0);
+    if (kind == 0) {
+        hid_t d = H5Dopen2(f, "1/segment", H5P_DEFAULT);
+        uint8_t v[4000];
+        hid_t sp = H5Dget_space(d);
+        hssize_t np = H5Sget_simple_extent_npoints(sp);
+        ENSURE(np > 7 && np <= 4000);
+        H5Dread(d, H5T_NATIVE_UINT8, H5S_ALL, H5S_ALL, H5P_DEFAULT, v);
+        v[7] = 4;
+        ENSURE(H5Dwrite(d, H5T_NATIVE_UINT8, H5S_ALL, H5S_ALL, H5P_DEFAULT, v) >= 0);
+        H5Sclose(sp);
+        H5Dclose(d);
+    }
+    if (kind == 1 || kind == 3)
+        ENSURE(H5Adelete(f, "vafm segments") >= 0);
+    if (kind == 1 || kind == 2) {
+        H5Adelete(f, "vafm format version");
+        h_str(f, "vafm format version", "1.1", 0);
+    }
+    H5Fclose(f);
+}
+
+static void test_segment_lists(void)
+{
+    const char *path = "t_h5_seg4.h5", *bad = "t_h5_seg4_bad.h5";
+    remove(path);
+    vafm_error e = { 0 };
+    int rc = seg4_file(path, 0, 2, S_SEG4, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    rc = vafm_h5_check(path, &e);
+    ENSURE_MSG(rc == 0, "conformance: %s", e.message);
+    /* read back bit for bit, with the list and format 1.2 */
+    vafm_h5_reader *r = NULL;
+    rc = vafm_h5_reader_open(&r, path, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    if (!rc) {
+        vafm_h5_provenance pv;
+        vafm_h5_reader_provenance(r, &pv);
+        ENSURE(pv.format_major == 1 && pv.format_minor == VAFM_H5_FORMAT_MINOR_SEGMENTS);
+        ENSURE(s_same_str(pv.segments_json, S_SEG4) && pv.segment_count == 4);
+        ENSURE(vafm_h5_reader_count(r) == 2);
+        for (size_t i = 0; i < 2; i++) {
+            syn s;
+            seg4_make(&s, 400 + 13 * i, i);
+            vafm_h5_curve c;
+            rc = vafm_h5_reader_curve(r, i, &c, &e);
+            ENSURE_MSG(rc == 0, "%s", e.message);
+            char why[200] = "";
+            ENSURE_MSG(!rc && s_curve_eq(&s.c, &c, 0, why, sizeof why), "curve %zu: %s", i, why);
+            ENSURE(!rc && c.segment[0] == 0 && c.segment[c.n - 1] == 3 && c.meta.segment_count == 4);
+            syn_free(&s);
+        }
+        vafm_h5_reader_destroy(&r);
+    }
+    /* resume: the same list continues it, another or none is refused */
+    ENSURE(vafm_h5_resume_check_segments(path, &(vafm_params){ 0 }, NULL, "{\"segments\": [{}]}", &e) != 0);
+    rc = seg4_file(path, 1, 3, "{\"segments\": [{\"kind\": \"pause\"}]}", &e);
+    ENSURE_MSG(rc == VAFM_EINVAL && strstr(e.message, "differs from the file's"), "%d %s", rc, e.message);
+    rc = seg4_file(path, 1, 3, NULL, &e);
+    ENSURE_MSG(rc == VAFM_EINVAL && strstr(e.message, "holds a segment list"), "%d %s", rc, e.message);
+    rc = seg4_file(path, 1, 3, S_SEG4, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    rc = vafm_h5_check(path, &e);
+    ENSURE_MSG(rc == 0, "conformance after resume: %s", e.message);
+    rc = vafm_h5_reader_open(&r, path, &e);
+    ENSURE(rc == 0 && vafm_h5_reader_count(r) == 3);
+    vafm_h5_reader_destroy(&r);
+    /* the writer refuses a value ≥ the count, another count, a count ≠ 2 without a list, a bad list */
+    {
+        vafm_params p;
+        s_fig4(&p);
+        for (int k = 0; k < 4; k++) {
+            const char *f = "t_h5_seg4_w.h5";
+            remove(f);
+            vafm_h5_writer *w = NULL;
+            ENSURE(vafm_h5_writer_open(&w, f, NULL, &e) == 0);
+            if (k < 2)
+                ENSURE(vafm_h5_writer_set_segments(w, S_SEG4, &e) == 0);
+            if (k == 3) {
+                rc = vafm_h5_writer_set_segments(w, "{\"segments\": []}", &e);
+                ENSURE_MSG(rc == VAFM_EINVAL && strstr(e.message, "1 to 255"), "%d %s", rc, e.message);
+            }
+            ENSURE(vafm_h5_writer_set_provenance(w, &p, NULL, &e) == 0);
+            syn s;
+            seg4_make(&s, 400, 0);
+            if (k == 0)
+                s.seg[9] = 4;
+            if (k == 1)
+                s.c.meta.segment_count = 3;
+            rc = vafm_h5_writer_append(w, &s.c, &s.truth, &e);
+            ENSURE_MSG(rc == VAFM_EINVAL && strstr(e.message, k == 0 ? "below 'segment count'" : "'segment count'"),
+                       "case %d: %d %s", k, rc, e.message);
+            syn_free(&s);
+            vafm_h5_writer_destroy(&w);
+        }
+    }
+    /* hostile files: the checker names the rule, the reader refuses a value ≥ the count */
+    static const char *const rule[] = { "[L12]", "[V2]", "[V6]", "[V6]" };
+    for (int k = 0; k < 4; k++) {
+        seg4_hostile(path, bad, k);
+        rc = vafm_h5_check(bad, &e);
+        ENSURE_MSG(rc == VAFM_EFORMAT && strstr(e.message, rule[k]), "case %d: %d %s", k, rc, e.message);
+        if (k == 0) {
+            ENSURE(vafm_h5_reader_open(&r, bad, &e) == 0);
+            vafm_h5_curve c;
+            rc = vafm_h5_reader_curve(r, 1, &c, &e);
+            ENSURE_MSG(rc == VAFM_EFORMAT && strstr(e.message, "below 'segment count'"), "%d %s", rc, e.message);
+            vafm_h5_reader_destroy(&r);
+        }
+    }
+    /* a file without a list stays 1.1, count 2 */
+    remove("t_h5_seg0.h5");
+    rc = syn_file("t_h5_seg0.h5", NULL, 1, &e);
+    ENSURE(rc == 0 && vafm_h5_reader_open(&r, "t_h5_seg0.h5", &e) == 0);
+    vafm_h5_provenance pv;
+    vafm_h5_reader_provenance(r, &pv);
+    ENSURE(pv.format_minor == VAFM_H5_FORMAT_MINOR && !pv.segments_json && pv.segment_count == 0);
+    vafm_h5_reader_destroy(&r);
+}
+
 static int make_files(const char *dir)
 {
     char a[512], b[512];
@@ -1721,6 +1887,7 @@ int main(int argc, char **argv)
     S_RUN(test_bad_files);
     S_RUN(test_writer_refusals);
     S_RUN(test_resume_trailing);
+    S_RUN(test_segment_lists);
     S_RUN(test_journal_steps);
     S_RUN(test_campaign_roundtrip);
     S_RUN(test_damaged_files);
