@@ -97,7 +97,9 @@ class H5File:
     (every root attribute), and for vafm files (`is_vafm`) `format_version`, `scene` (dict), `grid`
     (dict), `seed`, `created` and `truth` (the ground-truth table as a numpy structured array, one row per
     curve, or None; format 1.1 rows carry each curve's E_star_Pa, gamma_J_per_m2, surface_height_m). A force
-    map (`is_map`) has `map_shape`, `map_extent`, `map_spec` and `map_array(values)`."""
+    map (`is_map`) has `map_shape`, `map_extent`, `map_spec` and `map_array(values)`. A file whose curves run a
+    segment list (format 1.2, "vafm segments") has `segments`, the list (one dict a segment; None otherwise):
+    its curves' `segment` is the segment's position, so `approach`/`retract` are then segments 0 and 1."""
 
     def __init__(self, path, curves, attrs, truth):
         self.path, self.curves, self.attrs, self.truth = path, curves, attrs, truth
@@ -109,6 +111,13 @@ class H5File:
         self.grid = json.loads(attrs["vafm grid"]) if "vafm grid" in attrs else None
         self.seed = int(attrs["vafm seed"]) if "vafm seed" in attrs else None
         self.created = attrs.get("vafm created")
+        self.segments = None
+        if "vafm segments" in attrs:
+            seg = json.loads(attrs["vafm segments"])
+            if not (isinstance(seg, dict) and list(seg) == ["segments"] and isinstance(seg["segments"], list)
+                    and 1 <= len(seg["segments"]) <= 255):
+                raise _bad(path, "/", "V6", "'vafm segments' is not a segment list {\"segments\": [1 to 255 objects]}")
+            self.segments = seg["segments"]
 
     @property
     def is_map(self):
