@@ -14,6 +14,10 @@
  * 4. The scalar table loop compiled for SSE4.1 (core/kernel.h, VAFM_KLOOP_TABLE41) against the baseline
  *    loop: whole curves of every integrator on paper-fig4 (ṽ = 1e-2) and of the underdamped ones on
  *    contact-silica, the same bytes.
+ * 5. The backend table (core/backend.h): each row the CPU runs gives whole curves the same bytes as the
+ *    scalar row, run alone (the wider rows masked off as on an older CPU); a row masked off is refused by
+ *    name, never chosen by a width, and vafm_batch_steps() runs the scalar row for its width; the kernel
+ *    names are the table's.
  */
 #include "harness.h"
 
@@ -23,6 +27,7 @@
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "vafm/units.h"
+#include "core/backend.h"
 #include "core/batch.h"
 #include "core/kernel.h"
 
@@ -385,6 +390,108 @@ static void test_names(void)
     printf("batch kernel on this CPU: up to %d lanes\n", max);
 }
 
+/* ---- 5. the backend table ---------------------------------------------------------------------- */
+
+static void test_backends(void)
+{
+    const int nb = vafm_backend_count();
+    ENSURE(nb >= 3);
+    ENSURE(!strcmp(vafm_backend_at(0)->name, "scalar") && vafm_backend_at(0)->lanes == 1 && vafm_backend_usable(0));
+    ENSURE(vafm_backend_at(nb) == NULL && vafm_backend_at(-1) == NULL);
+    char want_names[128] = "auto, scalar, batch";
+    for (int i = 1; i < nb; i++) {
+        const vafm_backend *b = vafm_backend_at(i);
+        ENSURE_MSG(b->lanes > vafm_backend_at(i - 1)->lanes, "row %d (%s): rows go narrowest first", i, b->name);
+        ENSURE(vafm_batch_lanes_per_call(b->lanes) >= b->lanes && b->available && b->describe);
+        snprintf(want_names + strlen(want_names), sizeof want_names - strlen(want_names), ", batch%d", b->lanes);
+    }
+    /* the kernel names are the table's: each parses to its row's width */
+    char names[128];
+    ENSURE(vafm_campaign_kernel_names(names, sizeof names, ", ") == 0);
+    ENSURE_MSG(!strcmp(names, want_names), "kernel names '%s', want '%s'", names, want_names);
+    ENSURE(vafm_campaign_kernel_names(names, 8, ", ") == VAFM_EINVAL);
+    vafm_campaign_spec sp;
+    memset(&sp, 0, sizeof sp);
+    for (int i = 1; i < nb; i++) {
+        char nm[16];
+        snprintf(nm, sizeof nm, "batch%d", vafm_backend_at(i)->lanes);
+        ENSURE_MSG(vafm_campaign_kernel_parse(nm, &sp) == 0 && sp.batch_width == vafm_backend_at(i)->lanes, "%s", nm);
+    }
+    const char *bad[] = { "batch2", "batch16", "batch04", "batch4x", "batch", "avx512", "" };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+        ENSURE_MSG((vafm_campaign_kernel_parse(bad[i], &sp) == VAFM_EINVAL) == (i != 4), "'%s'", bad[i]);
+    ENSURE(vafm_backend_find("nosuch", NULL) == VAFM_ENOTFOUND && vafm_backend_find(NULL, NULL) == VAFM_ENOTFOUND);
+
+    /* whole curves: the reference, then each usable row alone (the rows above it masked off) */
+    vafm_params p;
+    t_scene(&p, 1e-2);
+    const double T[2] = { p.T_K, 2.0 * p.T_K };
+    memset(&sp, 0, sizeof sp);
+    sp.T_K = T;
+    sp.n_T = 2;
+    sp.curves_per_point = 6;
+    sp.keep_samples = 1;
+    sp.threads = 1;
+    sp.kernel = VAFM_CAMPAIGN_KERNEL_SCALAR;
+    static t_camp ref, got;
+    ENSURE(vafm_campaign_run(&p, &sp, t_camp_fn, &ref, NULL) == 0 && ref.n == 12);
+    int ran = 0;
+    for (int i = 0; i < nb; i++) {
+        const vafm_backend *b = vafm_backend_at(i), *found = NULL;
+        if (!vafm_backend_usable(i)) {
+            printf("backend %s: not on this CPU\n", b->name);
+            ENSURE(vafm_backend_find(b->name, &found) == VAFM_ENOTSUP && found == NULL);
+            continue;
+        }
+        ENSURE(vafm_backend_find(b->name, &found) == 0 && found == b);
+        vafm_backend_off = ~0u << (i + 1); /* as on a CPU whose widest row is i */
+        ENSURE(vafm_batch_width_max() == b->lanes && vafm_batch_width(0) == b->lanes);
+        for (int j = i + 1; j < nb; j++) { /* the rows above: refused by name, a width asking for them gets i */
+            ENSURE_MSG(vafm_backend_find(vafm_backend_at(j)->name, &found) == VAFM_ENOTSUP && found == b,
+                       "masked row %s was not refused", vafm_backend_at(j)->name);
+            ENSURE(vafm_batch_width(vafm_backend_at(j)->lanes) == b->lanes);
+        }
+        sp.kernel = VAFM_CAMPAIGN_KERNEL_BATCH;
+        sp.batch_width = 0; /* the widest: row i */
+        ENSURE(vafm_campaign_kernel_width(&sp) == b->lanes);
+        ENSURE(!strcmp(vafm_campaign_kernel_describe(&sp), b->describe));
+        ENSURE(vafm_campaign_run(&p, &sp, t_camp_fn, &got, NULL) == 0);
+        vafm_backend_off = 0;
+        ENSURE(got.n == ref.n);
+        for (size_t c = 0; c < got.n && c < ref.n; c++) {
+            ENSURE_MSG(t_trace_same(&got.tr[c], &ref.tr[c]) && got.tr[c].n > 100, "row %s: curve %zu's samples differ",
+                       b->name, c);
+            ENSURE_MSG(t_result_same(&got.res[c], &ref.res[c]) && got.status[c] == ref.status[c],
+                       "row %s: curve %zu's result differs", b->name, c);
+        }
+        t_camp_free(&got);
+        ran++;
+        printf("backend %s (%d lanes): %zu curves the same bytes as the scalar kernel's\n", b->name, b->lanes, ref.n);
+    }
+    ENSURE(ran >= 1);
+    t_camp_free(&ref);
+
+    /* vafm_batch_steps() at a width whose row is masked off runs the scalar row: the same end state as gjf's run */
+    vafm_sim *s = NULL;
+    vafm_kernel k0[2], k1[2];
+    int n_in = 0;
+    t_scene(&p, 1e-2);
+    ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+    ENSURE(t_harvest(s, 5, k0, 2, &n_in) == 2);
+    memcpy(k1, k0, sizeof k0);
+    vafm_kernel *kp[2] = { &k0[0], &k0[1] };
+    const long want[2] = { 300, 77 };
+    long done[2], done1[2];
+    vafm_backend_off = ~1u; /* every vector row off */
+    vafm_batch_steps(kp, want, done, 2, vafm_backend_at(nb - 1)->lanes);
+    vafm_backend_off = 0;
+    for (int l = 0; l < 2; l++) {
+        done1[l] = vafm_integrator_gjf->run(&k1[l], want[l]);
+        ENSURE(done[l] == done1[l] && t_same_kernel(&k0[l], &k1[l]));
+    }
+    vafm_sim_destroy(&s);
+}
+
 int main(void)
 {
     RUN_TEST(test_names);
@@ -392,5 +499,6 @@ int main(void)
     RUN_TEST(test_campaigns);
     RUN_TEST(test_campaign_measured_height);
     RUN_TEST(test_table_loop_isa);
+    RUN_TEST(test_backends);
     return harness_done();
 }

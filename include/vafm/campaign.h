@@ -75,9 +75,14 @@ VAFM_API size_t vafm_campaign_points(const vafm_campaign_spec *spec);
  *  AVX2), else 4 or 8. */
 VAFM_API int vafm_campaign_kernel_width(const vafm_campaign_spec *spec);
 
-/** Set spec's kernel from its name: "auto", "scalar", "batch" (the widest the CPU runs), "batch4", "batch8".
+/** Set spec's kernel from its name: "auto", "scalar", "batch" (the widest the CPU runs), "batch4", "batch8"
+ *  (up to that many lanes, capped at the CPU's; one "batch<lanes>" per backend of the batch kernel).
  *  @return 0, or VAFM_EINVAL for another name (spec unchanged). */
 VAFM_API int vafm_campaign_kernel_parse(const char *name, vafm_campaign_spec *spec);
+
+/** The kernel names vafm_campaign_kernel_parse() accepts, joined by sep, into buf (e.g. "auto, scalar, batch,
+ *  batch4, batch8"). @return 0, or VAFM_EINVAL (no buffer, or too small: buf then holds a truncated list). */
+VAFM_API int vafm_campaign_kernel_names(char *buf, size_t size, const char *sep);
 
 /** The kernel a campaign with this spec runs on this CPU, in words (e.g. "batch, 8 lanes (AVX-512)"). */
 VAFM_API const char *vafm_campaign_kernel_describe(const vafm_campaign_spec *spec);

@@ -57,7 +57,9 @@ int vafm_cli_parse_kernel(const char *text, vafm_campaign_spec *spec)
     if (!text)
         return 0;
     if (vafm_campaign_kernel_parse(text, spec)) {
-        vafm_cli_error("--kernel: '%s' is not a kernel (auto, scalar, batch, batch4, batch8)", text);
+        char names[128];
+        vafm_campaign_kernel_names(names, sizeof names, ", ");
+        vafm_cli_error("--kernel: '%s' is not a kernel (%s)", text, names);
         return VAFM_CLI_EXIT_USAGE;
     }
     return 0;

@@ -221,8 +221,9 @@ int vafm_cmd_study(int argc, char **argv)
             ctx.threads = (int)t;
         } else if (!strcmp(a, "--kernel") && i + 1 < argc) {
             if (vafm_campaign_kernel_parse(argv[++i], &ctx.kernel)) {
-                fprintf(stderr, "vafm study: --kernel: '%s' is not a kernel (auto, scalar, batch, batch4, batch8)\n",
-                        argv[i]);
+                char names[128];
+                vafm_campaign_kernel_names(names, sizeof names, ", ");
+                fprintf(stderr, "vafm study: --kernel: '%s' is not a kernel (%s)\n", argv[i], names);
                 return 2;
             }
         } else if (a[0] != '-' && !ctx.name) {

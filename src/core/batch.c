@@ -3,6 +3,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "core/backend.h"
 #include "core/batch.h"
 #include "core/kernel.h"
 #include "core/table8.h"
@@ -228,15 +229,100 @@ typedef long long s_vl4 __attribute__((vector_size(32)));
 #include "core/batch_lanes.h"
 #endif
 
-int vafm_batch_width_max(void)
+/* ---- the backend table (backend.h) -------------------------------------------------------------- */
+
+static void s_steps_scalar(vafm_kernel *const *K, const long *want, long *done, int n)
+{
+    for (int l = 0; l < n; l++)
+        done[l] = vafm_integrator_gjf->run(K[l], want[l]);
+}
+
+static int s_avail_scalar(void)
+{
+    return 1;
+}
+
+static int s_avail_avx2(void)
 {
 #if S_X86
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq"))
-        return 8;
-    if (__builtin_cpu_supports("avx2"))
-        return 4;
+    return __builtin_cpu_supports("avx2");
+#else
+    return 0;
 #endif
+}
+
+static int s_avail_avx512(void)
+{
+#if S_X86
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq");
+#else
+    return 0;
+#endif
+}
+
+#if !S_X86
+#define s_steps_avx2 NULL
+#define s_steps_avx512 NULL
+#endif
+
+/* narrowest first; row 0 the scalar reference */
+static const vafm_backend s_backends[] = {
+    { "scalar", "batch, 1 lane (no AVX2 on this CPU)", 1, s_avail_scalar, s_steps_scalar },
+    { "avx2", "batch, 4 lanes (AVX2)", 4, s_avail_avx2, s_steps_avx2 },
+    { "avx512", "batch, 8 lanes (AVX-512)", 8, s_avail_avx512, s_steps_avx512 },
+};
+#define S_NBACKENDS ((int)(sizeof s_backends / sizeof s_backends[0]))
+
+unsigned vafm_backend_off = 0;
+
+int vafm_backend_count(void)
+{
+    return S_NBACKENDS;
+}
+
+const vafm_backend *vafm_backend_at(int i)
+{
+    return i >= 0 && i < S_NBACKENDS ? &s_backends[i] : NULL;
+}
+
+int vafm_backend_usable(int i)
+{
+    if (i < 0 || i >= S_NBACKENDS || !s_backends[i].steps)
+        return 0;
+    if (i > 0 && (vafm_backend_off >> i & 1u))
+        return 0;
+    return s_backends[i].available();
+}
+
+int vafm_backend_find(const char *name, const vafm_backend **out)
+{
+    for (int i = 0; name && i < S_NBACKENDS; i++)
+        if (!strcmp(name, s_backends[i].name)) {
+            if (!vafm_backend_usable(i))
+                return VAFM_ENOTSUP;
+            if (out)
+                *out = &s_backends[i];
+            return 0;
+        }
+    return VAFM_ENOTFOUND;
+}
+
+/* The usable row of exactly `width` lanes, else the scalar row. */
+static const vafm_backend *s_backend_of_width(int width)
+{
+    for (int i = S_NBACKENDS - 1; i > 0; i--)
+        if (s_backends[i].lanes == width && vafm_backend_usable(i))
+            return &s_backends[i];
+    return &s_backends[0];
+}
+
+int vafm_batch_width_max(void)
+{
+    for (int i = S_NBACKENDS - 1; i > 0; i--)
+        if (vafm_backend_usable(i))
+            return s_backends[i].lanes;
     return 1;
 }
 
@@ -250,25 +336,18 @@ int vafm_batch_width(int want)
     const int max = vafm_batch_width_max();
     if (want <= 0 || want >= max)
         return max;
-    return want >= 4 && max >= 4 ? 4 : 1;
+    for (int i = S_NBACKENDS - 1; i > 0; i--) /* the widest usable row not above want */
+        if (s_backends[i].lanes <= want && vafm_backend_usable(i))
+            return s_backends[i].lanes;
+    return 1;
 }
 
 void vafm_batch_steps(vafm_kernel *const *K, const long *want, long *done, int n, int width)
 {
-    const int per = vafm_batch_lanes_per_call(width);
+    const vafm_backend *b = s_backend_of_width(width); /* an unusable width runs the scalar row */
+    const int per = vafm_batch_lanes_per_call(b->lanes);
     for (int i = 0; i < n; i += per) {
         const int m = n - i < per ? n - i : per;
-#if S_X86
-        if (width == 8) {
-            s_steps_avx512(K + i, want + i, done + i, m);
-            continue;
-        }
-        if (width == 4) {
-            s_steps_avx2(K + i, want + i, done + i, m);
-            continue;
-        }
-#endif
-        for (int l = 0; l < m; l++)
-            done[i + l] = vafm_integrator_gjf->run(K[i + l], want[i + l]);
+        b->steps(K + i, want + i, done + i, m);
     }
 }

@@ -19,6 +19,7 @@
 #include <unistd.h>
 
 #include "vafm/campaign.h"
+#include "core/backend.h"
 #include "core/batch.h"
 #include "core/internal.h"
 
@@ -425,30 +426,60 @@ static void *s_worker_batch(void *arg)
     return NULL;
 }
 
+/* The row of backend.h's table with `lanes` lanes (> 1), or -1. */
+static int s_backend_of_lanes(int lanes)
+{
+    for (int i = 1; i < vafm_backend_count(); i++)
+        if (vafm_backend_at(i)->lanes == lanes)
+            return i;
+    return -1;
+}
+
+/* Kernel names: "auto", "scalar", "batch" (the widest the CPU runs) and "batch<lanes>" for each backend
+ * row with more than one lane (up to that many lanes, capped at the CPU's: vafm_batch_width). */
 int vafm_campaign_kernel_parse(const char *name, vafm_campaign_spec *spec)
 {
-    static const struct {
-        const char *name;
-        int kernel, width;
-    } k[] = { { "auto", VAFM_CAMPAIGN_KERNEL_AUTO, 0 },  { "scalar", VAFM_CAMPAIGN_KERNEL_SCALAR, 0 },
-              { "batch", VAFM_CAMPAIGN_KERNEL_BATCH, 0 }, { "batch4", VAFM_CAMPAIGN_KERNEL_BATCH, 4 },
-              { "batch8", VAFM_CAMPAIGN_KERNEL_BATCH, 8 } };
-    for (size_t i = 0; name && spec && i < sizeof k / sizeof k[0]; i++)
-        if (!strcmp(name, k[i].name)) {
-            spec->kernel = k[i].kernel;
-            spec->batch_width = k[i].width;
-            return 0;
+    if (!name || !spec)
+        return VAFM_EINVAL;
+    int kernel = -1, width = 0;
+    if (!strcmp(name, "auto"))
+        kernel = VAFM_CAMPAIGN_KERNEL_AUTO;
+    else if (!strcmp(name, "scalar"))
+        kernel = VAFM_CAMPAIGN_KERNEL_SCALAR;
+    else if (!strcmp(name, "batch"))
+        kernel = VAFM_CAMPAIGN_KERNEL_BATCH;
+    else if (!strncmp(name, "batch", 5) && name[5] >= '1' && name[5] <= '9' && strlen(name) <= 7) {
+        char *end = NULL;
+        const long lanes = strtol(name + 5, &end, 10);
+        if (*end == '\0' && s_backend_of_lanes((int)lanes) > 0) {
+            kernel = VAFM_CAMPAIGN_KERNEL_BATCH;
+            width = (int)lanes;
         }
-    return VAFM_EINVAL;
+    }
+    if (kernel < 0)
+        return VAFM_EINVAL;
+    spec->kernel = kernel;
+    spec->batch_width = width;
+    return 0;
+}
+
+int vafm_campaign_kernel_names(char *buf, size_t size, const char *sep)
+{
+    if (!buf || !size || !sep)
+        return VAFM_EINVAL;
+    size_t n = (size_t)snprintf(buf, size, "auto%sscalar%sbatch", sep, sep);
+    for (int i = 1; i < vafm_backend_count() && n < size; i++)
+        n += (size_t)snprintf(buf + n, size - n, "%sbatch%d", sep, vafm_backend_at(i)->lanes);
+    return n < size ? 0 : VAFM_EINVAL;
 }
 
 const char *vafm_campaign_kernel_describe(const vafm_campaign_spec *spec)
 {
-    switch (vafm_campaign_kernel_width(spec)) {
-    case 8: return "batch, 8 lanes (AVX-512)";
-    case 4: return "batch, 4 lanes (AVX2)";
-    default: return spec && spec->kernel == VAFM_CAMPAIGN_KERNEL_BATCH ? "batch, 1 lane (no AVX2 on this CPU)" : "scalar";
-    }
+    const int w = vafm_campaign_kernel_width(spec);
+    if (w == 1 && !(spec && spec->kernel == VAFM_CAMPAIGN_KERNEL_BATCH))
+        return "scalar";
+    const int i = w == 1 ? 0 : s_backend_of_lanes(w);
+    return vafm_backend_at(i < 0 ? 0 : i)->describe;
 }
 
 int vafm_campaign_kernel_width(const vafm_campaign_spec *spec)
@@ -523,9 +554,13 @@ int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *sp
         vafm_err_set(err, VAFM_EINVAL, "kernel", "kernel = %d is not a kernel (0 auto, 1 scalar, 2 batch)", spec->kernel);
         return VAFM_EINVAL;
     }
-    if (spec->batch_width != 0 && spec->batch_width != 1 && spec->batch_width != 4 && spec->batch_width != 8) {
-        vafm_err_set(err, VAFM_EINVAL, "batch_width", "batch_width = %d is not a width (0: the widest, 1, 4 or 8)",
-                     spec->batch_width);
+    if (spec->batch_width != 0 && spec->batch_width != 1 && s_backend_of_lanes(spec->batch_width) < 0) {
+        char widths[64] = "1";
+        for (int i = 1; i < vafm_backend_count(); i++) /* the backend rows' lanes */
+            snprintf(widths + strlen(widths), sizeof widths - strlen(widths), "%s%d",
+                     i + 1 < vafm_backend_count() ? ", " : " or ", vafm_backend_at(i)->lanes);
+        vafm_err_set(err, VAFM_EINVAL, "batch_width", "batch_width = %d is not a width (0: the widest, %s)",
+                     spec->batch_width, widths);
         return VAFM_EINVAL;
     }
     size_t np = vafm_campaign_points(spec);

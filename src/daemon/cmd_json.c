@@ -90,7 +90,8 @@ static int s_setting_apply(vafmd_settings *s, const s_setting *f, json_t *v, vaf
     }
     if (f->kind == S_SET_CHOICE) { /* kernel */
         const char *t = json_is_string(v) ? json_string_value(v) : NULL;
-        if (!t || (strcmp(t, "scalar") && strcmp(t, "batch"))) {
+        vafm_campaign_spec k = { 0 }; /* the kernel names' table (core/backend.h): the daemon takes two of them */
+        if (!t || vafm_campaign_kernel_parse(t, &k) || k.kernel == VAFM_CAMPAIGN_KERNEL_AUTO || k.batch_width) {
             vafmd_err_set(e, t ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, f->name,
                           "'%s' must be \"scalar\" or \"batch\"", f->name);
             return -1;
