@@ -263,10 +263,10 @@ S_FLOOR1_ATTR static long s_floor1(const s_fl *c, double *sink)
     for (int j = 0; j < S_STEPS; j++) {
         const double f = hf + c->drift;
         const double beta = c->sig * c->nz[j];
-        const double un = u + c->b * (c->dt * w + c->hdmdt * f + c->hdm * beta);
+        const double un = VAFM_GJF_MOVE(u, w, f, beta, c->b, c->dt, c->hdmdt, c->hdm); /* core/gjf_step.h */
         const double ndn = nd + 1.0;
         const double usn = c->uspr0 + c->vspr * (ndn * c->dt);
-        const double x = sqrt(un - c->udet) * c->invh;
+        const double x = VAFM_JKR_TABLE_X(un, c->udet, c->invh, sqrt);
         if (__builtin_expect(!(un >= c->udet) || !(x < c->xend), 0)) {
             left++;
             break;
@@ -274,14 +274,13 @@ S_FLOOR1_ATTR static long s_floor1(const s_fl *c, double *sink)
         const double fr = x - __builtin_trunc(x);
         const double gg = 1.0 - fr;
         const double *p = c->node + 2 * (long)x;
-        const double t = gg * gg * (1.0 + 2.0 * fr) * p[0] + fr * fr * (1.0 + 2.0 * gg) * p[2] +
-                         fr * gg * (gg * p[1] - fr * p[3]);
+        const double t = VAFM_JKR_HERMITE(fr, gg, p[0], p[1], p[2], p[3]);
         sn = c->sm + t;
-        const double s3 = sn * sn * sn;
-        Fn = s3 * ((4.0 / 3.0) * s3 - c->c2);
-        const double fs = c->kk * (usn - un);
+        const double s3 = VAFM_JKR_CUBE(sn);
+        Fn = VAFM_JKR_FORCE(s3, c->c2);
+        const double fs = VAFM_SPRING_FORCE(c->kk, usn, un);
         const double hfn = fs - Fn;
-        w = c->a * w + c->hdm * (c->a * f + hfn + c->drift) + c->binvm * beta;
+        w = VAFM_GJF_KICK(w, f, hfn, beta, c->a, c->hdm, c->drift, c->binvm);
         u = un;
         hf = hfn;
         nd = ndn;
@@ -296,6 +295,7 @@ S_FLOOR1_ATTR static long s_floor1(const s_fl *c, double *sink)
 #if defined(__x86_64__) && defined(__GNUC__)
 typedef double s_fd8 __attribute__((vector_size(64)));
 typedef long long s_fl8 __attribute__((vector_size(64)));
+#define S_SQRT8(x) ((s_fd8)_mm512_sqrt_pd((__m512d)(x)))
 
 /* G vectors of 8 curves side by side, S_STEPS steps each: batch_lanes.h's common path, term by term. */
 static inline __attribute__((always_inline, target("avx512f,avx512dq"))) long s_floor8(const s_fl *c, int G,
@@ -325,10 +325,10 @@ static inline __attribute__((always_inline, target("avx512f,avx512dq"))) long s_
         for (int q = 0; q < G; q++) {
             const s_fd8 f = hf[q] + drift;
             const s_fd8 beta = sig * nz;
-            const s_fd8 un = u[q] + b * (dt * w[q] + hdmdt * f + hdm * beta);
+            const s_fd8 un = VAFM_GJF_MOVE(u[q], w[q], f, beta, b, dt, hdmdt, hdm);
             const s_fd8 ndn = nd[q] + 1.0;
             const s_fd8 usn = uspr0 + vspr * (ndn * dt);
-            const s_fd8 x = (s_fd8)_mm512_sqrt_pd((__m512d)(un - udet)) * invh;
+            const s_fd8 x = VAFM_JKR_TABLE_X(un, udet, invh, S_SQRT8);
             const s_fl8 out = (s_fl8)(un < udet) | ~(s_fl8)(x < xend);
             if (__builtin_expect(_mm512_movepi64_mask((__m512i)out) != 0, 0))
                 left++;
@@ -339,13 +339,13 @@ static inline __attribute__((always_inline, target("avx512f,avx512dq"))) long s_
             __m512d q0, q1, q2, q3;
             vafm_table8_load((__m512i)addr, &q0, &q1, &q2, &q3);
             const s_fd8 p0 = (s_fd8)q0, p1 = (s_fd8)q1, p2 = (s_fd8)q2, p3 = (s_fd8)q3;
-            const s_fd8 t = gg * gg * (1.0 + 2.0 * fr) * p0 + fr * fr * (1.0 + 2.0 * gg) * p2 + fr * gg * (gg * p1 - fr * p3);
+            const s_fd8 t = VAFM_JKR_HERMITE(fr, gg, p0, p1, p2, p3);
             const s_fd8 sn = sm + t;
-            const s_fd8 s3 = sn * sn * sn;
-            const s_fd8 Fn = s3 * ((4.0 / 3.0) * s3 - c2);
-            const s_fd8 fs = kk * (usn - un);
+            const s_fd8 s3 = VAFM_JKR_CUBE(sn);
+            const s_fd8 Fn = VAFM_JKR_FORCE(s3, c2);
+            const s_fd8 fs = VAFM_SPRING_FORCE(kk, usn, un);
             const s_fd8 hfn = fs - Fn;
-            w[q] = a * w[q] + hdm * (a * f + hfn + drift) + binvm * beta;
+            w[q] = VAFM_GJF_KICK(w[q], f, hfn, beta, a, hdm, drift, binvm);
             u[q] = un;
             sv[q] = sn;
             Fv[q] = Fn;

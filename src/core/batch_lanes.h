@@ -13,8 +13,9 @@
  *   BWIDE         1: the lanes' normals are drawn by the AVX-512 ziggurat (batch.c), 0: one by one
  *
  * The arithmetic is written with GCC's vector extensions: each operator is the lane-wise IEEE
- * operation, so each lane computes exactly what the scalar loop computes, in the same order (the
- * expressions below mirror integrator_gjf.c's loop and kernel.h's post-move, table or free, term by term).
+ * operation, so each lane computes exactly what the scalar loop computes, in the same order: the step's
+ * formulas (position and velocity update, table variable, Hermite cubic, contact and spring force) are
+ * core/gjf_step.h's macros, the same the scalar loop (integrator_gjf.c, kernel.h) expands.
  *
  * Two groups of BW lanes step side by side (S_GROUPS): a step is a chain of ≈ 40 dependent operations
  * (square root and table gather included), so one vector alone leaves the core waiting on latency;
@@ -85,19 +86,17 @@ static inline __attribute__((always_inline)) BATTR void BSTEP(BGRP *g, long j, B
     const BVL act = (BVL)(zero + (double)j < g->lenv) & ~g->evm;
     if (!BANY(act))
         return;
-    /* integrator_gjf.c: f, beta and the position update */
+    /* f, beta and the position update */
     const BVD f = g->hf + g->drift;
     const BVD beta = g->sig * nz;
-    const BVD un = g->u + g->b * (g->dt * g->w + g->hdmdt * f + g->hdm * beta);
+    const BVD un = VAFM_GJF_MOVE(g->u, g->w, f, beta, g->b, g->dt, g->hdmdt, g->hdm);
     /* kernel.h, s_khot_post_move_k (table, or free): time, support, contact state, force */
     const BVD ndn = g->nd + 1.0;
     const BVD tau = ndn * g->dt;
     const BVD usn = g->uspr0 + g->vspr * tau;
     const BVL det = g->icm & (BVL)(un < g->udet);       /* in contact: detaches */
     const BVL touch = ~g->icm & (BVL)(un >= g->utouch); /* free: touches */
-    const BVD du = un - g->udet;
-    const BVD xi = BSQRT(du);
-    const BVD x = xi * g->invh;
+    const BVD x = VAFM_JKR_TABLE_X(un, g->udet, g->invh, BSQRT);
     const BVL inside = (BVL)(x < g->xend);
     const BVL ok = act & g->icm & ~det & inside;
     const __typeof__(BTRUNC(x)) xi32 = BTRUNC(x); /* the table interval, as (int)x */
@@ -108,15 +107,15 @@ static inline __attribute__((always_inline)) BATTR void BSTEP(BGRP *g, long j, B
     const BVL addr = S_SEL(ok, g->node + ix * 16, dummy); /* lanes not on the table read a dummy */
     BVD p0, p1, p2, p3;
     BTABLE(addr, p0, p1, p2, p3);
-    const BVD t = gg * gg * (1.0 + 2.0 * fr) * p0 + fr * fr * (1.0 + 2.0 * gg) * p2 + fr * gg * (gg * p1 - fr * p3);
+    const BVD t = VAFM_JKR_HERMITE(fr, gg, p0, p1, p2, p3);
     BVD sn = g->sm + t;
-    const BVD s3 = sn * sn * sn;
-    BVD Fn = s3 * ((4.0 / 3.0) * s3 - g->c2);
+    const BVD s3 = VAFM_JKR_CUBE(sn);
+    BVD Fn = VAFM_JKR_FORCE(s3, g->c2);
     if (__builtin_expect(!BANY(~act | ~g->icm | det | ~inside), 1)) {
         /* the common step: every lane active, in contact and on the table (no selects needed) */
-        const BVD fs = g->kk * (usn - un);
+        const BVD fs = VAFM_SPRING_FORCE(g->kk, usn, un);
         const BVD hfn = fs - Fn;
-        g->w = g->a * g->w + g->hdm * (g->a * f + hfn + g->drift) + g->binvm * beta;
+        g->w = VAFM_GJF_KICK(g->w, f, hfn, beta, g->a, g->hdm, g->drift, g->binvm);
         g->u = un;
         g->s = sn;
         g->Fc = Fn;
@@ -151,10 +150,9 @@ static inline __attribute__((always_inline)) BATTR void BSTEP(BGRP *g, long j, B
         memcpy(&Fn, a_F, sizeof Fn);
         memcpy(&sn, a_sn, sizeof sn);
     }
-    const BVD fs = g->kk * (usn - un);
+    const BVD fs = VAFM_SPRING_FORCE(g->kk, usn, un);
     const BVD hfn = fs - Fn;
-    /* integrator_gjf.c: the velocity update */
-    const BVD wn = g->a * g->w + g->hdm * (g->a * f + hfn + g->drift) + g->binvm * beta;
+    const BVD wn = VAFM_GJF_KICK(g->w, f, hfn, beta, g->a, g->hdm, g->drift, g->binvm);
     /* commit the active lanes */
     g->u = S_SEL(act, un, g->u);
     g->w = S_SEL(act, wn, g->w);

@@ -41,9 +41,9 @@ static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
     while (i < n) {
         const double f = h.f + drift;
         const double beta = thermal ? c.gjf_sig * s_kernel_noise(K) : 0.0;
-        h.u += c.gjf_b * (dt * h.w + half_dt_m * dt * f + half_dt_m * beta);
+        h.u = VAFM_GJF_MOVE(h.u, h.w, f, beta, c.gjf_b, dt, half_dt_m * dt, half_dt_m); /* core/gjf_step.h */
         s_khot_post_move_k(K, &v, &h, kind);
-        h.w = c.gjf_a * h.w + half_dt_m * (c.gjf_a * f + h.f + drift) + c.gjf_b * inv_m * beta;
+        h.w = VAFM_GJF_KICK(h.w, f, h.f, beta, c.gjf_a, half_dt_m, drift, c.gjf_b * inv_m);
         i++;
         if (h.event)
             break;

@@ -10,6 +10,7 @@
 #include <math.h>
 
 #include "vafm/contact.h"
+#include "core/gjf_step.h"
 
 #define VAFM_JKR_PI 3.14159265358979323846
 
@@ -37,8 +38,8 @@ static inline double vafm_jkr_P(double s_m, double t)
 
 static inline double vafm_jkr_F_t(double s_m, double c, double t)
 {
-    double s = s_m + t, s3 = s * s * s;
-    return s3 * ((4.0 / 3.0) * s3 - 2.0 * c);
+    double s = s_m + t, s3 = VAFM_JKR_CUBE(s);
+    return VAFM_JKR_FORCE(s3, 2.0 * c);
 }
 
 static inline double vafm_jkr_D(double s_m, double t)
@@ -135,7 +136,7 @@ static inline double vafm_jkr_force_inline(const vafm_contact *ct, double u, dou
     }
     if (s_io)
         *s_io = s;
-    return s3 * ((4.0 / 3.0) * s3 - 2.0 * c);
+    return VAFM_JKR_FORCE(s3, 2.0 * c); /* core/gjf_step.h, as the table */
 }
 
 /* Where the stable branch carries force F ≥ 0 (JKR, and Hertz as c = 0): F = (4/3)x² − 2c·x with

@@ -17,6 +17,7 @@
 #include <math.h>
 
 #include "vafm/contact.h"
+#include "core/gjf_step.h"
 #include "core/jkr_inline.h"
 
 typedef struct vafm_jkr_table {
@@ -36,19 +37,16 @@ void vafm_jkr_table_free(vafm_jkr_table *T);
 /** Contact force on the branch (u ≥ u_min) with √a in *s_io (used as warm start by the fallback). */
 static inline double vafm_jkr_table_force(const vafm_jkr_table *T, const vafm_contact *c, double u, double *s_io)
 {
-    const double du = u - c->u_detach;
-    const double xi = sqrt(du);
-    const double x = xi * T->inv_h;
+    const double x = VAFM_JKR_TABLE_X(u, c->u_detach, T->inv_h, sqrt);
     if (!(x < (double)(T->n - 1))) /* beyond the table, or NaN */
         return vafm_jkr_force_inline(c, u, s_io, NULL);
     const int i = (int)x;
     const double f = x - (double)i, g = 1.0 - f;
     const double *p = T->node + 2 * i;
-    /* cubic Hermite: t = g²(1+2f)·t0 + f²(1+2g)·t1 + f·g·(g·m0 − f·m1), m = h·dt/dξ */
-    const double t = g * g * (1.0 + 2.0 * f) * p[0] + f * f * (1.0 + 2.0 * g) * p[2] + f * g * (g * p[1] - f * p[3]);
-    const double s = c->s_m + t, s3 = s * s * s;
+    const double t = VAFM_JKR_HERMITE(f, g, p[0], p[1], p[2], p[3]); /* core/gjf_step.h, as every kernel */
+    const double s = c->s_m + t, s3 = VAFM_JKR_CUBE(s);
     *s_io = s;
-    return s3 * ((4.0 / 3.0) * s3 - 2.0 * c->c);
+    return VAFM_JKR_FORCE(s3, 2.0 * c->c);
 }
 
 #endif

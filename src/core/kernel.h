@@ -25,6 +25,7 @@
 #include "vafm/contact.h"
 #include "vafm/integrator.h"
 #include "vafm/params.h"
+#include "core/gjf_step.h"
 #include "core/jkr_inline.h"
 #include "core/jkr_table.h"
 #include "core/rng_philox.h"
@@ -165,7 +166,7 @@ static inline void s_khot_post_move(const vafm_kernel *K, const vafm_jkr_table *
         else
             h->Fc = K->cforce(&K->contact, h->u, &h->s, NULL);
     }
-    const double fs = K->k * (h->u_spr - h->u);
+    const double fs = VAFM_SPRING_FORCE(K->k, h->u_spr, h->u);
     h->f = fs - h->Fc;
     h->acc_u += h->u;
     h->acc_uspr += h->u_spr;
@@ -284,9 +285,7 @@ vafm_kfs vafm_kernel_table_far(const vafm_kernel *K, double u, double s);
 static VAFM_KALWAYS double s_kinv_table_force(const vafm_kernel *K, const vafm_kinv *v, double u, double *s_io,
                                               const int sse41)
 {
-    const double du = u - v->u_detach;
-    const double xi = sqrt(du);
-    const double x = xi * v->inv_h;
+    const double x = VAFM_JKR_TABLE_X(u, v->u_detach, v->inv_h, sqrt);
     if (!(x < v->x_end)) {
         const vafm_kfs r = vafm_kernel_table_far(K, u, *s_io);
         *s_io = r.s;
@@ -295,10 +294,10 @@ static VAFM_KALWAYS double s_kinv_table_force(const vafm_kernel *K, const vafm_k
     const int i = (int)x;
     const double f = (sse41 ? x - __builtin_trunc(x) : x - (double)i), g = 1.0 - f;
     const double *p = v->node + 2 * i;
-    const double t = g * g * (1.0 + 2.0 * f) * p[0] + f * f * (1.0 + 2.0 * g) * p[2] + f * g * (g * p[1] - f * p[3]);
-    const double s = v->s_m + t, s3 = s * s * s;
+    const double t = VAFM_JKR_HERMITE(f, g, p[0], p[1], p[2], p[3]);
+    const double s = v->s_m + t, s3 = VAFM_JKR_CUBE(s);
     *s_io = s;
-    return s3 * ((4.0 / 3.0) * s3 - v->c2);
+    return VAFM_JKR_FORCE(s3, v->c2);
 }
 
 /** s_khot_post_move() for a loop of the given kind (a compile-time constant). */
@@ -328,7 +327,7 @@ static VAFM_KALWAYS void s_khot_post_move_k(const vafm_kernel *K, const vafm_kin
     } else {
         h->Fc = 0.0;
     }
-    const double fs = v->k * (h->u_spr - h->u);
+    const double fs = VAFM_SPRING_FORCE(v->k, h->u_spr, h->u);
     h->f = fs - h->Fc;
     h->acc_u += h->u;
     h->acc_uspr += h->u_spr;
