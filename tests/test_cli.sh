@@ -254,6 +254,24 @@ done
 if [ "$kern_ok" -eq 1 ] && [ "$(wc -l <"$TMP/k_scalar.csv")" -eq 21 ]; then ok "curves --kernel scalar|batch|batch4|batch8|auto: the same CSV"
 else bad "curves --kernel: the same CSV" "$(head -c 300 "$TMP/err")"; fi
 expect_fail "curves --kernel fast" 2 -- --kernel fast -- curves -n 1 --preset paper-fig4 --kernel fast
+# The kernel names are the backend table's (src/core/backend.h; the error lists them): each one is accepted
+# and named in the help of every command that takes --kernel (printed from the table).
+run curves -n 1 --preset paper-fig4 --kernel fast
+knames=$(sed -n 's/.*is not a kernel (\(.*\)).*/\1/p' "$TMP/err" | tr -d ',')
+kn_ok=1
+for k in auto scalar batch; do case " $knames " in *" $k "*) ;; *) kn_ok=0 ;; esac; done
+for k in $knames; do
+    run curves -n 1 --preset paper-fig4 --kernel "$k" --csv "$TMP/kn.csv" --quiet
+    [ "$rc" -eq 0 ] || { kn_ok=0; echo "  --kernel $k refused"; }
+done
+for c in curves campaign map; do
+    run help $c
+    for k in $knames; do grep -Eq -- "[ (,]$k[ ,):]" "$TMP/out" || { kn_ok=0; echo "  help $c does not name $k"; }; done
+done
+"$VAFM" study --help >"$TMP/out" 2>&1
+for k in $knames; do grep -Eq -- "[ (,]$k[ ,):]" "$TMP/out" || { kn_ok=0; echo "  study --help does not name $k"; }; done
+if [ "$kn_ok" -eq 1 ]; then ok "--kernel names ($knames): accepted, in the help of curves, campaign, map, study"
+else bad "--kernel names in the help" "$knames"; fi
 
 # Grid: T slowest; the point column and the T column follow the list.
 run curves -n 2 --preset paper-fig4 --T 0,1e6 --csv "$TMP/grid.csv" --quiet

@@ -175,9 +175,12 @@ static void s_help(FILE *o)
           "  --out DIR     output directory (default study-NAME; created), at most " VAFM_CLI_XSTR(VAFM_STUDY_OUT_MAX) " bytes\n"
           "  -n N          curves per point of the thermal campaigns, 2 to " VAFM_CLI_XSTR(VAFM_STUDY_N_MAX) " (distribution: 2000,\n"
           "                quick 12; velocity-thermal: 200, quick 8); the T = 0 campaigns always run one\n"
-          "  --threads T   worker threads (default 0: all cores); results do not depend on it\n"
-          "  --kernel NAME auto (default), scalar, batch, batch4, batch8: as for vafm campaign (same results)\n"
-          "  --resume      keep the complete curves of existing files and run the rest (same results)\n"
+          "  --threads T   worker threads (default 0: all cores); results do not depend on it\n",
+          o);
+    char names[128];
+    vafm_campaign_kernel_names(names, sizeof names, ", ");
+    fprintf(o, "  --kernel NAME %s (auto: the default): as for vafm campaign (same results)\n", names);
+    fputs("  --resume      keep the complete curves of existing files and run the rest (same results)\n"
           "                without it, the study's files in DIR are replaced\n"
           "  -q, --quiet   no progress lines\n"
           "  Exit status: 0 ok, 1 runtime error, 2 usage error, 4 a fit did not converge (report written).\n",

@@ -329,6 +329,13 @@ static void s_print_usage(FILE *o)
 static void s_print_command_help(FILE *o, const vafm_cli_command *c)
 {
     fprintf(o, "vafm %s: %s\n\n%s", c->name, c->summary, c->usage ? c->usage : "");
+    if (c->opts & M(O_KERNEL)) { /* the names of the batch kernel's backend table */
+        char names[128];
+        vafm_campaign_spec sp;
+        memset(&sp, 0, sizeof sp);
+        vafm_campaign_kernel_names(names, sizeof names, ", ");
+        fprintf(o, "\nKERNELS (--kernel)\n  %s (auto on this CPU: %s)\n", names, vafm_campaign_kernel_describe(&sp));
+    }
     if (c->scene) {
         fputs(s_scene_help, o);
         fputs(s_exit_help, o);
@@ -377,8 +384,8 @@ static const vafm_cli_command s_commands[] = {
       "  -n N                 curves per grid point (required)\n"
       "  --threads T          worker threads (default 0: all cores); results do not depend on it\n"
       "  --kernel NAME        how curves are stepped: auto (default: batch where the CPU has AVX2 or AVX-512),\n"
-      "                       scalar (one curve at a time per thread), batch, batch4, batch8 (curves in SIMD\n"
-      "                       lanes); the results are the same bit for bit\n"
+      "                       scalar (one curve at a time per thread), batch or batchN (curves in SIMD lanes,\n"
+      "                       up to N; the names under KERNELS); the results are the same bit for bit\n"
       "  --first I            skip global curve indices below I (resume)\n"
       "  --csv FILE|-         one row per curve (SI); '-' writes to stdout and the summary to stderr\n"
       "  --T LIST             temperatures, K, comma-separated (grid: T slowest, then v, then k)\n"
@@ -415,8 +422,8 @@ static const vafm_cli_command s_commands[] = {
       "  --T, --v, --k LIST   grid lists as for vafm curves (K, m/s, N/m; T slowest, then v, then k)\n"
       "  --threads T          worker threads (default 0: all cores); the file does not depend on it\n"
       "  --kernel NAME        how curves are stepped: auto (default: batch where the CPU has AVX2 or AVX-512),\n"
-      "                       scalar (one curve at a time per thread), batch, batch4, batch8 (curves in SIMD\n"
-      "                       lanes); the results are the same bit for bit\n"
+      "                       scalar (one curve at a time per thread), batch or batchN (curves in SIMD lanes,\n"
+      "                       up to N; the names under KERNELS); the results are the same bit for bit\n"
       "  --resume             continue FILE (same scene and grid, else refused naming the field): keep its\n"
       "                       complete curves and run the rest; the result equals an uninterrupted run\n"
       "  --overwrite          replace an existing FILE (without --resume or --overwrite it is refused)\n"
