@@ -692,6 +692,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     }
     if (kind == VAFMD_CMD_REPLAY && s_decode_replay(root, c, e))
         return -1;
+    if ((kind == VAFMD_CMD_ENGAGE || kind == VAFMD_CMD_WITHDRAW || kind == VAFMD_CMD_MOVE || kind == VAFMD_CMD_Z ||
+         kind == VAFMD_CMD_FEEDBACK) && vafmd_live_decode(root, c, e))
+        return -1;
     if (kind == VAFMD_CMD_FAULTS) { /* the plan itself is checked by vafmd_faults_decode (faults.c) */
         if ((v = json_object_get(root, "clear")) != NULL) {
             if (!json_is_boolean(v)) {

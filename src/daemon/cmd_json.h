@@ -82,6 +82,7 @@ typedef struct vafmd_cmd {
     double map_lateral_speed; /* map: lateral_speed_m_per_s */
     json_t *fault_plan;    /* faults: borrowed plan object (set/replace), or NULL */
     int fault_clear;       /* faults: 1 = "clear": true */
+    vafmd_live_op ctrl;    /* engage, withdraw, move, z, feedback (live_json.c) */
 } vafmd_cmd;
 
 #define VAFMD_CAMPAIGN_LIST_MAX 1000      /* values per campaign list */

@@ -72,8 +72,9 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     /* every command of commands.def, in 0.5's order (log before shutdown; tests/test_commands.py checks the
      * list against the table): a new command goes at the end of both */
     json_object_set_new(r, "capabilities",
-                        json_pack("[ssssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
-                                  "status", "log", "shutdown", "campaign", "replay", "faults", "map"));
+                        json_pack("[sssssssssssssssssss]", "hello", "get", "set", "presets", "curve", "tune", "abort",
+                                  "status", "log", "shutdown", "campaign", "replay", "faults", "map", "engage",
+                                  "withdraw", "move", "z", "feedback"));
     json_object_set_new(r, "not_implemented", json_array());
     json_object_set_new(r, "security", json_string(d->auth.on ? "curve" : "none"));
     json_t *stream = json_string(d->pub_endpoint); /* NULL for an endpoint that is not UTF-8 */
@@ -81,6 +82,7 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "channels", vafmd_channels_json());
     json_object_set_new(r, "max_request_bytes", json_integer(VAFMD_MAX_CMD_BYTES));
     json_object_set_new(r, "session", json_integer(atomic_load(&d->sh.session)));
+    json_object_set_new(r, "live", vafmd_live_hello_json()); /* the controller's topic (live.c) */
     return r;
 }
 
@@ -379,6 +381,7 @@ static json_t *s_status(vafmd *d, const vafmd_cmd *c)
                                              (json_int_t)d->auth.n_clients, "accepted",
                                              (json_int_t)atomic_load(&d->auth.accepted), "refused",
                                              (json_int_t)atomic_load(&d->auth.refused)));
+    json_object_set_new(r, "ctrl", vafmd_live_status_json(d)); /* the always-on controller (live.c) */
     return r;
 }
 
@@ -731,7 +734,7 @@ static json_t *s_cmd_hello(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e
 static json_t *s_cmd_get(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
     (void)quit;
-    json_t *v = vafmd_get_values(&d->scene, &d->set, c, e);
+    json_t *v = vafmd_live_get(d, c, e); /* vafmd_get_values and the controller's settings (live.c) */
     if (!v)
         return NULL;
     json_t *r = s_ok(c);
@@ -743,7 +746,7 @@ static json_t *s_cmd_get(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 static json_t *s_cmd_set(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
     (void)quit;
-    if (vafmd_apply_set(&d->scene, &d->set, c, e))
+    if (vafmd_live_set(d, c, e)) /* vafmd_apply_set and the controller's settings (live.c) */
         return NULL;
     json_t *r = s_ok(c);
     json_object_set_new(r, "applies_to", json_string(s_busy(d) ? "next_run" : "now"));
@@ -814,6 +817,13 @@ static json_t *s_cmd_faults(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *
 {
     (void)quit;
     return s_faults_cmd(d, c, e);
+}
+
+/* engage, withdraw, move, z, feedback: the always-on controller (live.c) */
+static json_t *s_cmd_ctrl(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
+{
+    (void)quit;
+    return vafmd_live_cmd(d, c, s_ok(c), e);
 }
 
 typedef json_t *s_handler(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e);

@@ -19,6 +19,7 @@
 #include "vafm/sim.h"
 #include "daemon/spsc_ring.h"
 #include "daemon/faults.h"
+#include "daemon/live.h"
 
 #ifndef VAFM_PROJECT_VERSION
 #define VAFM_PROJECT_VERSION "unknown"
@@ -53,6 +54,7 @@ enum vafmd_sim_cmd_type {
     VAFMD_SIM_START = 1, VAFMD_SIM_ABORT = 2, VAFMD_SIM_QUIT = 3,
     VAFMD_SIM_FAULTS = 4,     /* a new fault plan (plan; NULL: none); the old one goes back on the retire ring */
     VAFMD_SIM_FAULT_NOTE = 5, /* a command fault the control thread injected: record and publish it */
+    VAFMD_SIM_CTRL = 6,       /* a controller command or a new controller (live: live.h) */
 };
 
 /* A campaign (protocol/wire.md, `campaign`): the grid of `vafm campaign`, run curve after curve by the
@@ -97,6 +99,7 @@ typedef struct vafmd_sim_cmd {
     vafmd_fault_plan *plan; /* FAULTS: ownership passes (NULL: clear) */
     vafmd_fault_rec fault;  /* FAULT_NOTE */
     struct vafmd_feed_curve *feed; /* START of a fed campaign curve: its samples (ownership passes; sim: metadata) */
+    vafmd_live_op live;     /* CTRL (live.h) */
 } vafmd_sim_cmd;
 
 /* ---- HDF5 logging (log.c) ------------------------------------------------------------------------
@@ -290,6 +293,7 @@ typedef struct vafmd {
     uint64_t faults_total;            /* control thread: faults recorded */
     vafmd_fault_rec fault_last[VAFMD_FAULT_LAST];
     int exit_status;                  /* control loop: the process exit status (a kill fault's) */
+    struct vafmd_live *live;          /* the always-on controller (live.c; owned by main) */
 } vafmd;
 
 /* sim_thread.c */

@@ -450,6 +450,10 @@ int main(int argc, char **argv)
     /* a file-size limit is a log write error (EFBIG, status.log.error), not a kill (SIGXFSZ) */
     signal(SIGXFSZ, SIG_IGN);
     pthread_t th, lth, ath;
+    if (vafmd_live_init(&d)) { /* the always-on controller (live.c), owned by the simulation thread from here */
+        fprintf(stderr, "vafmd: out of memory\n");
+        return 1;
+    }
     int trc = pthread_create(&th, NULL, vafmd_sim_main, &d);
     int ltrc = trc ? -1 : pthread_create(&lth, NULL, vafmd_log_main, &d);
     int atrc = ltrc || !d.auth.on ? 0 : pthread_create(&ath, NULL, vafmd_auth_main, &d);
@@ -486,6 +490,7 @@ int main(int argc, char **argv)
     while (!vafmd_ring_push(&d.ring, &q))
         nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
     pthread_join(th, NULL);
+    vafmd_live_free(&d);
     /* The simulation thread has pushed the end of the last run: the writer appends what is complete,
      * flushes, closes the file and exits. */
     int lon = VAFMD_LOG_ON;

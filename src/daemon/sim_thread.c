@@ -1088,7 +1088,8 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->run_id, c->run_id, memory_order_relaxed);
     atomic_store_explicit(&sh->run_samples, 0, memory_order_relaxed);
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
-    s_send_text(x, "run.start", c->start_json);
+    vafmd_live_run_start(x->d, &r->cmd.start_json); /* + "ctrl": the controller's state, held during the run */
+    s_send_text(x, "run.start", r->cmd.start_json);
     unsigned chmask = c->replay ? vafmd_replay_channels(c->replay)
                                 : VAFMD_CH_LIVE_MASK | (vafm_detector_height_differs(p) ? 1u << VAFMD_CH_HEIGHT_MEASURED : 0u);
     r->src_rc = 1;
@@ -1508,9 +1509,13 @@ static void s_subscriptions(s_ctx *x)
     char buf[256];
     int rc;
     int again = 0;
-    while ((rc = zmq_recv(x->d->pub, buf, sizeof buf, ZMQ_DONTWAIT)) >= 0)
+    while ((rc = zmq_recv(x->d->pub, buf, sizeof buf, ZMQ_DONTWAIT)) >= 0) {
         if (rc >= 1 && buf[0] == 1)
             again = 1;
+        if (rc >= 1 && buf[0] <= 1) /* the live topic goes out only to explicit subscribers (live.c) */
+            vafmd_live_subscription(x->d, buf + 1, (size_t)rc - 1 < sizeof buf - 1 ? (size_t)rc - 1 : sizeof buf - 1,
+                                    buf[0]);
+    }
     if (again) {
         s_heartbeat(x, s_now());
         if (x->run.active)
@@ -1567,6 +1572,10 @@ void *vafmd_sim_main(void *arg)
                 x->fp = c.plan;
                 continue;
             }
+            if (c.type == VAFMD_SIM_CTRL) { /* the always-on controller (live.c) */
+                vafmd_live_apply(x->d, &c.live);
+                continue;
+            }
             if (c.type == VAFMD_SIM_FAULT_NOTE) { /* a command fault: time it from the daemon's start */
                 c.fault.time_s -= (double)x->t_boot / 1e9;
                 s_fault_record(x, &c.fault);
@@ -1617,9 +1626,10 @@ void *vafmd_sim_main(void *arg)
             s_camp_next(x);
         if (x->run.active)
             s_run_step(x);
-        else
-            s_sleep_until(now + 1000000); /* idle: look at the ring every millisecond */
+        else /* idle: the live controller (live.c), then look at the ring every millisecond */
+            s_sleep_until(vafmd_live_idle(x->d, now, x->dead));
     }
+    vafmd_live_sim_exit(x->d);
     /* the pools: free those whose blocks are all home, leave the others to the writer thread */
     s_pool_reclaim(L);
     s_pool_retire(x);

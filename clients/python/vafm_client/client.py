@@ -208,6 +208,43 @@ class Client:
             req["plan"] = dict(plan or {}, **kw)
         return self.request(req)
 
+    # ---- the always-on controller (protocol/wire.md: engage, withdraw, move, z, feedback; topic "live") ----
+    @staticmethod
+    def _at(req, at_s):
+        if at_s is not None:
+            req["at_s"] = at_s
+        return req
+
+    def engage(self, at_s=None):
+        """Start the auto-approach; the event `engaged` (or `engage_failed`, `crash`) on the stream ends it.
+        at_s: apply at that controller time (s) instead of now. Returns the reply (its "ctrl" is the status)."""
+        return self.request(self._at({"cmd": "engage"}, at_s))
+
+    def withdraw(self, motor_steps=0, at_s=None):
+        """Feedback off, piezo retracted, then the motor up motor_steps steps (event `withdrawn`)."""
+        return self.request(self._at({"cmd": "withdraw", "motor_steps": motor_steps}, at_s))
+
+    def move(self, x_m, y_m, speed_m_per_s=None, at_s=None):
+        """Move the tip to (x_m, y_m) (event `moved`); speed None: the controller's ctrl_xy_speed_m_per_s."""
+        req = {"cmd": "move", "x_m": x_m, "y_m": y_m}
+        if speed_m_per_s is not None:
+            req["speed_m_per_s"] = speed_m_per_s
+        return self.request(self._at(req, at_s))
+
+    def z(self, z_m, at_s=None):
+        """Feedback off, the piezo to extension z_m (event `z_reached`)."""
+        return self.request(self._at({"cmd": "z", "z_m": z_m}, at_s))
+
+    def feedback(self, on=None, setpoint=None, unit=None, relative=None, p_m_per_N=None, i_m_per_N_s=None,
+                 tau_s=None, at_s=None):
+        """Feedback on/off and/or its setpoint (unit "N" or "V", relative True/False) and gains."""
+        req = {"cmd": "feedback"}
+        for k, v in (("on", on), ("setpoint", setpoint), ("unit", unit), ("relative", relative),
+                     ("p_m_per_N", p_m_per_N), ("i_m_per_N_s", i_m_per_N_s), ("tau_s", tau_s)):
+            if v is not None:
+                req[k] = v
+        return self.request(self._at(req, at_s))
+
     def wait_idle(self, timeout=30.0, poll=0.005):
         """Wait until the daemon is idle and return its status. Needed between runs: run.end is published
         before the daemon's state returns to idle, so a start right after it may get a `state` error."""
@@ -304,10 +341,12 @@ class Stream:
     heartbeat, so a run started afterwards is seen from its first message. Counts lost data blocks (gaps in
     seq) in `gaps`."""
 
-    def __init__(self, endpoint=DEFAULT_PUB, timeout=20.0, rcvhwm=None, context=None, curve=None, stall_s=1.5):
+    def __init__(self, endpoint=DEFAULT_PUB, timeout=20.0, rcvhwm=None, context=None, curve=None, stall_s=1.5,
+                 live=False):
         """stall_s: a wait of this long with no message at all (heartbeats come at 1 Hz) is reported as a
-        stall of the publisher (`reports`), once it ends; `timeout` still bounds any wait."""
-        self.endpoint, self.timeout, self.stall_s = endpoint, timeout, stall_s
+        stall of the publisher (`reports`), once it ends; `timeout` still bounds any wait. live: messages()
+        also yields the controller's "live" topic as ("live", (header dict, {channel name: numpy array}))."""
+        self.endpoint, self.timeout, self.stall_s, self.live = endpoint, timeout, stall_s, live
         self.session = None  # the publisher's session (heartbeats, data headers): a change is a restart
         self.reports = []    # detected faults: dicts with "kind" gap|truncated|restart|stall|dropout|saturate
         self._own_ctx = context is None
@@ -402,6 +441,9 @@ class Stream:
                             self.reports.append(rep)
                             yield "stall", rep
                 yield topic, p
+            elif topic == "live" and self.live:  # the always-on controller's monitor (wire.md §3.7)
+                h = json.loads(parts[1])
+                yield topic, (h, {n: np.frombuffer(p, "<f8") for n, p in zip(h["channels"], parts[2:])})
             # other topics: ignored (wire.md §6)
 
     def runs(self, timeout=None, include_partial=False, deadline=None):

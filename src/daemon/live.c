@@ -1,0 +1,979 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The always-on controller in vafmd: its live stream, its commands, its settings and its status (design:
+ * live.h; the wire: protocol/wire.md "live"; the behaviour: docs/instrument.md "The daemon").
+ *
+ * Pacing: while no run is in progress the simulation thread calls vafmd_live_idle about every millisecond; it
+ * advances the controller to anchor_sample + (now − anchor)·fs·speed. The anchor is taken again after any gap
+ * of more than S_GAP_NS (a run, a stall) — the controller's state is held, not caught up — and whenever the
+ * controller cannot keep up within S_BUDGET_NS of work per call (the live scene then runs slower than asked,
+ * never bursts). Free run changes nothing here: the live scene has no end to run to, so it is paced at `speed`
+ * × real time; a scripted session gives its commands a controller time (`at_s`) instead, which makes it
+ * reproducible whatever the machine's speed.
+ *
+ * Decimation: monitor point j is the MEAN of the controller samples [j·m, (j+1)·m) (m = round(fs / rate)),
+ * aligned on the controller's own sample index; `state` is the state after the point's last sample. A message
+ * holds the points of about 0.1 s of controller time (at least 1, at most S_MAX_PTS).
+ */
+#include <inttypes.h>
+#include <math.h>
+#include <pthread.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <zmq.h>
+#include "daemon/cmd_json.h"
+#include "daemon/daemon.h"
+#include "daemon/live.h"
+#include "vafm/wire.h"
+
+#define S_NS 1000000000LL
+#define S_GAP_NS 50000000LL   /* a longer gap between two idle calls re-anchors the pacing */
+#define S_BUDGET_NS 2000000LL /* work per idle call at most (then the live scene falls behind, re-anchored) */
+#define S_MAX_PTS 1024
+#define S_PEND 32             /* commands held for their at_s */
+#define S_ACK_WAIT_NS 1000000000LL
+
+/* The live channels, declared once: name, unit, the vafm_ctrl_samples array (state: uint8_t, the last). */
+typedef struct s_live_channel {
+    const char *name, *unit;
+    size_t off;
+} s_live_channel;
+#define S_CH(n, u, f) { n, u, offsetof(vafm_ctrl_samples, f) }
+static const s_live_channel s_live_channels[] = {
+    S_CH("time_s", "s", time_s),
+    S_CH("motor_z_m", "m", motor_z_m),
+    S_CH("piezo_z_m", "m", piezo_z_m),
+    S_CH("x_m", "m", x_m),
+    S_CH("y_m", "m", y_m),
+    S_CH("deflection_m", "m", deflection_m),
+    S_CH("force_N", "N", force_N),
+    S_CH("signal_V", "V", signal_V),
+    S_CH("error_N", "N", error_N),
+    S_CH("state", "", state), /* enum vafm_ctrl_state after the point's last sample */
+    S_CH("surface_m", "m", surface_m), /* ground truth */
+    S_CH("gap_m", "m", gap_m),
+};
+#undef S_CH
+#define S_NCH (sizeof s_live_channels / sizeof s_live_channels[0])
+#define S_STATE_CH 9
+
+/* The controller's settings that get/set reach as ctrl_<field>. */
+typedef struct s_cset {
+    const char *name; /* the field; the setting is "ctrl_" name */
+    size_t off;       /* double fields; (size_t)-1: setpoint_unit, -2: setpoint_relative */
+    const char *unit, *doc;
+} s_cset;
+#define S_D(f, u, doc) { #f, offsetof(vafm_ctrl_params, f), u, doc }
+static const s_cset s_csets[] = {
+    S_D(motor_z0_m, "m", "start height of the coarse motor above the substrate, [-1e-2, 1e-1] m"),
+    S_D(motor_min_m, "m", "lowest motor height, [-1e-2, 1e-1] m: an engage that would step below it fails"),
+    S_D(motor_max_m, "m", "highest motor height, (motor_min_m, 1e-1] m"),
+    S_D(motor_step_m, "m", "motor step of an engage, (0, 1e-3] m"),
+    S_D(motor_speed_m_per_s, "m/s", "motor speed during a step, (0, 1e-2] m/s"),
+    S_D(piezo_range_m, "m", "piezo Z range, (0, 1e-3] m"),
+    S_D(xy_range_m, "m", "XY scanner range (full side, centred on 0), (0, 1e-2] m"),
+    S_D(xy_speed_m_per_s, "m/s", "default lateral speed of a move, (0, 1e-2] m/s"),
+    S_D(z_speed_m_per_s, "m/s", "piezo speed of retracts, withdraws and z moves, (0, 1e-2] m/s"),
+    S_D(engage_speed_m_per_s, "m/s", "piezo extension speed of the engage's search, (0, 1e-2] m/s"),
+    S_D(engage_timeout_s, "s", "an engage gives up after this, (0, 1e5] s"),
+    S_D(force_limit_N, "N", "a force beyond this is a crash, (0, 1e-3] N (above the setpoint)"),
+    S_D(setpoint, "N or V", "feedback setpoint in ctrl_setpoint_unit, [-100, 100]"),
+    { "setpoint_unit", (size_t)-1, "", "\"N\" (force) or \"V\" (deflection signal)" },
+    { "setpoint_relative", (size_t)-2, "", "true: relative to the free baseline an engage measures" },
+    S_D(fb_p_m_per_N, "m/N", "proportional gain, [0, 1e3] m/N"),
+    S_D(fb_i_m_per_N_s, "m/(N s)", "integral gain, [0, 1e12] m/(N s) (0: from ctrl_fb_tau_s)"),
+    S_D(fb_tau_s, "s", "integral time constant (gain 1/(k tau)) when the integral gain is 0, [0, 1e3] s "
+                       "(0: 10 sample intervals)"),
+    S_D(sum_V, "V", "photodiode sum signal, [0, 100] V (reported)"),
+};
+#undef S_D
+#define S_NCSET (sizeof s_csets / sizeof s_csets[0])
+#define S_MONITOR_MAX 1e5
+
+typedef struct s_snap {
+    int have;              /* a controller exists */
+    char why[256];         /* else why not */
+    vafm_ctrl_status st;
+    vafm_ctrl_params cp;
+    double fs, monitor_rate_Hz;
+    uint64_t generation, seq, dropped, decimation;
+    int held;              /* commands waiting for their at_s */
+} s_snap;
+
+struct vafmd_live {
+    /* ---- simulation thread ---- */
+    vafm_ctrl *ctrl;
+    uint64_t generation;   /* controllers made so far (the first is 1) */
+    char why[256];
+    double fs, speed, rate;
+    int64_t anchor_ns, last_ns;
+    uint64_t anchor_sample, cur;
+    int anchored, dead;
+    uint64_t decim;
+    double acc[S_NCH];
+    uint64_t acc_n;
+    double out[S_NCH][S_MAX_PTS];
+    size_t out_n, out_target;
+    uint64_t out_first;    /* controller sample of the first point's first sample */
+    uint64_t seq, dropped;
+    unsigned subs;         /* bit n-1: a subscription to the first n bytes of "live" is in place */
+    vafmd_live_op pend[S_PEND];
+    size_t n_pend;
+    vafmd *d;
+    /* ---- simulation → control: the answer to the last request (written before ack is released) ---- */
+    atomic_uint_least64_t ack;
+    vafmd_err ack_err;
+    int ack_rc;
+    /* ---- the status snapshot: the simulation thread only TRY-locks ---- */
+    pthread_mutex_t mu;
+    s_snap snap;
+    /* ---- control thread ---- */
+    uint64_t next_req;
+    vafm_ctrl_params cp;   /* the settings the next controller is built with */
+    double rate_ctl;
+    uint64_t scene_hash;   /* FNV-1a of the scene's JSON the controller was built over */
+};
+
+/* ================================== both sides ================================== */
+
+static uint64_t s_fnv(const char *s)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (; *s; s++)
+        h = (h ^ (unsigned char)*s) * 1099511628211ull;
+    return h;
+}
+
+static uint64_t s_scene_hash(const vafm_params *p)
+{
+    char *buf = malloc(65536);
+    uint64_t h = 0;
+    if (buf && vafm_params_to_json(p, buf, 65536) > 0)
+        h = s_fnv(buf);
+    free(buf);
+    return h;
+}
+
+/* Build a controller over the scene (control thread, or main before the threads). */
+static vafm_ctrl *s_build(const vafm_params *scene, const vafm_ctrl_params *cp, char *why, size_t whylen)
+{
+    vafm_ctrl *c = NULL;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int rc = vafm_ctrl_new(&c, scene, cp, NULL, &err);
+    if (rc) {
+        snprintf(why, whylen, "the scene cannot host the controller: %.40s%s%.100s", err.field[0] ? err.field : "",
+                 err.field[0] ? ": " : "", err.message[0] ? err.message : vafm_strerror(rc));
+        return NULL;
+    }
+    why[0] = 0;
+    return c;
+}
+
+int vafmd_live_init(vafmd *d)
+{
+    vafmd_live *L = calloc(1, sizeof *L);
+    if (!L)
+        return -1;
+    L->d = d;
+    pthread_mutex_init(&L->mu, NULL);
+    vafm_ctrl_params_default(&L->cp);
+    L->rate_ctl = L->rate = 100.0;
+    L->speed = d->set.speed;
+    L->scene_hash = s_scene_hash(&d->scene);
+    L->ctrl = s_build(&d->scene, &L->cp, L->why, sizeof L->why);
+    L->generation = 1;
+    atomic_init(&L->ack, 0);
+    d->live = L;
+    return 0;
+}
+
+void vafmd_live_free(vafmd *d)
+{
+    vafmd_live *L = d->live;
+    if (!L)
+        return;
+    vafm_ctrl_destroy(&L->ctrl);
+    pthread_mutex_destroy(&L->mu);
+    free(L);
+    d->live = NULL;
+}
+
+/* ================================== simulation thread ================================== */
+
+static void s_send(vafmd_live *L, const void *const *part, const size_t *len, int n)
+{
+    if (L->dead)
+        return;
+    for (int i = 0; i < n; i++) {
+        int rc;
+        while ((rc = zmq_send(L->d->pub, part[i], len[i], ZMQ_DONTWAIT | (i + 1 < n ? ZMQ_SNDMORE : 0))) < 0 &&
+               errno == EINTR)
+            ;
+        if (rc < 0) { /* a full subscriber (XPUB_NODROP) refuses the whole message at its first frame */
+            L->dropped++;
+            return;
+        }
+    }
+}
+
+static void s_send_json(vafmd_live *L, const char *topic, json_t *j)
+{
+    char *text = json_dumps(j, JSON_COMPACT);
+    json_decref(j);
+    if (!text)
+        return;
+    const void *part[2] = { topic, text };
+    size_t len[2] = { strlen(topic), strlen(text) };
+    s_send(L, part, len, 2);
+    free(text);
+}
+
+void vafmd_live_subscription(vafmd *d, const char *topic, size_t n, int on)
+{
+    vafmd_live *L = d->live;
+    if (!L || n < 1 || n > 4 || memcmp(topic, "live", n))
+        return;
+    L->subs = on ? L->subs | 1u << (n - 1) : L->subs & ~(1u << (n - 1));
+}
+
+static void s_flush(vafmd_live *L)
+{
+    if (!L->out_n)
+        return;
+    if (!L->subs) { /* nobody asked for the topic: nothing is sent, nor counted */
+        L->out_n = 0;
+        return;
+    }
+    json_t *names = json_array();
+    for (size_t k = 0; k < S_NCH; k++)
+        json_array_append_new(names, json_string(s_live_channels[k].name));
+    json_t *h = json_object();
+    json_object_set_new(h, "seq", json_integer((json_int_t)L->seq));
+    json_object_set_new(h, "session", json_integer(atomic_load_explicit(&L->d->sh.session, memory_order_relaxed)));
+    json_object_set_new(h, "generation", json_integer((json_int_t)L->generation));
+    json_object_set_new(h, "first_sample", json_integer((json_int_t)L->out_first));
+    json_object_set_new(h, "points", json_integer((json_int_t)L->out_n));
+    json_object_set_new(h, "decimation", json_integer((json_int_t)L->decim));
+    json_object_set_new(h, "sample_rate_Hz", json_real(L->fs));
+    json_object_set_new(h, "monitor_rate_Hz", json_real(L->fs / (double)L->decim));
+    json_object_set_new(h, "state", json_string(vafm_ctrl_state_name((int)L->out[S_STATE_CH][L->out_n - 1])));
+    json_object_set_new(h, "channels", names);
+    char *text = json_dumps(h, JSON_COMPACT);
+    json_decref(h);
+    if (text) {
+        const void *part[2 + S_NCH];
+        size_t len[2 + S_NCH];
+        part[0] = "live";
+        len[0] = 4;
+        part[1] = text;
+        len[1] = strlen(text);
+        for (size_t k = 0; k < S_NCH; k++) {
+            part[2 + k] = L->out[k];
+            len[2 + k] = L->out_n * sizeof(double);
+        }
+        s_send(L, part, len, (int)(2 + S_NCH));
+        free(text);
+    }
+    L->seq++;
+    L->out_n = 0;
+}
+
+/* The decimation of the current monitor rate: samples per point, and points per message (~0.1 s). */
+static void s_decimation(vafmd_live *L)
+{
+    L->acc_n = 0;
+    memset(L->acc, 0, sizeof L->acc);
+    L->out_n = 0;
+    if (!(L->rate > 0) || !(L->fs > 0)) {
+        L->decim = 0;
+        return;
+    }
+    double m = floor(L->fs / L->rate + 0.5);
+    L->decim = m < 1 ? 1 : (uint64_t)m;
+    double pts = ceil(0.1 * L->fs / (double)L->decim);
+    L->out_target = pts < 1 ? 1 : pts > S_MAX_PTS ? S_MAX_PTS : (size_t)pts;
+}
+
+static void s_sink(void *user, const vafm_ctrl_samples *b)
+{
+    vafmd_live *L = user;
+    if (!L->decim)
+        return;
+    for (size_t i = 0; i < b->n; i++) {
+        const uint64_t idx = b->first + i;
+        if (idx % L->decim == 0) { /* a point begins */
+            L->acc_n = 0;
+            memset(L->acc, 0, sizeof L->acc);
+            if (!L->out_n)
+                L->out_first = idx;
+        }
+        for (size_t k = 0; k < S_NCH; k++) {
+            if (k == S_STATE_CH)
+                continue;
+            const double *a = *(const double *const *)(const void *)((const char *)b + s_live_channels[k].off);
+            L->acc[k] += a[i];
+        }
+        L->acc_n++;
+        if ((idx + 1) % L->decim == 0 && L->acc_n == L->decim) { /* a whole point ends */
+            for (size_t k = 0; k < S_NCH; k++)
+                L->out[k][L->out_n] = k == S_STATE_CH ? (double)b->state[i] : L->acc[k] / (double)L->acc_n;
+            if (++L->out_n >= L->out_target)
+                s_flush(L);
+        }
+    }
+}
+
+static const char *s_event_kind(int type, const char **key)
+{
+    *key = "value";
+    switch (type) {
+    case VAFM_CTRL_EV_ENGAGED: *key = "force_N"; return "engaged";
+    case VAFM_CTRL_EV_FAILED: *key = "motor_z_m"; return "engage_failed";
+    case VAFM_CTRL_EV_CRASH: *key = "force_N"; return "crash";
+    case VAFM_CTRL_EV_Z_SATURATED: *key = "piezo_z_m"; return "z_saturated";
+    case VAFM_CTRL_EV_Z_RECOVERED: return "z_recovered";
+    case VAFM_CTRL_EV_XY_RANGE: *key = "coordinate_m"; return "xy_range";
+    case VAFM_CTRL_EV_WITHDRAWN: *key = "motor_z_m"; return "withdrawn";
+    case VAFM_CTRL_EV_MOVED: *key = "distance_m"; return "moved";
+    case VAFM_CTRL_EV_Z_REACHED: *key = "piezo_z_m"; return "z_reached";
+    case VAFM_CTRL_EV_LOST_CONTACT: *key = "force_N"; return "lost_contact";
+    case VAFM_CTRL_EV_SIM_ERROR: return "sim_error";
+    case VAFM_CTRL_EV_OVERFLOW: *key = "count"; return "events_dropped";
+    default: return "?";
+    }
+}
+
+static void s_publish(vafmd_live *L, int wait);
+
+static void s_events(vafmd_live *L)
+{
+    vafm_ctrl_event ev;
+    int first = 1;
+    while (L->ctrl && vafm_ctrl_event_pop(L->ctrl, &ev)) {
+        if (first) /* status shows the state after the event before a client can read the event */
+            s_publish(L, 1);
+        first = 0;
+        const char *key;
+        const char *kind = s_event_kind(ev.type, &key);
+        json_t *j = json_pack("{s:i,s:s,s:s,s:I,s:I,s:f}", "run_id", 0, "source", "ctrl", "kind", kind, "generation",
+                              (json_int_t)L->generation, "sample", (json_int_t)ev.sample, "time_s", ev.time_s);
+        json_object_set_new(j, key, json_real(ev.value));
+        if (ev.type == VAFM_CTRL_EV_FAILED)
+            json_object_set_new(j, "reason", json_string(vafm_ctrl_fail_name(ev.reason)));
+        if (ev.type == VAFM_CTRL_EV_SIM_ERROR)
+            json_object_set_new(j, "code", json_integer(ev.reason));
+        s_send_json(L, "event", j);
+    }
+}
+
+/* The status snapshot. The simulation thread never waits for the lock: it tries (wait: up to 256 times; the
+ * control thread holds it for one copy of the snapshot), else the next call publishes. */
+static void s_publish(vafmd_live *L, int wait)
+{
+    int tries = wait ? 256 : 1;
+    while (pthread_mutex_trylock(&L->mu))
+        if (--tries <= 0)
+            return;
+    s_snap *s = &L->snap;
+    s->have = L->ctrl != NULL;
+    snprintf(s->why, sizeof s->why, "%s", L->why);
+    if (L->ctrl) {
+        vafm_ctrl_status_get(L->ctrl, &s->st);
+        s->cp = *vafm_ctrl_params_get(L->ctrl);
+    }
+    s->fs = L->fs;
+    s->monitor_rate_Hz = L->decim ? L->fs / (double)L->decim : 0.0;
+    s->generation = L->generation;
+    s->seq = L->seq;
+    s->dropped = L->dropped;
+    s->decimation = L->decim;
+    s->held = (int)L->n_pend;
+    pthread_mutex_unlock(&L->mu);
+}
+
+/* Apply one command to the controller. @return 0 or -1 with e filled. */
+static int s_apply(vafmd_live *L, const vafmd_live_op *op, vafmd_err *e)
+{
+    vafm_ctrl *c = L->ctrl;
+    if (!c) {
+        vafmd_err_set(e, VAFMD_E_STATE, "cmd", "no controller: %s", L->why);
+        return -1;
+    }
+    vafm_ctrl_status st;
+    vafm_ctrl_status_get(c, &st);
+    const char *sn = vafm_ctrl_state_name(st.state);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int rc = 0;
+    switch (op->op) {
+    case VAFMD_LIVE_OP_ENGAGE:
+        if ((rc = vafm_ctrl_engage(c)) == VAFM_ESTATE) {
+            vafmd_err_set(e, VAFMD_E_STATE, "cmd", "engage is refused while %s%s", sn,
+                          st.state == VAFM_CTRL_CRASHED ? " (withdraw first)" : "");
+            return -1;
+        }
+        break;
+    case VAFMD_LIVE_OP_WITHDRAW:
+        if ((rc = vafm_ctrl_withdraw(c, op->motor_steps)) == VAFM_EINVAL) {
+            const vafm_ctrl_params *cp = vafm_ctrl_params_get(c);
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "motor_steps", "motor_steps = %u would take the motor from %g m past "
+                          "ctrl_motor_max_m = %g m (at most %.0f steps of %g m)", op->motor_steps, st.motor_z_m,
+                          cp->motor_max_m, floor((cp->motor_max_m - st.motor_z_m) / cp->motor_step_m), cp->motor_step_m);
+            return -1;
+        }
+        break;
+    case VAFMD_LIVE_OP_MOVE:
+        rc = vafm_ctrl_move(c, op->x_m, op->y_m, op->speed_m_per_s, &err);
+        break;
+    case VAFMD_LIVE_OP_Z:
+        rc = vafm_ctrl_z(c, op->z_m, &err);
+        break;
+    case VAFMD_LIVE_OP_FEEDBACK:
+        if (op->has_set) {
+            const vafm_ctrl_params *cp = vafm_ctrl_params_get(c);
+            rc = vafm_ctrl_feedback_set(c, op->setpoint, op->unit >= 0 ? op->unit : cp->setpoint_unit,
+                                        op->relative >= 0 ? op->relative : cp->setpoint_relative, op->p_m_per_N,
+                                        op->i_m_per_N_s, op->tau_s, &err);
+            if (rc) {
+                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, err.field[0] ? err.field : "setpoint", "%s", err.message);
+                return -1;
+            }
+        }
+        if (op->on >= 0 && (rc = vafm_ctrl_feedback(c, op->on)) == VAFM_ESTATE) {
+            vafmd_err_set(e, VAFMD_E_STATE, "on", "feedback %s is refused while %s", op->on ? "on" : "off", sn);
+            return -1;
+        }
+        break;
+    default:
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "unknown controller operation %d", op->op);
+        return -1;
+    }
+    if (rc == VAFM_EINVAL) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, err.field, "%s", err.message);
+        return -1;
+    }
+    if (rc == VAFM_ESTATE) {
+        vafmd_err_set(e, VAFMD_E_STATE, "cmd", "%s is refused while %s", op->cmd, sn);
+        return -1;
+    }
+    if (rc) {
+        vafmd_err_set(e, VAFMD_E_INTERNAL, "cmd", "%s: %s", op->cmd, vafm_strerror(rc));
+        return -1;
+    }
+    return 0;
+}
+
+static uint64_t s_at_sample(const vafmd_live *L, double at_s)
+{
+    double n = ceil(at_s * L->fs - 1e-6);
+    return n <= 0 ? 0 : (uint64_t)n;
+}
+
+/* Apply the held commands whose time has come (in the order they were given). */
+static void s_due(vafmd_live *L)
+{
+    while (L->n_pend && s_at_sample(L, L->pend[0].at_s) <= L->cur) {
+        vafmd_err e;
+        memset(&e, 0, sizeof e);
+        if (s_apply(L, &L->pend[0], &e)) /* a scheduled command refused: its requester learns it here */
+            s_send_json(L, "event", json_pack("{s:i,s:s,s:s,s:s,s:f,s:s,s:s,s:s}", "run_id", 0, "source", "ctrl", "kind",
+                                              "ctrl_refused", "cmd", L->pend[0].cmd, "at_s", L->pend[0].at_s, "code",
+                                              e.code ? e.code : "", "field", e.field, "message", e.message));
+        memmove(&L->pend[0], &L->pend[1], (L->n_pend - 1) * sizeof L->pend[0]);
+        L->n_pend--;
+    }
+    s_events(L);
+}
+
+static void s_ack(vafmd_live *L, uint64_t req, int rc)
+{
+    if (!req)
+        return;
+    L->ack_rc = rc;
+    atomic_store_explicit(&L->ack, req, memory_order_release);
+}
+
+void vafmd_live_apply(vafmd *d, const vafmd_live_op *op)
+{
+    vafmd_live *L = d->live;
+    memset(&L->ack_err, 0, sizeof L->ack_err);
+    if (op->op == VAFMD_LIVE_OP_NEW) {
+        s_flush(L);
+        vafm_ctrl_destroy(&L->ctrl); /* rare: a scene or settings change (the allocator may be used here) */
+        L->ctrl = op->ctrl;
+        snprintf(L->why, sizeof L->why, "%s", op->why);
+        L->generation++;
+        L->n_pend = 0;
+        L->cur = 0;
+        L->anchored = 0;
+        L->fs = L->ctrl ? 1.0 / vafm_ctrl_sample_interval_s(L->ctrl) : 0.0;
+        s_decimation(L);
+        s_publish(L, 1);
+        s_ack(L, op->req, 0);
+        return;
+    }
+    if (op->op == VAFMD_LIVE_OP_SETTINGS) {
+        L->speed = op->speed;
+        if (op->monitor_rate_Hz != L->rate) {
+            s_flush(L);
+            L->rate = op->monitor_rate_Hz;
+            s_decimation(L);
+        }
+        L->anchored = 0;
+        s_publish(L, 1);
+        s_ack(L, op->req, 0);
+        return;
+    }
+    int rc = 0;
+    if (op->has_at && L->ctrl && s_at_sample(L, op->at_s) > L->cur) {
+        if (L->n_pend >= S_PEND) {
+            vafmd_err_set(&L->ack_err, VAFMD_E_BUSY, "at_s", "%d commands are already waiting for their time", S_PEND);
+            rc = -1;
+        } else
+            L->pend[L->n_pend++] = *op;
+    } else {
+        rc = s_apply(L, op, &L->ack_err);
+        s_events(L); /* an xy_range refusal is an event too */
+    }
+    s_publish(L, 1);
+    s_ack(L, op->req, rc);
+}
+
+static int64_t s_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * S_NS + ts.tv_nsec;
+}
+
+int64_t vafmd_live_idle(vafmd *d, int64_t now, int dead)
+{
+    vafmd_live *L = d->live;
+    L->dead = dead;
+    if (!L->ctrl) {
+        s_publish(L, 0);
+        return now + 1000000;
+    }
+    if (!L->fs) {
+        L->fs = 1.0 / vafm_ctrl_sample_interval_s(L->ctrl);
+        s_decimation(L);
+    }
+    if (!L->anchored || now - L->last_ns > S_GAP_NS) {
+        L->anchor_ns = now;
+        L->anchor_sample = L->cur;
+        L->anchored = 1;
+    }
+    L->last_ns = now;
+    const uint64_t target = L->anchor_sample + (uint64_t)((double)(now - L->anchor_ns) * 1e-9 * L->fs * L->speed);
+    s_due(L);
+    while (L->cur < target) {
+        uint64_t n = target - L->cur;
+        if (n > 4096)
+            n = 4096;
+        if (L->n_pend) {
+            uint64_t at = s_at_sample(L, L->pend[0].at_s);
+            if (at > L->cur && at - L->cur < n)
+                n = at - L->cur;
+        }
+        long got = vafm_ctrl_advance(L->ctrl, (size_t)n, s_sink, L);
+        vafm_ctrl_status st;
+        vafm_ctrl_status_get(L->ctrl, &st);
+        L->cur = st.sample;
+        s_due(L);
+        if (got <= 0 && got != (long)n)
+            s_events(L);
+        int64_t t = s_now();
+        if (t - now > S_BUDGET_NS) { /* cannot keep up: fall behind, never burst */
+            L->anchor_ns = t;
+            L->anchor_sample = L->cur;
+            break;
+        }
+    }
+    s_publish(L, 0);
+    return now + 1000000;
+}
+
+void vafmd_live_run_start(vafmd *d, char **start_json)
+{
+    vafmd_live *L = d->live;
+    if (!L || !*start_json)
+        return;
+    s_flush(L); /* the points so far go out before the run */
+    json_t *j = json_loads(*start_json, 0, NULL);
+    if (!j)
+        return;
+    json_t *c;
+    if (!L->ctrl)
+        c = json_null();
+    else {
+        vafm_ctrl_status st;
+        vafm_ctrl_status_get(L->ctrl, &st);
+        c = json_pack("{s:I,s:s,s:I,s:f,s:f,s:f,s:f,s:f,s:b,s:b,s:f}", "generation", (json_int_t)L->generation, "state",
+                      vafm_ctrl_state_name(st.state), "sample", (json_int_t)st.sample, "time_s", st.time_s, "motor_z_m",
+                      st.motor_z_m, "piezo_z_m", st.piezo_z_m, "x_m", st.x_m, "y_m", st.y_m, "feedback", st.feedback,
+                      "in_contact", st.in_contact, "force_N", st.force_N);
+        json_object_set_new(c, "setpoint_N", isfinite(st.setpoint_N) ? json_real(st.setpoint_N) : json_null());
+        json_object_set_new(c, "surface_m", json_real(st.surface_m));
+    }
+    json_object_set_new(j, "ctrl", c);
+    char *text = json_dumps(j, JSON_COMPACT);
+    json_decref(j);
+    if (text) {
+        free(*start_json);
+        *start_json = text;
+    }
+}
+
+void vafmd_live_sim_exit(vafmd *d)
+{
+    vafmd_live *L = d->live;
+    if (L)
+        s_flush(L);
+}
+
+/* ================================== control thread ================================== */
+
+static json_t *s_num(double v)
+{
+    return isfinite(v) ? json_real(v) : json_null();
+}
+
+json_t *vafmd_live_hello_json(void)
+{
+    json_t *ch = json_array();
+    for (size_t k = 0; k < S_NCH; k++)
+        json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_live_channels[k].name, "unit",
+                                            s_live_channels[k].unit, "dtype", "<f8"));
+    return json_pack("{s:s,s:o}", "topic", "live", "channels", ch);
+}
+
+json_t *vafmd_live_status_json(vafmd *d)
+{
+    vafmd_live *L = d->live;
+    s_snap s;
+    pthread_mutex_lock(&L->mu);
+    s = L->snap;
+    pthread_mutex_unlock(&L->mu);
+    json_t *j = json_object();
+    json_object_set_new(j, "available", json_boolean(s.have));
+    json_object_set_new(j, "generation", json_integer((json_int_t)s.generation));
+    json_object_set_new(j, "live", json_pack("{s:I,s:f,s:I,s:I}", "seq", (json_int_t)s.seq, "monitor_rate_Hz",
+                                             s.monitor_rate_Hz, "decimation", (json_int_t)s.decimation, "dropped",
+                                             (json_int_t)s.dropped));
+    json_object_set_new(j, "held_commands", json_integer(s.held));
+    if (!s.have) {
+        json_object_set_new(j, "state", json_null());
+        json_object_set_new(j, "error", json_string(s.why));
+        return j;
+    }
+    const vafm_ctrl_status *t = &s.st;
+    json_object_set_new(j, "state", json_string(vafm_ctrl_state_name(t->state)));
+    static const char *const phases[] = { "none", "baseline", "extend", "retract", "motor" };
+    json_object_set_new(j, "engage_phase", json_string(t->engage_phase >= 0 && t->engage_phase <= 4
+                                                        ? phases[t->engage_phase] : "?"));
+    json_object_set_new(j, "last_fail", t->last_fail ? json_string(vafm_ctrl_fail_name(t->last_fail)) : json_null());
+    json_object_set_new(j, "sample", json_integer((json_int_t)t->sample));
+    json_object_set_new(j, "time_s", json_real(t->time_s));
+    json_object_set_new(j, "sample_rate_Hz", json_real(s.fs));
+    json_object_set_new(j, "motor_z_m", s_num(t->motor_z_m));
+    json_object_set_new(j, "piezo_z_m", s_num(t->piezo_z_m));
+    json_object_set_new(j, "x_m", s_num(t->x_m));
+    json_object_set_new(j, "y_m", s_num(t->y_m));
+    json_object_set_new(j, "target_x_m", s_num(t->target_x_m));
+    json_object_set_new(j, "target_y_m", s_num(t->target_y_m));
+    json_object_set_new(j, "moving", json_boolean(t->moving));
+    json_object_set_new(j, "surface_m", s_num(t->surface_m));
+    json_object_set_new(j, "gap_m", s_num(t->gap_m));
+    json_object_set_new(j, "in_contact", json_boolean(t->in_contact));
+    json_object_set_new(j, "feedback", json_boolean(t->feedback));
+    json_object_set_new(j, "saturated", json_boolean(t->saturated));
+    json_object_set_new(j, "setpoint_N", s_num(t->setpoint_N));
+    json_object_set_new(j, "baseline_N", s_num(t->baseline_N));
+    json_object_set_new(j, "error_N", s_num(t->error_N));
+    json_object_set_new(j, "force_N", s_num(t->force_N));
+    json_object_set_new(j, "deflection_m", s_num(t->deflection_m));
+    json_object_set_new(j, "signal_V", s_num(t->signal_V));
+    json_object_set_new(j, "sum_V", s_num(t->sum_V));
+    json_object_set_new(j, "invols_m_per_V", s_num(t->invols_m_per_V));
+    json_object_set_new(j, "crash_force_N", s_num(t->crash_force_N));
+    json_object_set_new(j, "motor_steps", json_integer((json_int_t)t->motor_steps));
+    json_object_set_new(j, "gains", json_pack("{s:f,s:f,s:f}", "p_m_per_N", s.cp.fb_p_m_per_N, "i_m_per_N_s",
+                                              s.cp.fb_i_m_per_N_s, "tau_s", s.cp.fb_tau_s));
+    json_object_set_new(j, "setpoint", json_pack("{s:f,s:s,s:b}", "value", s.cp.setpoint, "unit",
+                                                 s.cp.setpoint_unit == VAFM_CTRL_UNIT_V ? "V" : "N", "relative",
+                                                 s.cp.setpoint_relative));
+    return j;
+}
+
+/* Push an op and, without at_s, wait for the simulation thread's answer (the control thread may wait). */
+static int s_request(vafmd *d, vafmd_live_op *op, int wait, vafmd_err *e)
+{
+    vafmd_live *L = d->live;
+    op->req = ++L->next_req;
+    vafmd_sim_cmd sc;
+    memset(&sc, 0, sizeof sc);
+    sc.type = VAFMD_SIM_CTRL;
+    sc.live = *op;
+    if (!vafmd_ring_push(&d->ring, &sc)) {
+        vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
+        return -1;
+    }
+    if (!wait)
+        return 0;
+    struct timespec t0, t;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    for (;;) {
+        if (atomic_load_explicit(&L->ack, memory_order_acquire) == op->req)
+            break;
+        clock_gettime(CLOCK_MONOTONIC, &t);
+        if ((t.tv_sec - t0.tv_sec) * S_NS + (t.tv_nsec - t0.tv_nsec) > S_ACK_WAIT_NS) {
+            vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread did not answer within 1 s (it will still apply "
+                          "the command); query status");
+            return -1;
+        }
+        nanosleep(&(struct timespec){ 0, 50000 }, NULL);
+    }
+    if (L->ack_rc) {
+        *e = L->ack_err;
+        return -1;
+    }
+    return 0;
+}
+
+json_t *vafmd_live_cmd(vafmd *d, const vafmd_cmd *c, json_t *ok, vafmd_err *e)
+{
+    vafmd_live *L = d->live;
+    if (d->jobs_started != atomic_load_explicit(&d->sh.jobs_done, memory_order_acquire)) {
+        vafmd_err_set(e, VAFMD_E_STATE, "cmd", "a run is in progress: the controller's state is held until it ends "
+                      "(abort it or wait)");
+        json_decref(ok);
+        return NULL;
+    }
+    vafmd_live_op op = c->ctrl;
+    /* the scanner's ranges from the settings in force, before anything is handed over */
+    const vafm_ctrl_params *cp = &L->cp;
+    if (op.op == VAFMD_LIVE_OP_Z && !(op.z_m <= cp->piezo_range_m)) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "z_m", "z_m = %.17g m is outside the piezo range [0, %g] m "
+                      "(ctrl_piezo_range_m)", op.z_m, cp->piezo_range_m);
+        json_decref(ok);
+        return NULL;
+    }
+    if (op.has_at && op.op == VAFMD_LIVE_OP_MOVE) {
+        const double half = 0.5 * cp->xy_range_m;
+        const int bx = !(fabs(op.x_m) <= half);
+        if (bx || !(fabs(op.y_m) <= half)) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, bx ? "x_m" : "y_m", "%s = %.17g m is beyond the scanner's range "
+                          "[%g, %g] m (ctrl_xy_range_m)", bx ? "x_m" : "y_m", bx ? op.x_m : op.y_m, -half, half);
+            json_decref(ok);
+            return NULL;
+        }
+    }
+    if (s_request(d, &op, !op.has_at, e)) {
+        json_decref(ok);
+        return NULL;
+    }
+    if (op.op == VAFMD_LIVE_OP_FEEDBACK && op.has_set) { /* the next controller keeps the new feedback */
+        if (!isnan(op.setpoint))
+            L->cp.setpoint = op.setpoint;
+        if (op.unit >= 0)
+            L->cp.setpoint_unit = op.unit;
+        if (op.relative >= 0)
+            L->cp.setpoint_relative = op.relative;
+        if (!isnan(op.p_m_per_N))
+            L->cp.fb_p_m_per_N = op.p_m_per_N;
+        if (!isnan(op.i_m_per_N_s))
+            L->cp.fb_i_m_per_N_s = op.i_m_per_N_s;
+        if (!isnan(op.tau_s))
+            L->cp.fb_tau_s = op.tau_s;
+    }
+    json_object_set_new(ok, "scheduled", json_boolean(op.has_at));
+    if (op.has_at)
+        json_object_set_new(ok, "at_s", json_real(op.at_s));
+    json_object_set_new(ok, "ctrl", vafmd_live_status_json(d));
+    return ok;
+}
+
+static const s_cset *s_cset_find(const char *name)
+{
+    if (strncmp(name, "ctrl_", 5))
+        return NULL;
+    for (size_t i = 0; i < S_NCSET; i++)
+        if (!strcmp(s_csets[i].name, name + 5))
+            return &s_csets[i];
+    return NULL;
+}
+
+static json_t *s_cset_value(const vafm_ctrl_params *cp, const s_cset *f)
+{
+    if (f->off == (size_t)-1)
+        return json_string(cp->setpoint_unit == VAFM_CTRL_UNIT_V ? "V" : "N");
+    if (f->off == (size_t)-2)
+        return json_boolean(cp->setpoint_relative);
+    return json_real(*(const double *)(const void *)((const char *)cp + f->off));
+}
+
+static json_t *s_cset_info(const s_cset *f)
+{
+    return json_pack("{s:s,s:s,s:s}", "unit", f->unit, "kind", f->off == (size_t)-1 ? "choice" : f->off == (size_t)-2
+                     ? "bool" : "real", "doc", f->doc);
+}
+
+static const char s_monitor_doc[] = "live topic: monitor points per second (block means of the controller's samples), "
+                                    "[0, 1e5] Hz, 0: off";
+
+json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+{
+    vafmd_live *L = d->live;
+    vafmd_cmd c2 = *c;
+    json_t *names = NULL, *extra = json_array();
+    if (c->names) { /* split the names: the controller's here, the rest to vafmd_get_values */
+        names = json_array();
+        size_t i;
+        json_t *n;
+        json_array_foreach(c->names, i, n) {
+            const char *s = json_string_value(n);
+            json_array_append(s_cset_find(s) || !strcmp(s, "monitor_rate_Hz") ? extra : names, n);
+        }
+        c2.names = names;
+    } else {
+        for (size_t i = 0; i < S_NCSET; i++) {
+            char nm[64];
+            snprintf(nm, sizeof nm, "ctrl_%s", s_csets[i].name);
+            json_array_append_new(extra, json_string(nm));
+        }
+        json_array_append_new(extra, json_string("monitor_rate_Hz"));
+    }
+    json_t *v = vafmd_get_values(&d->scene, &d->set, &c2, e);
+    json_decref(names);
+    if (!v) {
+        json_decref(extra);
+        return NULL;
+    }
+    json_t *vals = json_object_get(v, "values"), *info = json_object_get(v, "info");
+    size_t i;
+    json_t *n;
+    json_array_foreach(extra, i, n) {
+        const char *s = json_string_value(n);
+        const s_cset *f = s_cset_find(s);
+        json_object_set_new(vals, s, f ? s_cset_value(&L->cp, f) : json_real(L->rate_ctl));
+        if (info)
+            json_object_set_new(info, s, f ? s_cset_info(f) : json_pack("{s:s,s:s,s:s}", "unit", "Hz", "kind", "real",
+                                                                         "doc", s_monitor_doc));
+    }
+    json_decref(extra);
+    return v;
+}
+
+/* Apply one ctrl_* value to cp. @return 0 or -1. */
+static int s_cset_apply(vafm_ctrl_params *cp, const char *name, const s_cset *f, json_t *v, vafmd_err *e)
+{
+    if (f->off == (size_t)-1) {
+        const char *u = json_is_string(v) ? json_string_value(v) : NULL;
+        if (!u || (strcmp(u, "N") && strcmp(u, "V"))) {
+            vafmd_err_set(e, u ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, name, "'%s' must be \"N\" or \"V\"", name);
+            return -1;
+        }
+        cp->setpoint_unit = !strcmp(u, "V") ? VAFM_CTRL_UNIT_V : VAFM_CTRL_UNIT_N;
+        return 0;
+    }
+    if (f->off == (size_t)-2) {
+        if (!json_is_boolean(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, name, "'%s' must be true or false", name);
+            return -1;
+        }
+        cp->setpoint_relative = json_is_true(v);
+        return 0;
+    }
+    if (!json_is_number(v)) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, name, "'%s' must be a number (%s)", name, f->unit);
+        return -1;
+    }
+    *(double *)(void *)((char *)cp + f->off) = json_number_value(v);
+    return 0;
+}
+
+int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+{
+    vafmd_live *L = d->live;
+    vafm_ctrl_params cp = L->cp;
+    double rate = L->rate_ctl;
+    int ctrl_given = 0, rate_given = 0;
+    json_t *rest = NULL;
+    vafmd_cmd c2 = *c;
+    if (c->values) {
+        rest = json_object();
+        const char *key;
+        json_t *v;
+        json_object_foreach(c->values, key, v) {
+            const s_cset *f = s_cset_find(key);
+            if (f) {
+                if (s_cset_apply(&cp, key, f, v, e)) {
+                    json_decref(rest);
+                    return -1;
+                }
+                ctrl_given = 1;
+            } else if (!strcmp(key, "monitor_rate_Hz")) {
+                double x = json_is_number(v) ? json_number_value(v) : NAN;
+                if (!json_is_number(v) || !(x >= 0 && x <= S_MONITOR_MAX)) {
+                    vafmd_err_set(e, json_is_number(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, key,
+                                  "monitor_rate_Hz = %.17g is outside [0, %g] Hz (0: off)", x, S_MONITOR_MAX);
+                    json_decref(rest);
+                    return -1;
+                }
+                rate = x;
+                rate_given = 1;
+            } else
+                json_object_set(rest, key, v);
+        }
+        c2.values = rest;
+    }
+    vafm_params scene = d->scene;
+    vafmd_settings set = d->set;
+    int rc = vafmd_apply_set(&scene, &set, &c2, e);
+    json_decref(rest);
+    if (rc)
+        return -1;
+    if (ctrl_given) {
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        if (vafm_ctrl_params_validate(&cp, &scene, &err)) {
+            char f[80];
+            snprintf(f, sizeof f, "ctrl_%.60s", err.field);
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, err.field[0] ? f : "", "%s (the setting is ctrl_%s)", err.message,
+                          err.field);
+            return -1;
+        }
+    }
+    /* the settings first: a new controller then starts on the new decimation grid from its sample 0 */
+    if (rate_given || set.speed != d->set.speed) {
+        vafmd_live_op op;
+        memset(&op, 0, sizeof op);
+        op.op = VAFMD_LIVE_OP_SETTINGS;
+        op.speed = set.speed;
+        op.monitor_rate_Hz = rate;
+        if (s_request(d, &op, 1, e))
+            return -1;
+    }
+    const uint64_t h = s_scene_hash(&scene);
+    if (ctrl_given || h != L->scene_hash) { /* a new controller over the new scene: it starts again */
+        vafmd_live_op op;
+        memset(&op, 0, sizeof op);
+        op.op = VAFMD_LIVE_OP_NEW;
+        op.ctrl = s_build(&scene, &cp, op.why, sizeof op.why);
+        if (s_request(d, &op, 1, e)) { /* answered: status shows the new controller from the reply on */
+            if (!strcmp(e->code, VAFMD_E_BUSY) && strstr(e->message, "not take"))
+                vafm_ctrl_destroy(&op.ctrl); /* not handed over */
+            return -1;
+        }
+        L->scene_hash = h;
+    }
+    d->scene = scene;
+    d->set = set;
+    L->cp = cp;
+    L->rate_ctl = rate;
+    return 0;
+}

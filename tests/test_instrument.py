@@ -1,0 +1,251 @@
+"""The always-on controller in vafmd (issue #26, daemon half): the live topic, the controller commands and
+their errors, events and status, faults on them, and a scripted session reproduced bit for bit.
+protocol/wire.md §2.4, §3.7; docs/instrument.md "The daemon"."""
+import json
+import time
+
+import numpy as np
+import zmq
+
+from vafmd_harness import Daemon, TIMEOUT_MS
+
+KB = 1.380649e-23
+
+
+def live_sub(d):
+    """A subscriber that only watches: the live topic and the events (and the greeting heartbeat)."""
+    _DEADLINE[0] = time.time() + 60
+    return d.sub(topics=(b"live", b"event", b"heartbeat"))
+
+
+_DEADLINE = [None]
+
+
+def recv(s, timeout_s=20.0):
+    """The next message; a test's loops over messages end by its 60 s deadline (heartbeats never stop)."""
+    if _DEADLINE[0] is None:
+        _DEADLINE[0] = time.time() + 60
+    assert time.time() < _DEADLINE[0], "the test's stream deadline passed"
+    assert s.poll(int(timeout_s * 1000)), "nothing on the stream"
+    p = s.recv_multipart()
+    topic = p[0].decode()
+    if topic == "live":
+        h = json.loads(p[1])
+        return topic, (h, {n: np.frombuffer(x, "<f8") for n, x in zip(h["channels"], p[2:])})
+    return topic, json.loads(p[1])
+
+
+def wait_event(s, kinds, timeout_s=30.0):
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        t, m = recv(s, deadline - time.time())
+        if t == "event" and m.get("source") == "ctrl" and m["kind"] in kinds:
+            return m
+    raise AssertionError(f"no controller event among {kinds}")
+
+
+def err(r, code, field):
+    assert r["status"] == "error" and r["code"] == code and r["field"] == field, r
+    return r["message"]
+
+
+def test_live_topic_free_thermal_noise():
+    """A subscriber that only watches sees the free lever breathe: <x^2> = kT/k within its statistical error.
+    N = 60000 samples (decimation 1; point samples: antialias "point", the default "mean" averages each sample
+    over its interval and so shrinks the variance of a lever faster than the sampling), the error from 30
+    batch means (the samples are correlated)."""
+    d = Daemon()
+    v = d.cmd({"cmd": "get", "names": ["k_N_per_m", "T_K", "sample_rate_Hz", "monitor_rate_Hz"]})["values"]
+    assert v["monitor_rate_Hz"] == 100
+    hello = d.cmd({"cmd": "hello"})
+    assert [c["name"] for c in hello["live"]["channels"]][:3] == ["time_s", "motor_z_m", "piezo_z_m"]
+    assert d.cmd({"cmd": "set", "values": {"monitor_rate_Hz": v["sample_rate_Hz"], "speed": 4,
+                                                           "antialias": "point"}})["status"] == "ok"
+    s = live_sub(d)
+    xs, seqs, first = [], [], None
+    while sum(len(x) for x in xs) < 60000:
+        t, m = recv(s)
+        if t != "live":
+            continue
+        h, ch = m
+        assert h["decimation"] == 1 and h["state"] == "idle"
+        if first is None:
+            first = h["first_sample"]
+        seqs.append(h["seq"])
+        xs.append(ch["deflection_m"])
+        assert np.all(ch["motor_z_m"] == 200e-6) and np.all(ch["surface_m"] == 0)
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), "a live message was lost"
+    x = np.concatenate(xs)[:60000]
+    pred = KB * v["T_K"] / v["k_N_per_m"]
+    b = (x * x).reshape(30, -1).mean(axis=1)
+    m, se = b.mean(), b.std(ddof=1) / np.sqrt(len(b))
+    print(f"<x^2> {m:.4g} m^2, kT/k {pred:.4g}, ratio {m / pred:.4f} +- {se / pred:.4f} (N 60000)")
+    assert abs(m - pred) < 5 * se, (m, pred, se)
+    assert se < 0.1 * pred  # the test can tell
+    # a subscriber to everything sees no live message unless someone asked for the topic: greeted first
+    d.cmd({"cmd": "set", "values": {"monitor_rate_Hz": 100}})
+    s.close(0)
+    time.sleep(0.3)
+    a = d.sub(topics=(b"",), greet=True)
+    t0 = time.time()
+    while time.time() - t0 < 0.5:
+        if a.poll(100):
+            assert a.recv_multipart()[0] != b"live"
+    d.stop()
+
+
+def test_engage_move_z_feedback_withdraw_and_errors():
+    d = Daemon()
+    assert d.cmd({"cmd": "set", "values": {"speed": 50}})["status"] == "ok"
+    s = live_sub(d)
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["available"] and st["state"] == "idle" and st["motor_z_m"] == 200e-6 and not st["in_contact"]
+    # argument errors name the field and the range, before anything runs
+    assert "[0, 1e-05]" in err(d.cmd({"cmd": "z", "z_m": 2e-5}), "out_of_range", "z_m")
+    err(d.cmd({"cmd": "z"}), "missing_field", "z_m")
+    err(d.cmd({"cmd": "move", "x_m": 1e-6}), "missing_field", "y_m")
+    assert "scanner" in err(d.cmd({"cmd": "move", "x_m": 1e-3, "y_m": 0}), "out_of_range", "x_m")
+    assert wait_event(s, ["xy_range"])["coordinate_m"] == 1e-3
+    err(d.cmd({"cmd": "feedback"}), "missing_field", "on")
+    err(d.cmd({"cmd": "feedback", "unit": "A"}), "out_of_range", "unit")
+    err(d.cmd({"cmd": "withdraw", "motor_steps": -1}), "out_of_range", "motor_steps")
+    err(d.cmd({"cmd": "engage", "at_s": "soon"}), "wrong_type", "at_s")
+    assert "ctrl_force_limit_N" == d.cmd({"cmd": "set", "values": {"ctrl_setpoint": 1e-6}})["field"]
+    assert "(0, 0.001]" in err(d.cmd({"cmd": "set", "values": {"ctrl_motor_step_m": 1}}), "out_of_range",
+                               "ctrl_motor_step_m")
+    # engage from 200 um: simulated seconds, engaged near the setpoint
+    r = d.cmd({"cmd": "engage"})
+    assert r["status"] == "ok" and r["ctrl"]["state"] == "approaching", r
+    err(d.cmd({"cmd": "engage"}), "state", "cmd")
+    ev = wait_event(s, ["engaged", "engage_failed", "crash"], 60)
+    assert ev["kind"] == "engaged", ev
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["state"] == "engaged" and st["feedback"] and st["in_contact"], st
+    f = []
+    while len(f) < 50:
+        t, m = recv(s)
+        if t == "live":
+            f.extend(m[1]["force_N"][m[1]["state"] == 2])
+    print(f"engaged: mean force {np.mean(f):.4g} N over {len(f)} points, setpoint {st['setpoint_N']:.4g} N")
+    assert abs(np.mean(f) - st["setpoint_N"]) < 0.05 * st["setpoint_N"]
+    # move under feedback, then z (feedback off), feedback on again with a new setpoint, withdraw
+    assert d.cmd({"cmd": "move", "x_m": 2e-6, "y_m": -1e-6, "speed_m_per_s": 20e-6})["status"] == "ok"
+    ev = wait_event(s, ["moved"])
+    assert abs(ev["distance_m"] - np.hypot(2e-6, 1e-6)) < 1e-9, ev
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert abs(st["x_m"] - 2e-6) < 1e-12 and abs(st["y_m"] + 1e-6) < 1e-12 and st["state"] == "engaged"
+    pz = st["piezo_z_m"]
+    assert d.cmd({"cmd": "z", "z_m": pz - 1e-6})["status"] == "ok"
+    wait_event(s, ["z_reached"])
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["state"] == "idle" and not st["feedback"] and not st["in_contact"], st
+    r = d.cmd({"cmd": "feedback", "on": True, "setpoint": 3e-9, "tau_s": 0.002})
+    assert r["status"] == "ok" and r["ctrl"]["feedback"] and r["ctrl"]["setpoint"]["value"] == 3e-9, r
+    assert d.cmd({"cmd": "withdraw", "motor_steps": 2})["status"] == "ok"
+    ev = wait_event(s, ["withdrawn"])
+    assert abs(ev["motor_z_m"] - (st["motor_z_m"] + 10e-6)) < 1e-12, ev
+    assert d.cmd({"cmd": "status"})["ctrl"]["state"] == "withdrawn"
+    # a run holds the controller and records where it was; the curve itself is today's
+    r = d.cmd({"cmd": "curve", "index": 3})
+    assert r["status"] == "ok"
+    d.wait_idle()
+    d.stop()
+
+
+def test_crash_and_engage_timeout_reported():
+    d = Daemon()
+    assert d.cmd({"cmd": "set", "values": {"speed": 50}})["status"] == "ok"
+    s = live_sub(d)
+    d.cmd({"cmd": "engage"})
+    assert wait_event(s, ["engaged", "engage_failed", "crash"], 60)["kind"] == "engaged"
+    # the piezo pushed 5 um further into the sample with the feedback off: a crash beyond 50 nN
+    pz = d.cmd({"cmd": "status"})["ctrl"]["piezo_z_m"]
+    assert d.cmd({"cmd": "z", "z_m": min(pz + 5e-6, 10e-6)})["status"] == "ok"
+    ev = wait_event(s, ["crash"])
+    assert ev["force_N"] > 50e-9, ev
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["state"] == "crashed" and st["crash_force_N"] >= ev["force_N"], st
+    assert "withdraw first" in err(d.cmd({"cmd": "engage"}), "state", "cmd")
+    err(d.cmd({"cmd": "feedback", "on": True}), "state", "on")
+    d.cmd({"cmd": "withdraw", "motor_steps": 1})
+    wait_event(s, ["withdrawn"])
+    # an engage that cannot finish in time: the timeout, as an event and in status
+    r = d.cmd({"cmd": "set", "values": {"ctrl_engage_timeout_s": 2}})
+    assert r["status"] == "ok"
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["generation"] == 2 and st["motor_z_m"] == 200e-6  # rebuilt: it starts again
+    assert d.cmd({"cmd": "get", "names": ["ctrl_engage_timeout_s"]})["values"]["ctrl_engage_timeout_s"] == 2
+    d.cmd({"cmd": "engage"})
+    ev = wait_event(s, ["engage_failed", "engaged"], 30)
+    assert ev["kind"] == "engage_failed" and ev["reason"] == "timeout", ev
+    assert d.cmd({"cmd": "status"})["ctrl"]["last_fail"] == "timeout"
+    d.stop()
+
+
+def test_fault_plan_on_engage():
+    """engage is faultable: busy (not executed; the retry works) and no_reply (executed, its reply lost)."""
+    d = Daemon()
+    d.cmd({"cmd": "set", "values": {"speed": 50}})
+    s = live_sub(d)
+    assert d.cmd({"cmd": "faults", "plan": {"script": [{"kind": "busy", "cmd": "engage"},
+                                                      {"kind": "no_reply", "cmd": "withdraw"}]}})["status"] == "ok"
+    err(d.cmd({"cmd": "engage"}), "busy", None)
+    assert d.cmd({"cmd": "status"})["ctrl"]["state"] == "idle"  # not executed
+    assert d.cmd({"cmd": "engage"})["status"] == "ok"
+    with_reply = True
+    try:
+        d.cmd({"cmd": "withdraw"}, timeout=1000)
+    except zmq.Again:
+        with_reply = False
+    assert not with_reply, "the no_reply fault answered"
+    d._connect()
+    ev = wait_event(s, ["withdrawn"])  # executed all the same (the engage it aborted failed first)
+    assert d.cmd({"cmd": "status"})["ctrl"]["state"] == "withdrawn", ev
+    assert [f["kind"] for f in d.cmd({"cmd": "faults"})["last"]] == ["busy", "no_reply"]
+    d.stop()
+
+
+def session(seed, until_s=34.0):
+    """A scripted session in free run: the same commands at the same controller times. Returns the live
+    points (all channels) of the controller built over the seed, up to until_s."""
+    d = Daemon()
+    s = live_sub(d)
+    assert d.cmd({"cmd": "set", "values": {"free_run": True, "speed": 25, "monitor_rate_Hz": 1000,
+                                           "seed": str(seed)}})["status"] == "ok"
+    gen = d.cmd({"cmd": "status"})["ctrl"]["generation"]
+    for c in ({"cmd": "engage", "at_s": 0.5}, {"cmd": "feedback", "tau_s": 0.002, "at_s": 29.0},
+              {"cmd": "move", "x_m": 3e-6, "y_m": 0, "speed_m_per_s": 5e-6, "at_s": 29.5},
+              {"cmd": "withdraw", "at_s": 31.5}):
+        r = d.cmd(c)
+        assert r["status"] == "ok" and r["scheduled"], r
+    pts, seqs, events = [], [], []
+    while True:
+        t, m = recv(s)
+        if t == "event" and m.get("source") == "ctrl" and m["generation"] == gen:
+            events.append(m)
+        if t != "live" or m[0]["generation"] != gen:
+            continue
+        seqs.append(m[0]["seq"])
+        pts.append(np.stack([m[1][n] for n in m[0]["channels"]]))
+        if m[1]["time_s"][-1] >= until_s:
+            break
+    d.stop()
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), "a live message was lost"
+    a = np.concatenate(pts, axis=1)
+    return a, [(e["kind"], e["sample"]) for e in events]
+
+
+def test_scripted_session_reproducible():
+    """Two daemons, the same seed and the same commands at the same controller times: identical live samples
+    (every channel, bit for bit) and events; another seed differs."""
+    a, ea = session(7)
+    b, eb = session(7)
+    kinds = [k for k, _ in ea]
+    assert kinds[:1] == ["engaged"] and "moved" in kinds and kinds[-1] == "withdrawn", ea
+    n = min(a.shape[1], b.shape[1])
+    assert n > 30000
+    assert a[:, :n].tobytes() == b[:, :n].tobytes()
+    assert ea == eb
+    c, _ = session(8)
+    m = min(n, c.shape[1])
+    assert a[:, :m].tobytes() != c[:, :m].tobytes()
