@@ -205,7 +205,7 @@ def test_fault_plan_on_engage():
     d.stop()
 
 
-def session(seed, until_s=34.0):
+def session(seed, until_s=38.0):
     """A scripted session in free run: the same commands at the same controller times. Returns the live
     points (all channels) of the controller built over the seed, up to until_s."""
     d = Daemon()
@@ -213,15 +213,15 @@ def session(seed, until_s=34.0):
     assert d.cmd({"cmd": "set", "values": {"free_run": True, "speed": 25, "monitor_rate_Hz": 1000,
                                            "seed": str(seed)}})["status"] == "ok"
     gen = d.cmd({"cmd": "status"})["ctrl"]["generation"]
-    for c in ({"cmd": "engage", "at_s": 0.5}, {"cmd": "feedback", "tau_s": 0.002, "at_s": 29.0},
-              {"cmd": "move", "x_m": 3e-6, "y_m": 0, "speed_m_per_s": 5e-6, "at_s": 29.5},
-              {"cmd": "withdraw", "at_s": 31.5}):
+    for c in ({"cmd": "engage", "at_s": 4.0}, {"cmd": "feedback", "tau_s": 0.002, "at_s": 33.0},
+              {"cmd": "move", "x_m": 3e-6, "y_m": 0, "speed_m_per_s": 5e-6, "at_s": 33.5},
+              {"cmd": "withdraw", "at_s": 35.5}):
         r = d.cmd(c)
-        assert r["status"] == "ok" and r["scheduled"], r
+        assert r["status"] == "ok" and r["scheduled"] and not r["late"], r  # else not the same session
     pts, seqs, events = [], [], []
     while True:
         t, m = recv(s)
-        if t == "event" and m.get("source") == "ctrl" and m["generation"] == gen:
+        if t == "event" and m.get("source") == "ctrl" and m.get("generation") == gen:
             events.append(m)
         if t != "live" or m[0]["generation"] != gen:
             continue

@@ -127,6 +127,7 @@ struct vafmd_live {
     atomic_uint_least64_t ack;
     vafmd_err ack_err;
     int ack_rc;
+    int ack_late;          /* the command's at_s had passed when it arrived: applied at once */
     /* ---- the status snapshot: the simulation thread only TRY-locks ---- */
     pthread_mutex_t mu;
     s_snap snap;
@@ -480,8 +481,8 @@ static void s_due(vafmd_live *L)
         vafmd_err e;
         memset(&e, 0, sizeof e);
         if (s_apply(L, &L->pend[0], &e)) /* a scheduled command refused: its requester learns it here */
-            s_send_json(L, "event", json_pack("{s:i,s:s,s:s,s:s,s:f,s:s,s:s,s:s}", "run_id", 0, "source", "ctrl", "kind",
-                                              "ctrl_refused", "cmd", L->pend[0].cmd, "at_s", L->pend[0].at_s, "code",
+            s_send_json(L, "event", json_pack("{s:i,s:s,s:s,s:I,s:s,s:f,s:s,s:s,s:s}", "run_id", 0, "source", "ctrl",
+                                              "kind", "ctrl_refused", "generation", (json_int_t)L->generation, "cmd", L->pend[0].cmd, "at_s", L->pend[0].at_s, "code",
                                               e.code ? e.code : "", "field", e.field, "message", e.message));
         memmove(&L->pend[0], &L->pend[1], (L->n_pend - 1) * sizeof L->pend[0]);
         L->n_pend--;
@@ -529,6 +530,7 @@ void vafmd_live_apply(vafmd *d, const vafmd_live_op *op)
         return;
     }
     int rc = 0;
+    L->ack_late = op->has_at && L->ctrl && s_at_sample(L, op->at_s) < L->cur;
     if (op->has_at && L->ctrl && s_at_sample(L, op->at_s) > L->cur) {
         if (L->n_pend >= S_PEND) {
             vafmd_err_set(&L->ack_err, VAFMD_E_BUSY, "at_s", "%d commands are already waiting for their time", S_PEND);
@@ -772,7 +774,7 @@ json_t *vafmd_live_cmd(vafmd *d, const vafmd_cmd *c, json_t *ok, vafmd_err *e)
             return NULL;
         }
     }
-    if (s_request(d, &op, !op.has_at, e)) {
+    if (s_request(d, &op, 1, e)) {
         json_decref(ok);
         return NULL;
     }
@@ -791,8 +793,10 @@ json_t *vafmd_live_cmd(vafmd *d, const vafmd_cmd *c, json_t *ok, vafmd_err *e)
             L->cp.fb_tau_s = op.tau_s;
     }
     json_object_set_new(ok, "scheduled", json_boolean(op.has_at));
-    if (op.has_at)
+    if (op.has_at) { /* late: the controller's clock had passed at_s when it arrived (applied at once) */
         json_object_set_new(ok, "at_s", json_real(op.at_s));
+        json_object_set_new(ok, "late", json_boolean(L->ack_late));
+    }
     json_object_set_new(ok, "ctrl", vafmd_live_status_json(d));
     return ok;
 }
