@@ -26,6 +26,7 @@
 #include "vafm/common.h"
 #include "vafm/params.h"
 #include "vafm/rng.h"
+#include "vafm/sim.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -91,6 +92,16 @@ VAFM_API void vafm_detector_apply(vafm_detector *d, double t_s, double height_m,
  *  height_m for an ideal piezo): a first-order low-pass of zsensor_bandwidth_Hz (from the first sample on)
  *  plus white noise of zsensor_noise_m rms from its own stream. Unchanged without a z-sensor setting. */
 VAFM_API double vafm_detector_height(vafm_detector *d, double t_s, double height_m);
+
+/** Sample i of a block through the measured chain: the one function every recorder of measured signals
+ *  calls (vafmd's stream and log, `vafm samples`, `vafm campaign` files), so that they record the same.
+ *  With the chain on: vafm_detector_apply's volts, deflection and force; off: the block's deflection and
+ *  force unchanged and volts = deflection / d->sens. The measured height is vafm_detector_height of the
+ *  piezo's actual height (b->height_measured_m, or b->height_m). Any output pointer may be NULL: its stage is
+ *  skipped (the z sensor's noise stream advances only when the height is asked for); a block without a
+ *  deflection array (a replayed file) leaves deflection and volts untouched. */
+VAFM_API void vafm_detector_sample(vafm_detector *d, const vafm_samples *b, size_t i, double *volts,
+                                   double *deflection_m, double *force_N, double *height_measured_m);
 
 /** The contact point of curve `index`: the height of the sample surface above the reference plane at t = 0,
  *  m: surface_height_m plus, with contact_point_sd_m > 0, a normal deviate of that sd from the curve's own

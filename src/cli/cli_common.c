@@ -592,17 +592,13 @@ static int s_measure(vafm_cli_rec *cp, const vafm_campaign_curve *c, vafm_sample
     }
     vafm_detector det;
     vafm_detector_begin(&det, c->params, c->index);
-    for (size_t i = 0; i < s->n; i++)
-        vafm_detector_apply(&det, s->time_s[i], s->height_m[i], s->deflection_m[i], NULL, &cp->mdefl[i], &cp->mforce[i]);
+    for (size_t i = 0; i < s->n; i++) /* the z sensor reads where the piezo is (a sensor of its own) */
+        vafm_detector_sample(&det, s, i, NULL, &cp->mdefl[i], &cp->mforce[i], det.zs_on ? &cp->mheight[i] : NULL);
     *out = *s;
     out->deflection_m = cp->mdefl;
     out->force_N = cp->mforce;
-    if (det.zs_on) { /* the z sensor reads where the piezo is */
-        const double *ha = s->height_measured_m ? s->height_measured_m : s->height_m;
-        for (size_t i = 0; i < s->n; i++)
-            cp->mheight[i] = vafm_detector_height(&det, s->time_s[i], ha[i]);
+    if (det.zs_on)
         out->height_measured_m = cp->mheight;
-    }
     return 0;
 }
 

@@ -214,17 +214,13 @@ static int s_write_samples(void *user, const vafm_samples *b)
 {
     s_out *o = user;
     for (size_t i = 0; i < b->n; i++) {
-        double defl = b->deflection_m[i], force = b->force_N[i];
-        if (o->det.on)
-            vafm_detector_apply(&o->det, b->time_s[i], b->height_m[i], b->deflection_m[i], NULL, &defl, &force);
+        double defl, force, hm;
+        vafm_detector_sample(&o->det, b, i, NULL, &defl, &force, o->hm ? &hm : NULL);
         if (fprintf(o->f, "%.17g,%.17g,%.17g,%.17g,%.17g,%u", b->time_s[i], b->height_m[i], defl, force,
                     b->tip_m[i], (unsigned)b->segment[i]) < 0)
             return 1; /* stop: the output is broken */
-        if (o->hm) {
-            double h = b->height_measured_m ? b->height_measured_m[i] : b->height_m[i];
-            if (fprintf(o->f, ",%.17g", vafm_detector_height(&o->det, b->time_s[i], h)) < 0)
-                return 1;
-        }
+        if (o->hm && fprintf(o->f, ",%.17g", hm) < 0)
+            return 1;
         if (fputc('\n', o->f) == EOF)
             return 1;
     }

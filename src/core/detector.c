@@ -184,6 +184,26 @@ double vafm_detector_height(vafm_detector *d, double t_s, double height_m)
     return d->zs_noise > 0 ? d->zs_y + d->zs_noise * vafm_rng_normal(&d->rng_zs) : d->zs_y;
 }
 
+void vafm_detector_sample(vafm_detector *d, const vafm_samples *b, size_t i, double *volts, double *deflection_m,
+                          double *force_N, double *height_measured_m)
+{
+    if (d->on) {
+        vafm_detector_apply(d, b->time_s[i], b->height_m[i], b->deflection_m[i], volts, deflection_m, force_N);
+    } else {
+        if (force_N)
+            *force_N = b->force_N[i];
+        if (b->deflection_m) {
+            if (deflection_m)
+                *deflection_m = b->deflection_m[i];
+            if (volts) /* a division, not a multiplication by the inverse: bit-exact with deflection / sensitivity */
+                *volts = b->deflection_m[i] / d->sens;
+        }
+    }
+    if (height_measured_m)
+        *height_measured_m =
+            vafm_detector_height(d, b->time_s[i], b->height_measured_m ? b->height_measured_m[i] : b->height_m[i]);
+}
+
 double vafm_artefact_contact_point(const vafm_params *p, uint64_t index)
 {
     double z = p->surface_height_m;
