@@ -42,6 +42,7 @@
 #include <unistd.h>
 
 #include "cli/campaign_mpi.h"
+#include "core/channels.h"
 
 int vafm_cli_mpi_launched(void)
 {
@@ -299,9 +300,24 @@ typedef struct s_hdr {
 
 _Static_assert(sizeof(s_hdr) % sizeof(double) == 0, "the channels after the header stay aligned");
 
+/* The arrays a packed curve carries: every row of core/channels.h that is an array of every computed curve
+ * (a vafm_samples field, not an optional one), in row order, then the segments. */
+static int s_packed(int i)
+{
+    return vafm_channels[i].field >= 0 && !(vafm_channels[i].flags & VAFM_CHF_OPTIONAL);
+}
+
+static size_t s_packed_channels(void)
+{
+    size_t k = 0;
+    for (int i = 0; i < VAFM_CH_COUNT; i++)
+        k += (size_t)s_packed(i);
+    return k;
+}
+
 static size_t s_packed_size(uint64_t n)
 {
-    return sizeof(s_hdr) + (size_t)n * (5 * sizeof(double) + 1);
+    return sizeof(s_hdr) + (size_t)n * (s_packed_channels() * sizeof(double) + 1);
 }
 
 /* ---- every rank: the source of indices and the sender of curves -------------------------------- */
@@ -434,13 +450,15 @@ static int s_send_curve(void *user, const vafm_campaign_curve *c)
     h.result = c->result;
     memcpy(buf, &h, sizeof h);
     double *ch = (double *)(void *)(buf + sizeof h);
-    const double *src[5] = { c->samples.time_s, c->samples.height_m, c->samples.deflection_m, c->samples.force_N,
-                             c->samples.tip_m };
-    for (int i = 0; i < 5; i++)
-        if (n)
-            memcpy(ch + (size_t)i * n, src[i], n * sizeof(double));
+    size_t k = 0;
+    for (int i = 0; i < VAFM_CH_COUNT; i++)
+        if (s_packed(i)) {
+            if (n)
+                memcpy(ch + k * n, vafm_channel_samples(&c->samples, i), n * sizeof(double));
+            k++;
+        }
     if (n)
-        memcpy(ch + 5 * n, c->samples.segment, n);
+        memcpy(ch + k * n, c->samples.segment, n);
     pthread_mutex_lock(&rk->qmu);
     while (rk->qcount == S_SENDS && !rk->failed)
         pthread_cond_wait(&rk->qcv, &rk->qmu);
@@ -500,12 +518,11 @@ static void s_deliver(s_server *sv)
             c.status = h.status;
             c.result = h.result;
             c.samples.n = n;
-            c.samples.time_s = ch;
-            c.samples.height_m = ch + n;
-            c.samples.deflection_m = ch + 2 * n;
-            c.samples.force_N = ch + 3 * n;
-            c.samples.tip_m = ch + 4 * n;
-            c.samples.segment = (const uint8_t *)(ch + 5 * n);
+            size_t k = 0;
+            for (int i = 0; i < VAFM_CH_COUNT; i++)
+                if (s_packed(i))
+                    vafm_channel_set_samples(&c.samples, i, ch + k++ * n);
+            c.samples.segment = (const uint8_t *)(ch + k * n);
             if (sv->fn && sv->fn(sv->user, &c))
                 sv->stop = 1;
         }

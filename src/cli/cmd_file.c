@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* `vafm info` and `vafm export`: HDF5 force-curve files, vafm's or another program's. */
 #include "cli/cli.h"
+#include "core/channels.h"
 
 /* ---- vafm info ------------------------------------------------------------------------------------ */
 
@@ -355,7 +356,8 @@ int vafm_cli_cmd_export(const vafm_cli_args *a)
     if (!rc && !(f = vafm_cli_open_out(a->val[O_CSV])))
         rc = VAFM_CLI_EXIT_RUNTIME;
     if (!rc) {
-        fputs("time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
+        vafm_channels_csv_head(f, VAFM_CH_SEGMENT_CSV); /* core/channels.h's columns */
+        fputc('\n', f);
         int bad = s_export_rows(f, &c) < 0;
         rc = vafm_cli_close_out(f, a->val[O_CSV], bad);
     }

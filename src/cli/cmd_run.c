@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* `vafm run` (one curve, a readable summary) and `vafm samples` (one curve or tune as CSV). */
 #include "cli/cli.h"
+#include "core/channels.h"
 #include "vafm/detector.h"
 #include "vafm/segments.h"
 #include "record/record.h"
@@ -259,8 +260,9 @@ int vafm_cli_cmd_samples(const vafm_cli_args *a)
     int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
     s_out o = { .f = f };
     o.hm = vafm_detector_height_differs(&sc.p);
-    fputs(o.hm ? "time_s,height_m,deflection_m,force_N,tip_m,segment,height_measured_m\n"
-               : "time_s,height_m,deflection_m,force_N,tip_m,segment\n", f);
+    /* the columns of core/channels.h up to the segment, and the measured height's after it */
+    vafm_channels_csv_head(f, o.hm ? vafm_channels[VAFM_CH_HEIGHT_MEASURED].csv : VAFM_CH_SEGMENT_CSV);
+    fputc('\n', f);
     vafm_detector_begin(&o.det, &sc.p, index);
     if (!r)
         r = vafm_cli_advance_all(sim, s_write_samples, &o, &pg);

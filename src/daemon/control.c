@@ -21,6 +21,7 @@
 #include "daemon/cmd_json.h"
 #include "daemon/daemon.h"
 #include "daemon/replay.h"
+#include "core/channels.h"
 #include "daemon/run_json.h"
 #include "vafm/wire.h"
 
@@ -79,7 +80,7 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     json_object_set_new(r, "security", json_string(d->auth.on ? "curve" : "none"));
     json_t *stream = json_string(d->pub_endpoint); /* NULL for an endpoint that is not UTF-8 */
     json_object_set_new(r, "stream", stream ? stream : json_null());
-    json_object_set_new(r, "channels", vafmd_channels_json());
+    json_object_set_new(r, "channels", vafmd_channels_json(vafm_channels_mask(VAFM_CHF_LIVE)));
     json_object_set_new(r, "max_request_bytes", json_integer(VAFMD_MAX_CMD_BYTES));
     json_object_set_new(r, "session", json_integer(atomic_load(&d->sh.session)));
     json_object_set_new(r, "live", vafmd_live_hello_json()); /* the controller's topic (live.c) */

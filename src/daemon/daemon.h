@@ -28,7 +28,6 @@
 #define VAFMD_DEFAULT_REP "tcp://127.0.0.1:5555"
 #define VAFMD_DEFAULT_PUB "tcp://127.0.0.1:5556"
 #define VAFMD_MAX_CMD_BYTES 65536 /* larger requests get a "too_large" error reply */
-#define VAFMD_N_CHANNELS 5
 
 /* Daemon settings that are not part of the physics scene (get/set like scene parameters). */
 typedef struct vafmd_settings {

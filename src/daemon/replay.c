@@ -15,6 +15,8 @@
  *   (it paces the stream).
  */
 #include "daemon/replay.h"
+#include "core/channels.h"
+#include "daemon/run_json.h"
 #include <inttypes.h>
 #include <math.h>
 #include <stdio.h>
@@ -23,13 +25,6 @@
 #include <jansson.h>
 #include "h5/h5.h"
 #include "vafm/wire.h"
-
-enum { S_CH_HEIGHT, S_CH_DEFL, S_CH_FORCE, S_CH_VDEFL, S_CH_TIP, S_CH_TIME, S_NCH };
-
-static const char *const s_ch_name[S_NCH][2] = {
-    { "height_m", "m" }, { "deflection_m", "m" }, { "force_N", "N" },
-    { "vDeflection_V", "V" }, { "tip_m", "m" }, { "time_s", "s" },
-};
 
 typedef struct s_curve {
     uint64_t group; /* the curve's number in the file */
@@ -402,20 +397,20 @@ static int s_load_curve(vafmd_replay *r, const char *path, const vafm_h5_curve *
     memcpy(r->height + o, h, n * sizeof(double));
     memcpy(r->force + o, cv->force_N, n * sizeof(double));
     memcpy(r->seg + o, cv->segment, n);
-    unsigned have = (1u << S_CH_HEIGHT) | (1u << S_CH_FORCE);
+    unsigned have = (1u << VAFM_CH_HEIGHT) | (1u << VAFM_CH_FORCE);
     if (s_pos(k)) {
-        have |= 1u << S_CH_DEFL;
+        have |= 1u << VAFM_CH_DEFLECTION;
         for (size_t i = 0; i < n; i++) /* NaN force → NaN deflection */
             r->defl[o + i] = cv->force_N[i] / k;
         if (s_pos(sens))
-            have |= 1u << S_CH_VDEFL;
+            have |= 1u << VAFM_CH_VDEFLECTION;
     }
     if (cv->tip_position_m) {
-        have |= 1u << S_CH_TIP;
+        have |= 1u << VAFM_CH_TIP;
         memcpy(r->tip + o, cv->tip_position_m, n * sizeof(double));
     }
     if (cv->time_s) {
-        have |= 1u << S_CH_TIME;
+        have |= 1u << VAFM_CH_TIME;
         memcpy(r->time + o, cv->time_s, n * sizeof(double));
         for (size_t i = 0; i < n; i++)
             r->clock[o + i] = cv->time_s[i] - cv->time_s[0] + 1.0 / fs;
@@ -508,7 +503,7 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
     }
     vafm_h5_provenance pv;
     vafm_h5_reader_provenance(rd, &pv);
-    unsigned mask = (1u << S_NCH) - 1;
+    unsigned mask = vafm_channels_mask(VAFM_CHF_LIVE | VAFM_CHF_REPLAY); /* what a file can have */
     curves = json_array();
     uint64_t declared = 0;
     for (size_t i = 0; i < n_sel; i++) { /* the lengths first: nothing is read beyond the pass's limit */
@@ -594,15 +589,15 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
     }
     r->mask = mask;
     /* the flat arrays of channels that are not streamed are not needed */
-    if (!(mask & (1u << S_CH_DEFL))) {
+    if (!(mask & (1u << VAFM_CH_DEFLECTION))) {
         free(r->defl);
         r->defl = NULL;
     }
-    if (!(mask & (1u << S_CH_TIP))) {
+    if (!(mask & (1u << VAFM_CH_TIP))) {
         free(r->tip);
         r->tip = NULL;
     }
-    if (!(mask & (1u << S_CH_TIME))) {
+    if (!(mask & (1u << VAFM_CH_TIME))) {
         free(r->time);
         r->time = NULL;
     }
@@ -610,11 +605,7 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
     double speed = c->has_speed ? c->speed : set->speed;
     *block_n = vafmd_block_samples(r->rate_Hz, set->block_s);
 
-    json_t *ch = json_array();
-    for (int i = 0; i < S_NCH; i++)
-        if (mask & (1u << i))
-            json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_ch_name[i][0], "unit", s_ch_name[i][1],
-                                                "dtype", "<f8"));
+    json_t *ch = vafmd_channels_json(mask);
     json_t *sel_j = json_array();
     for (size_t i = 0; i < n_sel; i++)
         json_array_append_new(sel_j, json_integer((json_int_t)vafm_h5_reader_group(rd, (size_t)sel[i])));
@@ -644,7 +635,7 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
     json_object_set_new(rp, "passes", r->passes ? json_integer((json_int_t)r->passes) : json_string("forever"));
     json_object_set_new(rp, "samples_per_pass", json_integer((json_int_t)r->total));
     json_object_set_new(rp, "duration_per_pass_s", json_real(r->pass_s));
-    json_object_set_new(rp, "time_column", json_boolean(mask & (1u << S_CH_TIME)));
+    json_object_set_new(rp, "time_column", json_boolean(mask & (1u << VAFM_CH_TIME)));
     json_object_set_new(rp, "curves", curves);
     curves = NULL;
 

@@ -26,12 +26,13 @@
 #define VAFMD_REPLAY_MAX_ATTR_BYTES 65536u      /* 64 KiB */
 #define VAFMD_REPLAY_MAX_ATTRS_TOTAL (8u << 20) /* 8 MiB */
 
-/* Channel bits of a run (bit i = channel i of the stream's channel table; time_s only in replays). */
-#define VAFMD_CH_TIME 5
-#define VAFMD_CH_LIVE_MASK 0x1fu
-/* A live run whose scene has a piezo actuator model or a z sensor also streams the measured height. */
-#define VAFMD_CH_HEIGHT_MEASURED 6
-#define VAFMD_CH_COUNT 7
+/* Channel bits of a run: bit i = row i of core/channels.h (time_s only in replays, height_measured_m when
+ * a live run's scene has a piezo model or a z sensor). */
+#include "core/channels.h"
+#define VAFMD_CH_TIME VAFM_CH_TIME
+#define VAFMD_CH_LIVE_MASK vafm_channels_mask(VAFM_CHF_LIVE)
+#define VAFMD_CH_HEIGHT_MEASURED VAFM_CH_HEIGHT_MEASURED
+#define VAFMD_CH_COUNT VAFM_CH_COUNT
 
 typedef struct vafmd_replay vafmd_replay;
 

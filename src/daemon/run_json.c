@@ -3,19 +3,23 @@
  * that it and "hello" share (design: run_json.h). */
 #include <stdlib.h>
 #include "daemon/run_json.h"
+#include "core/channels.h"
 #include "vafm/detector.h"
 #include "vafm/wire.h"
 
-static const char *const s_channels[VAFMD_N_CHANNELS][2] = {
-    { "height_m", "m" }, { "deflection_m", "m" }, { "force_N", "N" }, { "vDeflection_V", "V" }, { "tip_m", "m" },
-};
+unsigned vafmd_live_channels(const vafm_params *p)
+{
+    return vafm_channels_mask(VAFM_CHF_LIVE) |
+           (vafm_detector_height_differs(p) ? vafm_channels_mask(VAFM_CHF_OPTIONAL) : 0u);
+}
 
-json_t *vafmd_channels_json(void)
+json_t *vafmd_channels_json(unsigned mask)
 {
     json_t *ch = json_array();
-    for (int i = 0; i < VAFMD_N_CHANNELS; i++)
-        json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", s_channels[i][0], "unit", s_channels[i][1],
-                                            "dtype", "<f8"));
+    for (int i = 0; i < VAFM_CH_COUNT; i++)
+        if (mask & (1u << i))
+            json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", vafm_channels[i].name, "unit",
+                                                vafm_channels[i].unit, "dtype", VAFM_CH_DTYPE));
     return ch;
 }
 
@@ -28,9 +32,7 @@ char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int 
     if (scene && vafm_params_to_json(p, scene, 65536) > 0)
         scene_json = json_loads(scene, 0, NULL);
     free(scene);
-    json_t *ch = vafmd_channels_json();
-    if (vafm_detector_height_differs(p)) /* streamed after the five: the order of the channel bits */
-        json_array_append_new(ch, json_pack("{s:s,s:s,s:s}", "name", "height_measured_m", "unit", "m", "dtype", "<f8"));
+    json_t *ch = vafmd_channels_json(vafmd_live_channels(p));
     json_t *start = json_object();
     json_object_set_new(start, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));
     json_object_set_new(start, "run_id", json_integer((json_int_t)run_id));

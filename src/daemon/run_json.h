@@ -11,8 +11,13 @@
 #include <jansson.h>
 #include "daemon/daemon.h"
 
-/** The channels of a data block as a JSON array [{"name", "unit", "dtype"}] (new reference). */
-json_t *vafmd_channels_json(void);
+/** The channels of a data block, the rows of core/channels.h whose bit is set in mask, in row order, as
+ *  a JSON array [{"name", "unit", "dtype"}] (new reference). */
+json_t *vafmd_channels_json(unsigned mask);
+
+/** The channel bits a live run of scene p streams: the VAFM_CHF_LIVE rows, and the VAFM_CHF_OPTIONAL ones
+ *  when the scene has a measured height of its own (a piezo model or a z sensor). */
+unsigned vafmd_live_channels(const vafm_params *p);
 
 /** The "run.start" JSON text of a run (malloc'd; NULL on no memory). camp: the run's "campaign" object
  *  (stolen) or NULL. */
