@@ -123,6 +123,18 @@ for np in 1 2 3; do
     fi
 done
 
+# A scene whose curves have a measured height of their own (piezo hysteresis and creep, as the simulation
+# reports them in vafm_samples.height_measured_m): every array of a curve crosses to rank 0, so
+# "height (measured)" is the simulation's, as in the plain campaign (0.6.2 sent only the five arrays every
+# curve has and wrote the piezo command there).
+HSCENE=(--preset paper-fig4 --piezo_hysteresis=0.1 --piezo_creep=0.05 --flush-interval 0)
+if "$VAFM" campaign "${HSCENE[@]}" -n 3 -o "$TMP/href.h5" -q >/dev/null 2>&1 &&
+    timeout 120 "${MPI[@]}" -np 2 "$VAFM" campaign "${HSCENE[@]}" -n 3 -o "$TMP/hnp2.h5" -q >"$TMP/hnp2.out" 2>&1; then
+    same "piezo hysteresis: mpirun -np 2 equals the plain campaign" "$TMP/href.h5" "$TMP/hnp2.h5"
+else
+    bad "piezo hysteresis campaigns" "$(tail -c 300 "$TMP/hnp2.out")"
+fi
+
 # --mpi without a launcher: a singleton MPI job, the same file again.
 if timeout 60 "$VAFM" campaign "${SCENE[@]}" -n $N -o "$TMP/single.h5" -q --mpi >"$TMP/single.out" 2>&1 &&
     grep -q "^mpi          1 rank(s)" "$TMP/single.out"; then

@@ -294,30 +294,26 @@ typedef struct s_hdr {
     uint64_t index;
     uint64_t n;      /* samples */
     int32_t status;
-    int32_t pad;
+    uint32_t chmask; /* the channels packed after it (bits of core/channels.h's rows) */
     vafm_curve_result result;
 } s_hdr;
 
 _Static_assert(sizeof(s_hdr) % sizeof(double) == 0, "the channels after the header stay aligned");
 
-/* The arrays a packed curve carries: every row of core/channels.h that is an array of every computed curve
- * (a vafm_samples field, not an optional one), in row order, then the segments. */
-static int s_packed(int i)
+/* The arrays a packed curve carries: every row of core/channels.h that is a vafm_samples array the curve
+ * has (the measured height only with a piezo model), in row order, then the segments. */
+static uint32_t s_chmask(const vafm_samples *s)
 {
-    return vafm_channels[i].field >= 0 && !(vafm_channels[i].flags & VAFM_CHF_OPTIONAL);
-}
-
-static size_t s_packed_channels(void)
-{
-    size_t k = 0;
+    uint32_t m = 0;
     for (int i = 0; i < VAFM_CH_COUNT; i++)
-        k += (size_t)s_packed(i);
-    return k;
+        if (vafm_channels[i].field >= 0 && vafm_channel_samples(s, i))
+            m |= 1u << i;
+    return m;
 }
 
-static size_t s_packed_size(uint64_t n)
+static size_t s_packed_size(uint64_t n, uint32_t chmask)
 {
-    return sizeof(s_hdr) + (size_t)n * (s_packed_channels() * sizeof(double) + 1);
+    return sizeof(s_hdr) + (size_t)n * ((size_t)__builtin_popcount(chmask) * sizeof(double) + 1);
 }
 
 /* ---- every rank: the source of indices and the sender of curves -------------------------------- */
@@ -433,7 +429,8 @@ static int s_send_curve(void *user, const vafm_campaign_curve *c)
 {
     s_rank *rk = user;
     uint64_t n = c->samples.n;
-    size_t size = s_packed_size(n);
+    const uint32_t chmask = s_chmask(&c->samples);
+    size_t size = s_packed_size(n, chmask);
     char *buf = size <= (size_t)INT32_MAX ? malloc(size) : NULL;
     if (!buf) {
         fprintf(stderr, "vafm: rank %d: curve %" PRIu64 " (%" PRIu64 " samples): %s\n", rk->m->rank, c->index, n,
@@ -447,12 +444,13 @@ static int s_send_curve(void *user, const vafm_campaign_curve *c)
     h.index = c->index;
     h.n = n;
     h.status = c->status;
+    h.chmask = chmask;
     h.result = c->result;
     memcpy(buf, &h, sizeof h);
     double *ch = (double *)(void *)(buf + sizeof h);
     size_t k = 0;
     for (int i = 0; i < VAFM_CH_COUNT; i++)
-        if (s_packed(i)) {
+        if (chmask & (1u << i)) {
             if (n)
                 memcpy(ch + k * n, vafm_channel_samples(&c->samples, i), n * sizeof(double));
             k++;
@@ -520,7 +518,7 @@ static void s_deliver(s_server *sv)
             c.samples.n = n;
             size_t k = 0;
             for (int i = 0; i < VAFM_CH_COUNT; i++)
-                if (s_packed(i))
+                if (h.chmask & (1u << i))
                     vafm_channel_set_samples(&c.samples, i, ch + k++ * n);
             c.samples.segment = (const uint8_t *)(ch + k * n);
             if (sv->fn && sv->fn(sv->user, &c))
@@ -597,7 +595,8 @@ static void *s_serve(void *arg)
             if ((size_t)count >= sizeof h)
                 memcpy(&h, buf, sizeof h);
             /* Only a whole curve of an index handed out and not yet written can arrive. */
-            if ((size_t)count >= sizeof h && h.n < ((uint64_t)1 << 40) && (size_t)count == s_packed_size(h.n) &&
+            if ((size_t)count >= sizeof h && h.n < ((uint64_t)1 << 40) && h.chmask < (1u << VAFM_CH_COUNT) &&
+                (size_t)count == s_packed_size(h.n, h.chmask) &&
                 h.index >= sv->deliver_next && h.index < sv->next && !sv->slots[h.index % sv->window].buf) {
                 sv->slots[h.index % sv->window].buf = buf;
                 sv->per_rank[st.MPI_SOURCE]++;
