@@ -82,3 +82,25 @@ def test_wire_md_channel_table():
     for r in ROWS:
         if r["flags"] in ("LIVE", "OPTIONAL", "REPLAY"):
             assert "`" + r["name"] + "`" in wire, r["name"]
+
+
+def test_wire_md_units():
+    """wire.md §3.1's channel table gives each channel the table's unit."""
+    wire = read("protocol", "wire.md")
+    sec = wire[wire.index("### 3.1 Data blocks"):wire.index("#### 3.1.1")]
+    units = {r["name"]: r["unit"] for r in ROWS}
+    rows = re.findall(r"^\| \d+ \| `(\w+)` \| (\w+) \|", sec, flags=re.M)
+    assert len(rows) >= 5
+    for name, unit in rows:
+        assert units.get(name) == unit, (name, unit)
+
+
+def test_file_datasets():
+    """Each channel's file dataset is one of the HDF5 layer's (src/h5/h5_common.c), in the same unit."""
+    text = read("src", "h5", "h5_common.c")
+    body = text[text.index("vafm_h5i_chans[VAFM_H5I_NCHAN] = {"):]
+    h5 = dict(re.findall(r'\{ "([^"]+)", "(\w*)", \d, offsetof', body[:body.index("};")]))
+    assert "segment" in h5 and len(h5) >= 6, h5
+    for r in ROWS:
+        if r["file"] is not None:
+            assert h5.get(r["file"]) == r["unit"], (r["name"], r["file"], h5)
