@@ -29,10 +29,6 @@
 /* Channel bits of a run: bit i = row i of core/channels.h (time_s only in replays, height_measured_m when
  * a live run's scene has a piezo model or a z sensor). */
 #include "core/channels.h"
-#define VAFMD_CH_TIME VAFM_CH_TIME
-#define VAFMD_CH_LIVE_MASK vafm_channels_mask(VAFM_CHF_LIVE)
-#define VAFMD_CH_HEIGHT_MEASURED VAFM_CH_HEIGHT_MEASURED
-#define VAFMD_CH_COUNT VAFM_CH_COUNT
 
 typedef struct vafmd_replay vafmd_replay;
 
@@ -61,7 +57,7 @@ int vafmd_replay_prepare(const vafmd_cmd *c, const vafmd_settings *set, uint64_t
 /** Free a replay; NULL-safe, sets *rp to NULL. */
 void vafmd_replay_free(vafmd_replay **rp);
 
-/** Streamed channels (VAFMD_CH_* bits) and the nominal sample rate of the run (header, block size). */
+/** Streamed channels (bits of core/channels.h rows) and the nominal sample rate of the run (header, block size). */
 unsigned vafmd_replay_channels(const vafmd_replay *rp);
 double vafmd_replay_rate_Hz(const vafmd_replay *rp);
 

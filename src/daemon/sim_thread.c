@@ -36,6 +36,7 @@
 #endif
 #include <jansson.h>
 #include <zmq.h>
+#include "core/channels.h"
 #include "daemon/camp_feed.h"
 #include "daemon/daemon.h"
 #include "daemon/replay.h"
@@ -65,7 +66,7 @@ typedef struct s_event {
 /* A computed block waiting for its deadline in the run's FIFO. */
 typedef struct s_block {
     size_t n;                          /* samples */
-    double *ch[VAFMD_CH_COUNT];  /* into the run's preallocated store; NULL: channel not streamed */
+    double *ch[VAFM_CH_COUNT];  /* into the run's preallocated store; NULL: channel not streamed */
     uint32_t flags;                    /* LAST, SEG_CHANGE, CLIPPED (LATE and FREE_RUN at release) */
     uint8_t first_seg;
     s_event ev[S_MAX_EVENTS];
@@ -75,7 +76,7 @@ typedef struct s_block {
     int64_t deadline;                  /* CLOCK_MONOTONIC ns */
     int64_t ready;                     /* when its computation ended */
     double *log_t;                     /* a logged run: its samples' times and segments (the logged */
-    uint8_t *log_seg;                  /* height, force and tip are ch[0], ch[2], ch[4]), else NULL */
+    uint8_t *log_seg;                  /* height, force and tip are the channels' own arrays), else NULL */
     int n_frec;                        /* controller faults applied to this block: published after it */
     vafmd_fault_rec frec[3];
 } s_block;
@@ -91,7 +92,7 @@ typedef struct s_run {
     int active;
     vafmd_sim_cmd cmd;     /* START command: sim, start_json, settings */
     size_t block_n;
-    double *ch[VAFMD_CH_COUNT]; /* + time_s (replays), height_measured_m; a channel not streamed is NULL */
+    double *ch[VAFM_CH_COUNT]; /* + time_s (replays), height_measured_m; a channel not streamed is NULL */
     double sens;           /* m/V: vDeflection = deflection / sens (a replay: its curve's sensitivity) */
     size_t fill;
     uint8_t first_seg;
@@ -216,7 +217,7 @@ static void s_set_nodrop(s_ctx *x, int on)
 /* The channels a run streams (bits of its channel mask). */
 static size_t s_channels(unsigned chmask)
 {
-    return (size_t)__builtin_popcount(chmask & ((1u << VAFMD_CH_COUNT) - 1u));
+    return (size_t)__builtin_popcount(chmask & ((1u << VAFM_CH_COUNT) - 1u));
 }
 
 /* Bound each subscriber's queue in bytes as well as in messages: the setting hwm counts messages, and
@@ -397,7 +398,8 @@ static void s_fault_run_begin(s_ctx *x)
 static void s_fault_compute(s_ctx *x, s_block *b, uint64_t bi)
 {
     s_run *r = &x->run;
-    if (r->cmd.replay || !b->ch[1] || !b->ch[2] || !b->ch[3])
+    double *volts = b->ch[VAFM_CH_VDEFLECTION], *defl = b->ch[VAFM_CH_DEFLECTION], *force = b->ch[VAFM_CH_FORCE];
+    if (r->cmd.replay || !defl || !force || !volts)
         return; /* a replay streams what was recorded */
     double p0, p1;
     int sc;
@@ -422,9 +424,9 @@ static void s_fault_compute(s_ctx *x, s_block *b, uint64_t bi)
     size_t i = 0;
     if (r->sat_left) {
         for (; i < b->n && r->sat_left; i++, r->sat_left--) {
-            b->ch[3][i] = r->sat_level;
-            b->ch[1][i] = r->sat_level * r->sens;
-            b->ch[2][i] = k * b->ch[1][i];
+            volts[i] = r->sat_level;
+            defl[i] = r->sat_level * r->sens;
+            force[i] = k * defl[i];
         }
         b->flags |= VAFM_WIRE_FLAG_CLIPPED;
         r->force_altered = 1;
@@ -433,18 +435,18 @@ static void s_fault_compute(s_ctx *x, s_block *b, uint64_t bi)
         if (bi == 0 && !r->dout_stuck) /* nothing before: NaN; stuck at the first sample's values */
             r->last_v[0] = r->last_v[1] = r->last_v[2] = NAN;
         else if (bi == 0)
-            r->last_v[0] = b->ch[3][0], r->last_v[1] = b->ch[1][0], r->last_v[2] = b->ch[2][0];
+            r->last_v[0] = volts[0], r->last_v[1] = defl[0], r->last_v[2] = force[0];
         r->force_altered = 1;
         for (i = 0; i < b->n && r->dout_left; i++, r->dout_left--) {
-            b->ch[3][i] = r->dout_stuck ? r->last_v[0] : NAN;
-            b->ch[1][i] = r->dout_stuck ? r->last_v[1] : NAN;
-            b->ch[2][i] = r->dout_stuck ? r->last_v[2] : NAN;
+            volts[i] = r->dout_stuck ? r->last_v[0] : NAN;
+            defl[i] = r->dout_stuck ? r->last_v[1] : NAN;
+            force[i] = r->dout_stuck ? r->last_v[2] : NAN;
         }
     }
     if (b->n) {
-        r->last_v[0] = b->ch[3][b->n - 1];
-        r->last_v[1] = b->ch[1][b->n - 1];
-        r->last_v[2] = b->ch[2][b->n - 1];
+        r->last_v[0] = volts[b->n - 1];
+        r->last_v[1] = defl[b->n - 1];
+        r->last_v[2] = force[b->n - 1];
     }
 }
 
@@ -530,27 +532,22 @@ static const char *s_seg_name(int s)
 static int s_sink(void *user, const vafm_samples *b)
 {
     s_run *r = user;
+    if (!r->det.on) /* volts = deflection / the run's sensitivity (a replay: its curve's, set per batch) */
+        r->det.sens = r->sens;
     for (size_t i = 0; i < b->n; i++) {
         size_t k = r->fill + i;
         if (k >= r->block_n)
             return 1; /* cannot happen: advance is asked for at most the room left */
-        r->ch[0][k] = b->height_m[i];
-        if (r->ch[1]) /* replays stream only the channels their file has */
-            r->ch[1][k] = b->deflection_m[i];
-        r->ch[2][k] = b->force_N[i];
-        if (r->det.on) /* the measured chain: detector volts, then deflection and force derived from them */
-            vafm_detector_apply(&r->det, b->time_s[i], b->height_m[i], b->deflection_m[i], &r->ch[3][k], &r->ch[1][k],
-                                &r->ch[2][k]);
-        else if (r->ch[3]) /* a division, not a multiplication by the inverse: bit-exact with deflection / sensitivity */
-            r->ch[3][k] = b->deflection_m[i] / r->sens;
-        if (r->ch[4])
-            r->ch[4][k] = b->tip_m[i];
-        if (r->ch[VAFMD_CH_TIME])
-            r->ch[VAFMD_CH_TIME][k] = b->time_s[i];
-        if (r->ch[VAFMD_CH_HEIGHT_MEASURED]) /* where the piezo is, as its z sensor reads it */
-            r->ch[VAFMD_CH_HEIGHT_MEASURED][k] =
-                vafm_detector_height(&r->det, b->time_s[i], b->height_measured_m ? b->height_measured_m[i] : b->height_m[i]);
-        if (r->lt) { /* the log takes these and ch[0], ch[2], ch[4] at release: the stream's doubles */
+        /* the measured rows come out of the detector chain (deflection and force derived from its volts;
+         * the measured height from the z sensor, where the piezo is), the others from the block's arrays;
+         * a channel the run does not stream is NULL (a replay streams what its file has) */
+        double m[VAFM_CH_COUNT];
+        vafm_detector_sample(&r->det, b, i, &m[VAFM_CH_VDEFLECTION], &m[VAFM_CH_DEFLECTION], &m[VAFM_CH_FORCE],
+                             r->ch[VAFM_CH_HEIGHT_MEASURED] ? &m[VAFM_CH_HEIGHT_MEASURED] : NULL);
+        for (int c = 0; c < VAFM_CH_COUNT; c++)
+            if (r->ch[c])
+                r->ch[c][k] = vafm_channels[c].kind == VAFM_CHK_MEASURED ? m[c] : vafm_channel_samples(b, c)[i];
+        if (r->lt) { /* the log takes these and the table's file rows at release: the stream's doubles */
             r->lt[k] = b->time_s[i];
             r->lseg[k] = b->segment[i];
         }
@@ -813,18 +810,19 @@ static void s_log_block(s_ctx *x, const s_block *b)
 {
     s_run *r = &x->run;
     vafmd_log_block *lb = s_pool_get(x);
-    if (lb && (lb->pool->block_cap < b->n || !b->log_t || !b->ch[0] || !b->ch[2] || !b->ch[4])) {
+    if (lb && (lb->pool->block_cap < b->n || !b->log_t || !b->ch[VAFM_CH_HEIGHT] || !b->ch[VAFM_CH_FORCE] ||
+               !b->ch[VAFM_CH_TIP])) {
         s_pool_put(lb); /* cannot happen: the pool is made for the run's blocks, curves stream 0, 2 and 4 */
         lb = NULL;
     }
     if (lb) {
         memcpy(lb->time_s, b->log_t, b->n * sizeof(double));
-        memcpy(lb->height_m, b->ch[0], b->n * sizeof(double));
-        memcpy(lb->force_N, b->ch[2], b->n * sizeof(double));
-        memcpy(lb->tip_m, b->ch[4], b->n * sizeof(double));
-        lb->has_measured = b->ch[VAFMD_CH_HEIGHT_MEASURED] != NULL;
+        memcpy(lb->height_m, b->ch[VAFM_CH_HEIGHT], b->n * sizeof(double));
+        memcpy(lb->force_N, b->ch[VAFM_CH_FORCE], b->n * sizeof(double));
+        memcpy(lb->tip_m, b->ch[VAFM_CH_TIP], b->n * sizeof(double));
+        lb->has_measured = b->ch[VAFM_CH_HEIGHT_MEASURED] != NULL;
         if (lb->has_measured)
-            memcpy(lb->height_measured_m, b->ch[VAFMD_CH_HEIGHT_MEASURED], b->n * sizeof(double));
+            memcpy(lb->height_measured_m, b->ch[VAFM_CH_HEIGHT_MEASURED], b->n * sizeof(double));
         memcpy(lb->segment, b->log_seg, b->n);
         lb->n = b->n;
     }
@@ -852,7 +850,7 @@ static void s_run_free(s_run *r, vafmd_shared *sh)
     r->cmd.start_json = NULL;
     vafmd_replay_free(&r->cmd.replay);
     vafmd_feed_curve_free(&r->cmd.feed); /* between curves, as the campaign's simulations are built */
-    for (int i = 0; i < VAFMD_CH_COUNT; i++)
+    for (int i = 0; i < VAFM_CH_COUNT; i++)
         r->ch[i] = NULL; /* pointed into qstore */
     r->active = 0;
 }
@@ -1090,8 +1088,7 @@ static void s_run_start(s_ctx *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
     vafmd_live_run_start(x->d, &r->cmd.start_json); /* + "ctrl": the controller's state, held during the run */
     s_send_text(x, "run.start", r->cmd.start_json);
-    unsigned chmask = c->replay ? vafmd_replay_channels(c->replay)
-                                : VAFMD_CH_LIVE_MASK | (vafm_detector_height_differs(p) ? 1u << VAFMD_CH_HEIGHT_MEASURED : 0u);
+    unsigned chmask = c->replay ? vafmd_replay_channels(c->replay) : vafmd_live_channels(p);
     r->src_rc = 1;
     s_stream_bound(x, chmask, r->block_n, c->set.hwm);
     int rc = s_queue_alloc(x, chmask, p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay));
@@ -1133,7 +1130,7 @@ static int s_queue_alloc(s_ctx *x, unsigned chmask, double fs)
         return VAFM_ENOMEM;
     for (size_t k = 0; k < r->qcap; k++) {
         double *p = r->qstore + k * (nch + nlog) * r->block_n;
-        for (int i = 0; i < VAFMD_CH_COUNT; i++)
+        for (int i = 0; i < VAFM_CH_COUNT; i++)
             if (chmask >> i & 1) {
                 r->q[k].ch[i] = p;
                 p += r->block_n;
@@ -1174,7 +1171,7 @@ static void s_compute(s_ctx *x)
         r->seg_change = 0;
         r->n_ev = 0;
         r->det.clipped = 0;
-        for (int i = 0; i < VAFMD_CH_COUNT; i++)
+        for (int i = 0; i < VAFM_CH_COUNT; i++)
             r->ch[i] = b->ch[i];
         r->lt = b->log_t;
         r->lseg = b->log_seg;
@@ -1290,9 +1287,9 @@ static void s_release(s_ctx *x, int64_t now)
         .session = (uint32_t)atomic_load_explicit(&sh->session, memory_order_relaxed), /* the session */
     };
     unsigned char hb[VAFM_WIRE_HEADER_SIZE];
-    const void *part[2 + VAFMD_CH_COUNT] = { "data", hb };
-    size_t len[2 + VAFMD_CH_COUNT] = { 4, sizeof hb };
-    for (int i = 0; i < VAFMD_CH_COUNT; i++)
+    const void *part[2 + VAFM_CH_COUNT] = { "data", hb };
+    size_t len[2 + VAFM_CH_COUNT] = { 4, sizeof hb };
+    for (int i = 0; i < VAFM_CH_COUNT; i++)
         if (b->ch[i]) {
             part[2 + h.n_channels] = b->ch[i];
             len[2 + h.n_channels++] = b->n * sizeof(double);
