@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * vafmd internals shared by main.c, control.c and sim_thread.c.
+ * vafmd internals shared by main.c, control.c and the simulation thread (sim_thread.h).
  *
  * Threads: the main thread runs the control loop (REP socket, JSON, scene) and the simulation thread
  * owns the PUB socket. The control thread hands work over through a lock-free SPSC ring of commands;
@@ -105,12 +105,12 @@ typedef struct vafmd_sim_cmd {
  * The simulation thread copies each released block of a logged curve into a log block taken from a
  * preallocated pool and pushes a pointer through the log ring (SPSC; a paced run never waits: a full
  * ring, or an empty pool, drops the block, counts an overflow and marks the curve broken; a broken curve
- * is not written; a free run waits for room instead, sim_thread.c "Free run"). The writer thread assembles the curve, appends it, with a flush, when its LOG_END arrives,
+ * is not written; a free run waits for room instead, sim_logpool.c "Free run"). The writer thread assembles the curve, appends it, with a flush, when its LOG_END arrives,
  * and gives each block back through the free ring (a second SPSC ring, writer → simulation thread).
- * The pool's design and lifetime: sim_thread.c, "The log block pool". */
+ * The pool's design and lifetime: sim_logpool.c, "The log block pool". */
 enum vafmd_log_item_type { VAFMD_LOG_BEGIN = 1, VAFMD_LOG_BLOCK = 2, VAFMD_LOG_END = 3 };
 #define VAFMD_LOG_RING_CAP 4096u /* blocks in flight: 20 s of samples at the default 5 ms blocks */
-#define VAFMD_LOG_POOL_MAX_BYTES (256u << 20) /* sample memory of the log block pool (sim_thread.c) */
+#define VAFMD_LOG_POOL_MAX_BYTES (256u << 20) /* sample memory of the log block pool (sim_logpool.c) */
 
 struct vafmd_log_pool;
 typedef struct vafmd_log_block {
@@ -206,7 +206,7 @@ typedef struct vafmd_log {
 } vafmd_log;
 
 #define VAFMD_LOOKAHEAD_MAX_BYTES (256u << 20) /* memory of a run's compute-ahead FIFO (sim_thread.c) */
-#define VAFMD_STREAM_MAX_BYTES (256u << 20)   /* samples queued for one subscriber (sim_thread.c) */
+#define VAFMD_STREAM_MAX_BYTES (256u << 20)   /* samples queued for one subscriber (sim_publish.c) */
 #define VAFMD_MAX_BLOCK_SAMPLES 262144 /* bounds a block's memory at very high sample rates */
 /* Samples per data block: round(fs · block duration), at least 1, at most VAFMD_MAX_BLOCK_SAMPLES. */
 static inline size_t vafmd_block_samples(double fs, double block_s)

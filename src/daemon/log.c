@@ -6,10 +6,10 @@
  * progress. The arrays in the file are copies of the very doubles that were streamed (bit for bit).
  *
  * A paced run never waits for this thread: the ring is bounded and a full ring costs the curve (counted),
- * not time; a free run waits for room instead and loses nothing (sim_thread.c, "Free run"). Each curve
+ * not time; a free run waits for room instead and loses nothing (sim_logpool.c, "Free run"). Each curve
  * whose run.end said "pending" gets exactly one notice, from here (its end item) or, when its end item
  * was lost, from the simulation thread; the counters count each curve once, where its notice comes from. The log blocks come from the simulation thread's preallocated pool and go
- * back to it through the free ring (sim_thread.c, "The log block pool"). This thread polls the ring
+ * back to it through the free ring (sim_logpool.c, "The log block pool"). This thread polls the ring
  * (1 ms naps when it is empty); the writer object is handed over by the control thread through the
  * atomic log state (OFF → ON) and handed back, closed, by this thread (STOPPING → OFF).
  */
@@ -139,7 +139,7 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
 
 /* An item is done with: a log block goes back to the simulation thread's pool through the free ring (it
  * lives inside a pool allocation: never free()d one by one), begin and end items are freed here. The
- * free ring holds every block that can be out at once (sim_thread.c sizes it), so the push does not
+ * free ring holds every block that can be out at once (sim_logpool.c sizes it), so the push does not
  * fail; if it ever did, the block would only be lost to its pool until the pool is freed whole. */
 static void s_item_done(vafmd_log *L, vafmd_log_item *it)
 {
