@@ -479,7 +479,8 @@ int vafm_cli_listen(int argc, char **argv)
         silent_ms = q == VAFM_EABORT ? silent_ms + 250 : 0;
         if (q == VAFM_EABORT) {
             if (silent_ms >= VAFM_CLI_CONN_SILENCE_MS) { /* no heartbeat either: the daemon is gone */
-                vafm_cli_conn_err(&x, "nothing received for %d s (no heartbeat): is vafmd running?", VAFM_CLI_CONN_SILENCE_MS / 1000);
+                vafm_cli_conn_err(&x, "nothing received for %d s (no heartbeat): is vafmd running?",
+                                  VAFM_CLI_CONN_SILENCE_MS / 1000);
                 rc = VAFM_CLI_CONN_RUNTIME;
             }
             continue;
