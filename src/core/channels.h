@@ -117,6 +117,29 @@ static inline void vafm_channel_set_samples(vafm_samples *b, int i, const double
         memcpy((char *)b + vafm_channels[i].field, &p, sizeof p);
 }
 
+/** Rows that go into a file (a dataset of protocol/hdf5.md): what vafmd's log keeps of a run. */
+static inline int vafm_channels_filed(void)
+{
+    int k = 0;
+    for (int i = 0; i < VAFM_CH_COUNT; i++)
+        k += vafm_channels[i].file != NULL;
+    return k;
+}
+
+/** Samples [i, i + m) of a block: every channel's array (and the segments) advanced by i. */
+static inline vafm_samples vafm_channels_slice(const vafm_samples *b, size_t i, size_t m)
+{
+    vafm_samples s = *b;
+    s.n = m;
+    s.first = b->first + i;
+    for (int c = 0; c < VAFM_CH_COUNT; c++) {
+        const double *p = vafm_channel_samples(b, c);
+        vafm_channel_set_samples(&s, c, p ? p + i : NULL);
+    }
+    s.segment = b->segment ? b->segment + i : NULL;
+    return s;
+}
+
 /** The row at CSV column c (1 … ), -1: none there (the segment's column, or past the last). */
 static inline int vafm_channel_at_csv(int c)
 {

@@ -8,6 +8,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "core/channels.h"
 #include "vafm/common.h"
 
 struct vafmd_feed {
@@ -49,8 +50,11 @@ static void s_nap(void)
 static int s_on_curve(void *user, const vafm_campaign_curve *c)
 {
     vafmd_feed *f = user;
-    const size_t n = c->samples.n, hm = c->samples.height_measured_m ? 1 : 0;
-    const size_t bytes = n * ((5 + hm) * sizeof(double) + 1);
+    const size_t n = c->samples.n;
+    size_t arrays = 0; /* the channel arrays the curve has (core/channels.h) */
+    for (int k = 0; k < VAFM_CH_COUNT; k++)
+        arrays += vafm_channel_samples(&c->samples, k) != NULL;
+    const size_t bytes = n * (arrays * sizeof(double) + 1);
     vafmd_feed_curve *fc = malloc(sizeof *fc + bytes);
     if (!fc)
         return 1;
@@ -62,19 +66,20 @@ static int s_on_curve(void *user, const vafm_campaign_curve *c)
     fc->n = n;
     fc->bytes = bytes;
     double *p = (double *)(fc + 1);
-    double **dst[6] = { &fc->time_s, &fc->height_m, &fc->deflection_m, &fc->force_N, &fc->tip_m,
-                        &fc->height_measured_m };
-    const double *src[6] = { c->samples.time_s, c->samples.height_m, c->samples.deflection_m, c->samples.force_N,
-                             c->samples.tip_m, c->samples.height_measured_m };
-    for (size_t k = 0; k < 5 + hm; k++) {
-        *dst[k] = p;
+    fc->samples = (vafm_samples){ .n = n };
+    for (int k = 0; k < VAFM_CH_COUNT; k++) {
+        const double *src = vafm_channel_samples(&c->samples, k);
+        if (!src)
+            continue;
         if (n)
-            memcpy(p, src[k], n * sizeof(double));
+            memcpy(p, src, n * sizeof(double));
+        vafm_channel_set_samples(&fc->samples, k, p);
         p += n;
     }
-    fc->segment = (uint8_t *)p;
+    uint8_t *seg = (uint8_t *)p;
     if (n)
-        memcpy(fc->segment, c->samples.segment, n);
+        memcpy(seg, c->samples.segment, n);
+    fc->samples.segment = seg;
     for (;;) { /* room: a free slot, and the byte budget (an empty ring takes any curve) */
         if (atomic_load(&f->stop)) {
             vafmd_feed_curve_free(&fc);

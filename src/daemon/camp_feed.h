@@ -34,9 +34,8 @@ typedef struct vafmd_feed_curve {
     vafm_error error;           /* status ≠ 0: its detail (field, message) */
     vafm_curve_result result;
     size_t n;                   /* samples */
-    double *time_s, *height_m, *deflection_m, *force_N, *tip_m;
-    double *height_measured_m;  /* NULL: the scene has no piezo actuator model */
-    uint8_t *segment;
+    vafm_samples samples;       /* the curve's arrays (core/channels.h's rows, in the allocation after
+                                   this struct); height_measured_m NULL: the scene has no piezo model */
     size_t bytes;
 } vafmd_feed_curve;
 

@@ -13,6 +13,7 @@
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdint.h>
+#include "core/channels.h"
 #include "vafm/campaign.h"
 #include "vafm/map.h"
 #include "vafm/params.h"
@@ -115,9 +116,10 @@ enum vafmd_log_item_type { VAFMD_LOG_BEGIN = 1, VAFMD_LOG_BLOCK = 2, VAFMD_LOG_E
 struct vafmd_log_pool;
 typedef struct vafmd_log_block {
     size_t n;                    /* samples in use */
-    double *time_s, *height_m, *force_N, *tip_m; /* point into its pool's sample memory */
-    double *height_measured_m;   /* the measured height (used when has_measured) */
-    int has_measured;            /* the run streams height_measured_m (a piezo model or a z sensor) */
+    double *ch[VAFM_CH_COUNT];   /* the rows of core/channels.h that go into files (a dataset name), in
+                                    its pool's sample memory; NULL for the others */
+    unsigned mask;               /* the rows this block carries (the measured height: a piezo model or a
+                                    z sensor) */
     uint8_t *segment;
     struct vafmd_log_pool *pool; /* the pool it belongs to (and goes back to) */
 } vafmd_log_block;

@@ -27,8 +27,8 @@ typedef struct s_curve {
     vafmd_log_begin *begin; /* NULL: no curve in progress */
     int broken;
     size_t n, cap;
-    double *time_s, *height_m, *force_N, *tip_m, *height_measured_m;
-    int has_measured;
+    double *ch[VAFM_CH_COUNT]; /* the rows of core/channels.h that go into files */
+    unsigned mask;             /* the rows the curve's blocks carry */
     uint8_t *segment;
 } s_curve;
 
@@ -39,7 +39,7 @@ static void s_curve_reset(s_curve *c)
     free(c->begin);
     c->begin = NULL;
     c->broken = 0;
-    c->has_measured = 0;
+    c->mask = 0;
     c->n = 0;
     if (c->cap > ((size_t)1 << 20)) /* a long curve's buffers go back to the system (an idle daemon holds
                                       at most ~35 MB of them) */
@@ -49,11 +49,8 @@ static void s_curve_reset(s_curve *c)
 static void s_curve_free(s_curve *c)
 {
     free(c->begin);
-    free(c->time_s);
-    free(c->height_m);
-    free(c->force_N);
-    free(c->tip_m);
-    free(c->height_measured_m);
+    for (int k = 0; k < VAFM_CH_COUNT; k++)
+        free(c->ch[k]);
     free(c->segment);
     memset(c, 0, sizeof *c);
 }
@@ -69,12 +66,13 @@ static int s_curve_grow(s_curve *c, size_t need)
         cap *= 2;
     if (cap > VAFMD_LOG_MAX_CURVE_SAMPLES)
         cap = VAFMD_LOG_MAX_CURVE_SAMPLES;
-    double **d[5] = { &c->time_s, &c->height_m, &c->force_N, &c->tip_m, &c->height_measured_m };
-    for (int i = 0; i < 5; i++) {
-        double *p = realloc(*d[i], cap * sizeof(double));
+    for (int k = 0; k < VAFM_CH_COUNT; k++) {
+        if (!vafm_channels[k].file)
+            continue;
+        double *p = realloc(c->ch[k], cap * sizeof(double));
         if (!p)
             return -1;
-        *d[i] = p;
+        c->ch[k] = p;
     }
     uint8_t *s = realloc(c->segment, cap);
     if (!s)
@@ -107,9 +105,10 @@ static void s_notice(vafmd_log *L, uint64_t run_id, uint64_t group, int ok)
 /* Append the finished curve; the recorder makes it durable before it returns (flush interval 0). */
 static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
 {
-    vafm_samples s = { .n = c->n, .first = 0, .time_s = c->time_s, .height_m = c->height_m,
-                       .deflection_m = NULL, .force_N = c->force_N, .tip_m = c->tip_m, .segment = c->segment,
-                       .height_measured_m = c->has_measured ? c->height_measured_m : NULL };
+    vafm_samples s = { .n = c->n, .first = 0, .segment = c->segment };
+    for (int k = 0; k < VAFM_CH_COUNT; k++)
+        if (c->mask & (1u << k))
+            vafm_channel_set_samples(&s, k, c->ch[k]);
     /* the group number is the file's curve count; the random stream index and the run are kept in the
      * curve id (the curve-group attribute list is closed). With the detector on the force is a measured
      * (noisy, quantised) one, so "tip position" = height + force/k (hdf5.md L14) is left out; so it is
@@ -167,13 +166,10 @@ static void s_handle(vafmd_log *L, s_curve *c, vafmd_log_item *it, int on)
             c->broken = 1;
             break;
         }
-        memcpy(c->time_s + c->n, b->time_s, b->n * sizeof(double));
-        memcpy(c->height_m + c->n, b->height_m, b->n * sizeof(double));
-        memcpy(c->force_N + c->n, b->force_N, b->n * sizeof(double));
-        memcpy(c->tip_m + c->n, b->tip_m, b->n * sizeof(double));
-        c->has_measured = b->has_measured;
-        if (b->has_measured)
-            memcpy(c->height_measured_m + c->n, b->height_measured_m, b->n * sizeof(double));
+        for (int k = 0; k < VAFM_CH_COUNT; k++)
+            if (b->mask & (1u << k))
+                memcpy(c->ch[k] + c->n, b->ch[k], b->n * sizeof(double));
+        c->mask = b->mask;
         memcpy(c->segment + c->n, b->segment, b->n);
         c->n += b->n;
         break;

@@ -33,7 +33,7 @@
 
 static size_t s_pool_stride(size_t cap) /* bytes of one block's samples, 64-byte aligned */
 {
-    return ((5 * sizeof(double) + 1) * cap + 63) & ~(size_t)63;
+    return (((size_t)vafm_channels_filed() * sizeof(double) + 1) * cap + 63) & ~(size_t)63;
 }
 
 static size_t s_pool_head(size_t n) /* the pool header, block headers and free stack, 64-byte aligned */
@@ -73,12 +73,11 @@ static vafmd_log_pool *s_pool_new(size_t n, size_t cap)
         vafmd_log_block *b = &p->blocks[k];
         double *d = (double *)(m + head + k * stride);
         b->n = 0;
-        b->time_s = d;
-        b->height_m = d + cap;
-        b->force_N = d + 2 * cap;
-        b->tip_m = d + 3 * cap;
-        b->height_measured_m = d + 4 * cap;
-        b->segment = (uint8_t *)(d + 5 * cap);
+        for (int c = 0; c < VAFM_CH_COUNT; c++) {
+            b->ch[c] = vafm_channels[c].file ? d : NULL;
+            d += vafm_channels[c].file ? cap : 0;
+        }
+        b->segment = (uint8_t *)d;
         b->pool = p;
         p->free[n - 1 - k] = b;
     }
@@ -210,13 +209,14 @@ void vafmd_st_log_block(vafmd_st *x, const vafmd_st_block *b)
         lb = NULL;
     }
     if (lb) {
-        memcpy(lb->time_s, b->log_t, b->n * sizeof(double));
-        memcpy(lb->height_m, b->ch[VAFM_CH_HEIGHT], b->n * sizeof(double));
-        memcpy(lb->force_N, b->ch[VAFM_CH_FORCE], b->n * sizeof(double));
-        memcpy(lb->tip_m, b->ch[VAFM_CH_TIP], b->n * sizeof(double));
-        lb->has_measured = b->ch[VAFM_CH_HEIGHT_MEASURED] != NULL;
-        if (lb->has_measured)
-            memcpy(lb->height_measured_m, b->ch[VAFM_CH_HEIGHT_MEASURED], b->n * sizeof(double));
+        lb->mask = 0;
+        for (int c = 0; c < VAFM_CH_COUNT; c++) { /* the streamed arrays; the times (not streamed live) */
+            const double *src = b->ch[c] ? b->ch[c] : c == VAFM_CH_TIME ? b->log_t : NULL;
+            if (lb->ch[c] && src) {
+                memcpy(lb->ch[c], src, b->n * sizeof(double));
+                lb->mask |= 1u << c;
+            }
+        }
         memcpy(lb->segment, b->log_seg, b->n);
         lb->n = b->n;
     }

@@ -61,8 +61,7 @@ static int s_feed_advance(vafmd_st_run *r, size_t max)
     size_t m = c->n - r->feed_pos < max ? c->n - r->feed_pos : max;
     if (m > 0) {
         const size_t i = r->feed_pos;
-        vafm_samples b = { m, i, c->time_s + i, c->height_m + i, c->deflection_m + i, c->force_N + i, c->tip_m + i,
-                           c->segment + i, c->height_measured_m ? c->height_measured_m + i : NULL };
+        vafm_samples b = vafm_channels_slice(&c->samples, i, m);
         if (s_sink(r, &b))
             return VAFM_EABORT;
         r->feed_pos += m;
