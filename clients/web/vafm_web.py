@@ -43,8 +43,11 @@ import zmq.asyncio
 from aiohttp import WSMsgType, web
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "python"))
+# in the source tree, the client package beside it; installed (PREFIX/share/vafm/web), the installed package
+if os.path.isdir(os.path.join(HERE, "..", "python", "vafm_client")):
+    sys.path.insert(0, os.path.join(HERE, "..", "python"))
 from vafm_client.client import FLAG_SEG_CHANGE, decode_header  # noqa: E402
+from vafm_client.tune import K_B, fit_tune, sampled_psd  # noqa: E402  (the thermal_tune example's fit too)
 
 SEGMENTS = {0: "approach", 1: "retract", 2: "dwell", 3: "tune"}
 SEG_ID = {v: k for k, v in SEGMENTS.items()}
@@ -354,8 +357,6 @@ class Bridge:
             f, p = welch(x, fs=run.fs, nperseg=nper)
             keep = np.unique(np.geomspace(1, len(f) - 1, 600).astype(int))
             out["f_Hz"], out["psd_m2_per_Hz"] = f[keep].tolist(), p[keep].tolist()
-            sys.path.insert(0, os.path.join(HERE, "..", "python", "examples"))
-            from thermal_tune import K_B, fit_tune, sampled_psd  # the example's fit: one place for it
             kT = K_B * scene.get("T_K", 300.0)
             mean = scene.get("antialias", "mean") == "mean"
             fit = fit_tune(x, run.fs, kT, mean)
