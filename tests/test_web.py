@@ -253,3 +253,71 @@ def test_token(listen, token):
             web.wait(10)
     finally:
         assert d.stop() == 0
+
+
+def start_web(cmd, ready, timeout=WAIT):
+    """Start the panel with argv `cmd`; wait for its ready file. Returns (process, url)."""
+    web = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    wait_for("the panel to listen", lambda: os.path.exists(ready) or web.poll() is not None, timeout=timeout)
+    assert web.poll() is None, web.communicate()
+    return web, open(ready).read().strip()
+
+
+def stop_web(web):
+    web.terminate()
+    try:
+        return web.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        web.kill()
+        return web.communicate()
+
+
+def get(url):
+    import urllib.request
+    with urllib.request.urlopen(url, timeout=10) as r:
+        return r.status, r.read()
+
+
+def test_curve_keys(tmp_path):
+    """A daemon that requires CURVE keys: the panel with --curve (vafm ctl's key file) gets its hello, its
+    commands and its stream; without the keys it gets no answer and says so."""
+    import asyncio
+    import aiohttp
+    import zmq
+    spub, ssec = zmq.curve_keypair()
+    cpub, csec = zmq.curve_keypair()
+    cfg = tmp_path / "curve.json"
+    cfg.write_text(json.dumps({"curve_secret_key": ssec.decode(), "curve_public_key": spub.decode(),
+                               "curve_clients": [cpub.decode()]}))
+    keys = tmp_path / "client-keys.json"
+    keys.write_text(json.dumps({"server_public_key": spub.decode(), "public_key": cpub.decode(), "secret_key": csec.decode()}))
+    d = Daemon("--config", str(cfg), "--curve-required", tcp=True, curve=(spub, cpub, csec))
+    try:
+        ready = str(tmp_path / "ready")
+        nokeys = subprocess.run([sys.executable, BRIDGE, "--daemon", d.rep, "--listen", "127.0.0.1:0",
+                                 "--connect-timeout", "1.5", "--ready-file", ready], capture_output=True, text=True, timeout=60)
+        assert nokeys.returncode != 0 and "no vafmd answers" in nokeys.stderr and not os.path.exists(ready), nokeys
+        web, url = start_web([sys.executable, BRIDGE, "--daemon", d.rep, "--listen", "127.0.0.1:0", "--curve", str(keys),
+                              "--ready-file", ready], ready)
+
+        async def curve_through_panel():
+            async with aiohttp.ClientSession() as s, s.ws_connect(url.replace("http://", "ws://") + "ws") as ws:
+                await ws.send_str(json.dumps({"id": 1, "request": {"cmd": "curve", "index": 0}}))
+                reply, blocks = None, 0
+                async for m in ws:
+                    if m.type == aiohttp.WSMsgType.BINARY:
+                        blocks += 1
+                    elif m.type == aiohttp.WSMsgType.TEXT:
+                        j = json.loads(m.data)
+                        if j["type"] == "reply":
+                            reply = j["reply"]
+                            assert reply["status"] == "ok", reply
+                        elif j["type"] == "run.end" and reply and j["msg"]["run_id"] == reply["run_id"]:
+                            return reply, blocks, j["msg"]
+        try:
+            reply, frames, end = asyncio.run(asyncio.wait_for(curve_through_panel(), 60))
+            assert end["status"] == "ok" and frames > 0, (end, frames)
+        finally:
+            stop_web(web)
+    finally:
+        assert d.stop() == 0

@@ -163,11 +163,17 @@ class Bridge:
         self.t0 = time.time()  # the page's times are seconds since this (time.time(): the browser's clock too)
 
     # ---- the daemon --------------------------------------------------------------------------------------
+    def secure(self, sock):
+        """CURVE keys (--curve) on a socket to the daemon, as vafm ctl and the Python Client set them."""
+        if self.a.curve_keys:
+            sock.curve_serverkey, sock.curve_publickey, sock.curve_secretkey = self.a.curve_keys
+
     def _open_req(self):
         if self.req is not None:
             self.req.close(0)
         self.req = self.ctx.socket(zmq.REQ)
         self.req.setsockopt(zmq.LINGER, 0)
+        self.secure(self.req)
         self.req.connect(self.a.daemon)
 
     async def request(self, obj, timeout=10.0):
@@ -198,6 +204,7 @@ class Bridge:
         self.sub.setsockopt(zmq.LINGER, 0)
         self.sub.setsockopt(zmq.RCVHWM, 100000)
         self.sub.setsockopt(zmq.SUBSCRIBE, b"")
+        self.secure(self.sub)
         self.sub.connect(pub)
         self.pub = pub
 
@@ -437,7 +444,8 @@ class Bridge:
                     vals[k] = v
             return await self.request({"cmd": "set", "values": vals})
         proc = await asyncio.create_subprocess_exec(
-            self.a.vafm, "ctl", "--rep", self.a.daemon, *(["--pub", self.pub] if self.pub else []), "set", *words,
+            self.a.vafm, "ctl", "--rep", self.a.daemon, *(["--pub", self.pub] if self.pub else []),
+            *(["--curve", self.a.curve] if self.a.curve else []), "set", *words,
             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         out, err = await asyncio.wait_for(proc.communicate(), 30)
         for blob in (out, err):
@@ -531,12 +539,28 @@ def is_loopback(host):
         return False
 
 
+def load_curve(ap, path):
+    """The three Z85 keys of a --curve file (the format of vafm ctl --curve), or a usage error naming it."""
+    names = ("server_public_key", "public_key", "secret_key")
+    try:
+        with open(path) as fh:
+            j = json.load(fh)
+        keys = tuple(j[n].encode("ascii") for n in names)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+        ap.error(f"--curve {path}: needs JSON with {', '.join(names)} (Z85): {type(e).__name__}: {e}")
+    if not all(len(k) == 40 for k in keys):
+        ap.error(f"--curve {path}: {', '.join(names)} must be 40-character Z85 keys")
+    return keys
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="vafm web", description="The live web panel of a running vafmd (docs/web.md).")
     ap.add_argument("--daemon", default="tcp://127.0.0.1:5555", help="the daemon's command endpoint (default %(default)s)")
     ap.add_argument("--pub", help="its stream endpoint (default: the one hello names)")
     ap.add_argument("--listen", default="127.0.0.1:8080", help="HOST:PORT of the panel (default %(default)s; port 0: any free)")
     ap.add_argument("--token", help="required on a non-loopback address (one is generated if not given)")
+    ap.add_argument("--curve", metavar="FILE", help="CURVE keys for a daemon with curve_secret_key, as for vafm ctl: "
+                    'JSON {"server_public_key": Z85, "public_key": Z85, "secret_key": Z85}')
     ap.add_argument("--vafm", help="the vafm CLI, to convert values typed with units (vafm web passes itself)")
     ap.add_argument("--uplot-dir", default=os.path.join(HERE, "node_modules", "uplot", "dist"),
                     help="uPlot's dist folder (default: npm ci's, in clients/web)")
@@ -550,6 +574,7 @@ def main(argv=None):
         ap.error("--columns-per-block: allowed range [1, 4096]")
     if not 2 <= a.queue <= 100000:
         ap.error("--queue: allowed range [2, 100000]")
+    a.curve_keys = load_curve(ap, a.curve) if a.curve else None
     host, port = parse_listen(a.listen)
     if not is_loopback(host) and not a.token:
         a.token = secrets.token_urlsafe(18)
