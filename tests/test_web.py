@@ -278,6 +278,37 @@ def get(url):
         return r.status, r.read()
 
 
+def test_vafm_web_command():
+    """`vafm web` (src/cli/cmd_web.c) runs the bridge with the arguments as they are: the page and uPlot are
+    served; its option table is the bridge's; an unknown option or a missing value is a usage error (2)."""
+    assert VAFM, "VAFM_CLI (the vafm binary) is not set: meson test sets it"
+    h = subprocess.run([VAFM, "web", "--help"], capture_output=True, text=True, timeout=30)
+    assert h.returncode == 0 and h.stdout.startswith("usage: vafm web"), h
+    bh = subprocess.run([sys.executable, BRIDGE, "--help"], capture_output=True, text=True, timeout=30)
+    import re
+    opts = lambda t: set(re.findall(r"(?<![\w-])--[a-z][a-z-]+", t)) - {"--help"}  # noqa: E731
+    assert opts(h.stdout) == opts(bh.stdout), (opts(h.stdout) ^ opts(bh.stdout))
+    for bad, says in ((["--bogus"], "unknown option '--bogus'"), (["stray"], "unexpected argument 'stray'"),
+                      (["--listen"], "--listen needs a value"), (["--listen", "nowhere"], "--listen nowhere: needs HOST:PORT")):
+        r = subprocess.run([VAFM, "web", *bad], capture_output=True, text=True, timeout=30)
+        assert r.returncode == 2 and says in r.stderr, (bad, r)
+    d = Daemon()
+    try:
+        ready = os.path.join(d.dir, "web-ready")
+        web, url = start_web([VAFM, "web", "--daemon", d.rep, "--listen=127.0.0.1:0", "--ready-file", ready], ready)
+        try:
+            st, page = get(url)
+            assert st == 200 and b"<title>" in page and b"vendor/uPlot.iife.min.js" in page
+            st, js_ = get(url + "vendor/uPlot.iife.min.js")
+            assert st == 200 and b"uPlot" in js_ and len(js_) > 20000
+        finally:
+            out, _ = stop_web(web)
+        # the bridge of this source tree, run by vafm web (which passed itself as --vafm)
+        assert os.path.realpath(BRIDGE).encode() in out, out
+    finally:
+        assert d.stop() == 0
+
+
 def test_curve_keys(tmp_path):
     """A daemon that requires CURVE keys: the panel with --curve (vafm ctl's key file) gets its hello, its
     commands and its stream; without the keys it gets no answer and says so."""

@@ -527,6 +527,8 @@ class Bridge:
 def parse_listen(s):
     host, _, port = s.rpartition(":")
     host = host.strip("[]") or "127.0.0.1"
+    if not port.isdigit() or int(port) > 65535:
+        raise ValueError(s)
     return host, int(port)
 
 
@@ -575,7 +577,10 @@ def main(argv=None):
     if not 2 <= a.queue <= 100000:
         ap.error("--queue: allowed range [2, 100000]")
     a.curve_keys = load_curve(ap, a.curve) if a.curve else None
-    host, port = parse_listen(a.listen)
+    try:
+        host, port = parse_listen(a.listen)
+    except ValueError:
+        ap.error(f"--listen {a.listen}: needs HOST:PORT, PORT in [0, 65535]")
     if not is_loopback(host) and not a.token:
         a.token = secrets.token_urlsafe(18)
     asyncio.run(serve(a, host, port))
@@ -595,7 +600,7 @@ async def serve(a, host, port):
     await site.start()
     real_port = site._server.sockets[0].getsockname()[1]
     url = f"http://{'[' + host + ']' if ':' in host else host}:{real_port}/" + (f"?token={a.token}" if a.token else "")
-    print(f"vafm web: panel of {a.daemon} at {url}", flush=True)
+    print(f"vafm web: panel of {a.daemon} at {url} (bridge {os.path.abspath(__file__)})", flush=True)
     if a.ready_file:
         tmp = a.ready_file + ".tmp"
         with open(tmp, "w") as fh:

@@ -16,6 +16,7 @@
 
 #include "cli/cli.h"
 #include "cli/cmd_client.h"
+#include "cli/cmd_web.h"
 #include "cli/study.h"
 
 /* ---- options ---------------------------------------------------------------------------------- */
@@ -482,6 +483,8 @@ static const vafm_cli_command s_commands[] = {
     { "ctl", NULL, 0, 0, "send any command to a running vafmd, print the reply", NULL, 0, vafm_cli_ctl },
     { "status", NULL, 0, 0, "the state of a running vafmd", NULL, 0, vafm_cli_status },
     { "listen", NULL, 0, 0, "record the runs a vafmd streams to CSV or HDF5", NULL, 0, vafm_cli_listen },
+    { "web", NULL, 0, 0, "the live web panel of a running vafmd, in any browser (docs/web.md)", NULL, 0,
+      vafm_cli_web },
     { "replay", NULL, 0, 0, "replay the curves of an HDF5 file through a running vafmd's stream", NULL, 0,
       vafm_cli_replay },
     { "study", NULL, 0, 0, "reproduce one of the paper's results: campaigns, fits, theory, report, figures", NULL, 0,
