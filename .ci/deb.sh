@@ -20,6 +20,10 @@ if git rev-parse --is-inside-work-tree >/dev/null 2>&1; then
 else
     tar --exclude='./build*' --exclude='./obj-*' --exclude="./$DEB" -cf - . | tar -xf - -C "$SRC"
 fi
+# uPlot for the web panel (npm ci, .ci/deps.sh; git ignores node_modules): meson installs it into the vafm package
+[ -s clients/web/node_modules/uplot/dist/uPlot.iife.min.js ] ||
+    { echo "deb.sh: clients/web/node_modules/uplot is missing: run bash .ci/deps.sh --deb (npm ci)" >&2; exit 1; }
+tar -cf - clients/web/node_modules/uplot | tar -xf - -C "$SRC"
 echo "deb: building in $SRC" >&2
 (cd "$SRC" && nice dpkg-buildpackage -b -us -uc -j2)
 # lintian: errors fail `make deb`. What it says and is left as it is (lintian 2.116, Debian 12):

@@ -10,7 +10,8 @@
 set -u
 
 DEBDIR=$(cd "${1:?usage: test_deb.sh DEB_DIR}" && pwd)
-. "$(dirname "$0")/harness.sh"
+HERE=$(cd "$(dirname "$0")" && pwd)
+. "$HERE/harness.sh"
 MA=$(dpkg-architecture -qDEB_HOST_MULTIARCH)
 
 deb_of() { # the .deb of a package, or nothing
@@ -47,7 +48,9 @@ hasnt() {
     done
 }
 has vafm /usr/bin/vafm /usr/bin/vafmd /usr/share/man/man1/vafm.1.gz /usr/share/man/man1/vafmd.1.gz \
-    /lib/systemd/system/vafmd.service /etc/vafm/vafmd.json /usr/share/vafm/study_plot.py
+    /lib/systemd/system/vafmd.service /etc/vafm/vafmd.json /usr/share/vafm/study_plot.py \
+    /usr/share/vafm/web/vafm_web.py /usr/share/vafm/web/static/index.html /usr/share/vafm/web/static/panel.js \
+    /usr/share/vafm/web/node_modules/uplot/dist/uPlot.iife.min.js /usr/share/vafm/web/node_modules/uplot/LICENSE
 dpkg-deb -I "${DEBS[vafm]}" conffiles 2>/dev/null | grep -qx /etc/vafm/vafmd.json &&
     ok "vafm: /etc/vafm/vafmd.json is a conffile" || bad "vafm: /etc/vafm/vafmd.json is a conffile"
 has libvafm0 "/usr/lib/$MA/libvafm.so.0" "/usr/lib/$MA/libvafm_client.so.0"
@@ -62,7 +65,7 @@ has libvafm-dev /usr/include/vafm/version.h /usr/include/vafm/common.h /usr/incl
 hasnt libvafm-dev /usr/include/vafm/h5.h /usr/include/vafm/record.h /usr/include/vafm/scene.h
 has python3-vafm-client /usr/lib/python3/dist-packages/vafm_client/__init__.py \
     /usr/lib/python3/dist-packages/vafm_client/client.py /usr/lib/python3/dist-packages/vafm_client/h5.py \
-    /usr/lib/python3/dist-packages/vafm_client/spawn.py
+    /usr/lib/python3/dist-packages/vafm_client/spawn.py /usr/lib/python3/dist-packages/vafm_client/tune.py
 cat "$TMP"/*.list | grep -v '/$' | sort | uniq -d >"$TMP/dup"
 [ -s "$TMP/dup" ] && bad "no file is in two packages" "$(head -3 "$TMP/dup")" || ok "no file is in two packages"
 
@@ -124,6 +127,13 @@ if PYTHONPATH=$ROOT/usr/lib/python3/dist-packages /usr/bin/python3 -c \
     ok "python3 imports the extracted vafm_client $(cut -d' ' -f1 "$TMP/py")"
 else
     bad "python3 imports the extracted vafm_client $VERSION" "$(tail -3 "$TMP/py")"
+fi
+# the extracted `vafm web` serves the panel: the packaged bridge, page, uPlot and the packaged client's tune fit
+if PYTHONPATH=$ROOT/usr/lib/python3/dist-packages PYTHONDONTWRITEBYTECODE=1 /usr/bin/python3 "$HERE/web_serves.py" \
+    "$ROOT/usr/bin/vafm" "$ROOT/usr/bin/vafmd" "$ROOT/usr/share/vafm/web/vafm_web.py" >"$TMP/web" 2>&1; then
+    ok "the extracted vafm web: $(cat "$TMP/web")"
+else
+    bad "the extracted vafm web serves the panel" "$(tail -3 "$TMP/web")"
 fi
 
 # the pytest plugin, found by its pytest11 entry point in the extracted dist-info (no -p), and vafmd on PATH:

@@ -10,7 +10,8 @@
 set -u
 
 BUILD=$(cd "${1:?usage: test_install.sh BUILD_DIR}" && pwd)
-. "$(dirname "$0")/harness.sh"
+HERE=$(cd "$(dirname "$0")" && pwd)
+. "$HERE/harness.sh"
 STAGE=$TMP/stage
 if ! DESTDIR=$STAGE meson install -C "$BUILD" --quiet --no-rebuild >"$TMP/install.log" 2>&1; then
     bad "meson install into a temporary root" "$(tail -5 "$TMP/install.log")"
@@ -139,7 +140,16 @@ if PYTHONPATH=$PYDIR PYTHONDONTWRITEBYTECODE=1 VAFMD= /usr/bin/python3 -m pytest
 else
     bad "the installed pytest plugin (entry point) runs the first test" "$(tail -5 "$TMP/pytest")"
 fi
-for f in share/man/man1/vafm.1 share/man/man1/vafmd.1 lib/systemd/system/vafmd.service etc/vafm/vafmd.json share/vafm/study_plot.py; do
+# the installed `vafm web` serves the panel: the installed bridge, its page, uPlot (npm) and the tune fit of the
+# installed vafm_client (0.6.2's panel ran from the source tree only)
+if PYTHONPATH=$PYDIR PYTHONDONTWRITEBYTECODE=1 /usr/bin/python3 "$HERE/web_serves.py" "$ROOT/bin/vafm" "$ROOT/bin/vafmd" \
+    "$ROOT/share/vafm/web/vafm_web.py" >"$TMP/web" 2>&1; then
+    ok "the installed vafm web: $(cat "$TMP/web")"
+else
+    bad "the installed vafm web serves the panel" "$(tail -3 "$TMP/web")"
+fi
+for f in share/man/man1/vafm.1 share/man/man1/vafmd.1 lib/systemd/system/vafmd.service etc/vafm/vafmd.json share/vafm/study_plot.py \
+    share/vafm/web/static/index.html share/vafm/web/node_modules/uplot/LICENSE; do
     [ -s "$ROOT/$f" ] && ok "installed: $f" || bad "installed: $f"
 done
 grep -q "ExecStart=$PREFIX/bin/vafmd --config $PREFIX/etc/vafm/vafmd.json" "$ROOT/lib/systemd/system/vafmd.service" &&
