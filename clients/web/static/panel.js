@@ -268,14 +268,17 @@ function drawMap() {
 const tunePlot = new uPlot({
   width: width("tune"), height: 220, legend: {show: false},
   scales: {x: {time: false, distr: 3}, y: {distr: 3}},
-  axes: [{label: "frequency (Hz)"}, {label: "PSD (m²/Hz)", size: 70}],
+  axes: [{label: "frequency (Hz)"}, {label: "PSD (pm²/Hz)", size: 70}],
   series: [{}, {label: "PSD", stroke: "#7f7f7f", width: 1, points: {show: false}}, {label: "fit", stroke: "#d62728", width: 1.5, points: {show: false}}],
 }, [[1, 10], [null, null], [null, null]], $("tune"));
 
 function drawTune() {
   const t = P.tune; if (!t || !t.f_Hz) { if (t) $("tune-info").textContent = `run ${t.run_id}: ${t.fit_error || "no spectrum"}`; return; }
   const keep = t.f_Hz.map((f, k) => k).filter((k) => t.f_Hz[k] > 0);
-  tunePlot.setData([keep.map((k) => t.f_Hz[k]), keep.map((k) => t.psd_m2_per_Hz[k]), keep.map((k) => t.fit_psd ? t.fit_psd[k] : null)]);
+  // in pm²/Hz: uPlot's axes have no ticks below 1e-16, and a thermal PSD in m²/Hz is ~1e-26 (nothing was drawn)
+  const PM2 = 1e24;
+  tunePlot.setData([keep.map((k) => t.f_Hz[k]), keep.map((k) => t.psd_m2_per_Hz[k] * PM2),
+    keep.map((k) => t.fit_psd && t.fit_psd[k] !== null ? t.fit_psd[k] * PM2 : null)]);
   $("tune-info").textContent = t.fit ? `run ${t.run_id}: k = ${t.fit.k.toPrecision(4)} ± ${t.fit.k_err.toPrecision(2)} N/m, ` +
     `f0 = ${(t.fit.f0 / 1e3).toPrecision(4)} kHz, Q = ${t.fit.Q.toPrecision(3)}` : `run ${t.run_id}: fit failed: ${t.fit_error}`;
 }
