@@ -441,3 +441,40 @@ def test_loopback_only(tmp_path):
     p = subprocess.run([VAFMD, "--rep", f"ipc://{tmp_path}/r", "--pub", f"ipc://{tmp_path}/p",
                         "--nanonis", "127.0.0.1:0"], capture_output=True, timeout=20)
     assert p.returncode == 2 and b"PORT" in p.stderr
+
+
+def test_curve_refuses_nanonis(tmp_path):
+    """With CURVE configured, --nanonis would be a way in that skips the curve_clients allow-list (the bridge
+    is inproc, where no ZAP handshake happens): refused (exit 2) unless --nanonis-with-curve is given."""
+    import json
+    import subprocess
+    import zmq
+    from vafmd_harness import VAFMD
+    server_pub, server_sec = zmq.curve_keypair()
+    client_pub, _ = zmq.curve_keypair()
+    cfg = tmp_path / "curve.json"
+    cfg.write_text(json.dumps({"curve_secret_key": server_sec.decode(), "curve_clients": [client_pub.decode()]}))
+    args = [VAFMD, "--rep", f"ipc://{tmp_path}/r", "--pub", f"ipc://{tmp_path}/p", "--config", str(cfg),
+            "--nanonis", f"127.0.0.1:{free_port()}"]
+    p = subprocess.run(args, capture_output=True, timeout=20)
+    assert p.returncode == 2, p.stderr
+    assert b"CURVE" in p.stderr and b"--nanonis-with-curve" in p.stderr
+    # the explicit option opens it
+    port = free_port()
+    args[-1] = f"127.0.0.1:{port}"
+    d = subprocess.Popen(args + ["--nanonis-with-curve"], stderr=subprocess.PIPE)
+    try:
+        deadline = time.time() + 10
+        while True:
+            try:
+                c = Conn(port)
+                break
+            except OSError:
+                assert d.poll() is None and time.time() < deadline, "the Nanonis port did not open"
+                time.sleep(0.05)
+        assert names_get(c)[0] == "Z (m)"
+        c.close()
+    finally:
+        d.terminate()
+        assert d.wait(timeout=20) == 0
+

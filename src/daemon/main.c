@@ -45,6 +45,8 @@ static const char s_usage[] =
     "                     its usual port is 6501; HOST default 127.0.0.1). Config: \"nanonis\": \"[HOST:]PORT\"\n"
     "  --nanonis-allow-remote  allow a non-loopback HOST for --nanonis: the protocol has NO authentication,\n"
     "                     anyone who reaches the port drives the instrument (config \"nanonis_allow_remote\")\n"
+    "  --nanonis-with-curve  allow --nanonis although CURVE is configured: the Nanonis port bypasses the\n"
+    "                     curve_clients allow-list (refused without it; config \"nanonis_with_curve\")\n"
     "  --preset NAME      scene preset (replaces the config file's; default " VAFM_TOOLS_DEFAULT_PRESET ")\n"
     "  --speed F          pacing speed factor in [0.01, 1000] (1: real time)\n"
     "  --free-run         no pacing: release blocks as fast as they are computed\n"
@@ -165,7 +167,7 @@ int main(int argc, char **argv)
     json_t *cfg_faults = NULL; /* the config file's fault plan, installed once the rings exist */
     const char *rep_ep = VAFMD_DEFAULT_REP, *pub_ep = VAFMD_DEFAULT_PUB, *config = NULL, *preset = NULL;
     const char *speed = NULL, *sens = NULL, *hwm = NULL, *nanonis = NULL;
-    int free_run = 0, curve_required = 0, nanonis_remote = 0;
+    int free_run = 0, curve_required = 0, nanonis_remote = 0, nanonis_curve = 0;
     char nanonis_buf[300];
     char rep_buf[512], pub_buf[512];
     for (int i = 1; i < argc; i++) {
@@ -188,6 +190,8 @@ int main(int argc, char **argv)
             dst = &nanonis;
         else if (!strcmp(a, "--nanonis-allow-remote"))
             nanonis_remote = 1;
+        else if (!strcmp(a, "--nanonis-with-curve"))
+            nanonis_curve = 1;
         else if (!strcmp(a, "--rep"))
             dst = &rep_ep;
         else if (!strcmp(a, "--pub"))
@@ -267,6 +271,14 @@ int main(int argc, char **argv)
             }
             nanonis_remote |= json_is_true(v);
         }
+        if ((v = json_object_get(cfg, "nanonis_with_curve")) != NULL) {
+            if (!json_is_boolean(v)) {
+                fprintf(stderr, "vafmd: config '%s': \"nanonis_with_curve\" must be true or false\n", config);
+                json_decref(cfg);
+                return 2;
+            }
+            nanonis_curve |= json_is_true(v);
+        }
         if (s_curve_config(&d, json_object_get(cfg, "curve_secret_key"), json_object_get(cfg, "curve_public_key"),
                            json_object_get(cfg, "curve_clients"))) {
             json_decref(cfg);
@@ -345,6 +357,14 @@ int main(int argc, char **argv)
     if (curve_required && !d.auth.on) {
         fprintf(stderr, "vafmd: CURVE is required (--curve-required) but not configured: give "
                         "\"curve_secret_key\" and \"curve_clients\" in the --config file\n");
+        return 2;
+    }
+    /* the Nanonis port reaches the control loop over inproc, where no ZAP handshake takes place: with CURVE
+     * it would be the one unauthenticated way in, so it takes an explicit option */
+    if (nanonis && d.auth.on && !nanonis_curve) {
+        fprintf(stderr, "vafmd: refusing --nanonis with CURVE configured: the Nanonis protocol has no "
+                        "authentication and bypasses the curve_clients allow-list; give --nanonis-with-curve "
+                        "(config \"nanonis_with_curve\": true) to open it anyway (docs/nanonis.md)\n");
         return 2;
     }
     if (!d.auth.on && (!s_endpoint_allowed(rep_ep) || !s_endpoint_allowed(pub_ep))) {
