@@ -478,3 +478,40 @@ def test_curve_refuses_nanonis(tmp_path):
         d.terminate()
         assert d.wait(timeout=20) == 0
 
+
+def test_partial_headers_do_not_hold_the_slots():
+    """Four connections that each send part of a header and hold it (slowloris) would keep all four slots
+    for ever: a request begun must be whole within the request time (10 s; 1 s here through the test hook),
+    then its connection is closed and another client is served. Idle connections between requests stay."""
+    port = free_port()
+    d = Daemon("--free-run", "--nanonis", f"127.0.0.1:{port}", env={"VAFMD_TEST_NANONIS_REQUEST_S": "1"})
+    try:
+        deadline = time.time() + 10
+        while True:
+            try:
+                idle = Conn(port)
+                break
+            except OSError:
+                assert time.time() < deadline, "the Nanonis port did not open"
+                time.sleep(0.05)
+        held = []
+        for _ in range(2):  # with the idle one and the one below: all four slots
+            s = socket.create_connection(("127.0.0.1", port), timeout=5)
+            s.sendall(HDR.pack(b"Bias.Get", 0, 1)[:20])
+            held.append(s)
+        # a body promised and not sent holds a slot the same way
+        s = socket.create_connection(("127.0.0.1", port), timeout=5)
+        s.sendall(HDR.pack(b"Bias.Set", 4, 1) + b"\0")
+        held.append(s)
+        time.sleep(2.5)
+        for s in held:  # each was closed by the daemon
+            s.settimeout(5)
+            assert s.recv(1) == b""
+            s.close()
+        c = Conn(port, timeout=5)
+        assert names_get(c)[0] == "Z (m)"
+        c.close()
+        assert names_get(idle)[0] == "Z (m)"  # 2.5 s idle between requests: still served
+        idle.close()
+    finally:
+        assert d.stop() == 0

@@ -31,6 +31,8 @@
 #define S_HEADER 40
 #define S_NAME 32
 #define S_REPLY_TIMEOUT_S 30.0 /* a JSON reply later than this: treated as lost (no Nanonis response) */
+#define S_REQUEST_TIMEOUT_S 10.0 /* a request begun must be whole (header and body) within this, or the
+                                    connection is closed: a partial header held open cannot keep a slot */
 
 struct nn_conn {
     int fd;
@@ -48,6 +50,7 @@ static struct {
     void *sub;
     pthread_t th;
     int started;
+    double request_s; /* S_REQUEST_TIMEOUT_S ($VAFMD_TEST_NANONIS_REQUEST_S in the tests) */
     atomic_int quit;
     pthread_mutex_t mu; /* guards the connection slots, live and the collector */
     pthread_cond_t cv;
@@ -436,13 +439,16 @@ static void s_stream_read(void)
 
 /* ---- connections ------------------------------------------------------------------------------------ */
 
-/* Read exactly n bytes. @return 1 read, 0 the peer closed (or the daemon stops), -1 an error. */
-static int s_read_full(int fd, unsigned char *p, size_t n)
+/* Read exactly n bytes, by deadline (monotonic s; 0: none). @return 1 read, 0 the peer closed (or the
+ * daemon stops), -1 an error or the deadline passed. */
+static int s_read_full(int fd, unsigned char *p, size_t n, double deadline)
 {
     size_t got = 0;
     while (got < n) {
         if (nn_quitting())
             return 0;
+        if (deadline > 0 && nn_now_s() > deadline)
+            return -1;
         struct pollfd pf = { fd, POLLIN, 0 };
         int pr = poll(&pf, 1, 100);
         if (pr < 0 && errno != EINTR)
@@ -516,7 +522,12 @@ static void *s_conn_main(void *arg)
     unsigned char *body = NULL;
     nn_buf out = { 0 };
     for (;;) {
-        if (s_read_full(c->fd, h, sizeof h) != 1)
+        /* idle between requests for as long as the client likes; once one begins, it must be whole within
+         * request_s (else four partial headers held open would turn every other client away) */
+        if (s_read_full(c->fd, h, 1, 0) != 1)
+            break;
+        double deadline = nn_now_s() + s.request_s;
+        if (s_read_full(c->fd, h + 1, sizeof h - 1, deadline) != 1)
             break;
         /* the command name: up to its first NUL (32 bytes without one are a name of 32 characters) */
         size_t nl = 0;
@@ -542,7 +553,7 @@ static void *s_conn_main(void *arg)
         if (!nb)
             break;
         body = nb;
-        if (size && s_read_full(c->fd, body, (size_t)size) != 1)
+        if (size && s_read_full(c->fd, body, (size_t)size, deadline) != 1)
             break;
         out.n = 0;
         out.oom = 0;
@@ -716,6 +727,10 @@ int vafmd_nanonis_start(void *zctx, const char *hostport, int allow_remote, char
     memset(&s, 0, sizeof s);
     s.zctx = zctx;
     s.lfd = fd;
+    s.request_s = S_REQUEST_TIMEOUT_S;
+    const char *env = getenv("VAFMD_TEST_NANONIS_REQUEST_S");
+    if (env && atof(env) > 0 && atof(env) <= S_REQUEST_TIMEOUT_S)
+        s.request_s = atof(env);
     pthread_mutex_init(&s.mu, NULL);
     pthread_cond_init(&s.cv, NULL);
     s.sub = zmq_socket(zctx, ZMQ_SUB);
