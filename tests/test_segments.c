@@ -237,6 +237,42 @@ static void test_validation(void)
 
 /* ---- 3. a height trigger fires at its height within one sample's travel ------------------------------- */
 
+/* A list is costed as a scene's curve is (VAFM_SIM_MAX_SAMPLES at the scene's rate): a crawl, a long pause or
+ * 64 long ones are refused before they run for hours, naming the segment that takes longest. */
+static void test_cost_bound(void)
+{
+    vafm_params p;
+    t_preset(&p, "contact-silica");
+    const double t_max = (double)VAFM_SIM_MAX_SAMPLES / p.sample_rate_Hz; /* simulated seconds a list may take */
+    vafm_segment_spec g[VAFM_SEGMENTS_MAX];
+    for (int i = 0; i < VAFM_SEGMENTS_MAX; i++)
+        vafm_segment_spec_default(&g[i]);
+    /* an extend of 1 mm at 1e-12 m/s: 1e9 s */
+    g[0].distance_m = 1e-3;
+    g[0].speed_m_per_s = 1e-12;
+    t_refuse(g, 1, &p, "segments[0].speed_m_per_s");
+    g[0].speed_m_per_s = 1e-3 / (0.9 * t_max); /* just inside */
+    vafm_error err = { 0 };
+    ENSURE_MSG(vafm_segments_validate(g, 1, &p, &err) == 0, "%s", err.message);
+    g[0].speed_m_per_s = 1e-3 / (1.1 * t_max); /* just outside */
+    t_refuse(g, 1, &p, "segments[0].speed_m_per_s");
+    g[0].trigger = VAFM_SEGMENT_TRIGGER_TIME; /* a time trigger cuts it short */
+    g[0].trigger_value = 1.0;
+    ENSURE_MSG(vafm_segments_validate(g, 1, &p, &err) == 0, "%s", err.message);
+    /* 64 pauses, each allowed alone (1e4 s each is the field's range), but together far too long */
+    vafm_segment_spec_default(&g[0]);
+    g[0].distance_m = 100e-9;
+    for (int i = 1; i < VAFM_SEGMENTS_MAX; i++) {
+        g[i].kind = VAFM_SEGMENT_PAUSE;
+        g[i].duration_s = 0.5 * t_max / (VAFM_SEGMENTS_MAX - 1);
+    }
+    ENSURE_MSG(vafm_segments_validate(g, VAFM_SEGMENTS_MAX, &p, &err) == 0, "%s", err.message);
+    g[7].duration_s = 1e4;
+    t_refuse(g, VAFM_SEGMENTS_MAX, &p, "segments[7].duration_s");
+    g[7].kind = VAFM_SEGMENT_MODULATE;
+    t_refuse(g, VAFM_SEGMENTS_MAX, &p, "segments[7].duration_s");
+}
+
 static void test_height_trigger(void)
 {
     vafm_params p;
@@ -523,6 +559,7 @@ int main(void)
 {
     RUN_TEST(test_default_list_is_the_curve);
     RUN_TEST(test_validation);
+    RUN_TEST(test_cost_bound);
     RUN_TEST(test_height_trigger);
     RUN_TEST(test_force_pause);
     RUN_TEST(test_modulation_fit);

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "vafm/segments.h"
+#include "vafm/sim.h"
 #include "core/internal.h"
 
 void vafm_segment_spec_default(vafm_segment_spec *g)
@@ -49,6 +50,39 @@ static int s_bad(vafm_error *err, size_t i, const char *kind, const char *field,
     snprintf(name, sizeof name, "segments[%zu].%s", i, field);
     vafm_err_set(err, VAFM_EINVAL, name, "segment %zu (%s): %s", i, kind, what);
     return VAFM_EINVAL;
+}
+
+/* The simulated time a checked list takes at most, as a scene's curve is costed before it runs (its samples
+ * at the scene's rate, VAFM_SIM_MAX_SAMPLES): a move's travel over its speed (an extend to the approach
+ * limit: the scene's z_range_m, its ramp, or the start height; a retract to the start or to detachment: the
+ * travel extended so far), a pause's or modulation's duration, each cut by a time trigger. *slowest: the
+ * segment that takes longest. */
+static double s_list_time(const vafm_segment_spec *segs, size_t n, const vafm_params *p, size_t *slowest)
+{
+    const double limit = p->z_range_m > 0 ? p->z_range_m : p->ramp_size_m > 0 ? 2.0 * p->ramp_size_m
+                                                                                : fabs(p->start_height_m);
+    double total = 0.0, extended = 0.0, worst = -1.0;
+    for (size_t i = 0; i < n; i++) {
+        const vafm_segment_spec *g = &segs[i];
+        double t;
+        if (g->kind == VAFM_SEGMENT_EXTEND || g->kind == VAFM_SEGMENT_RETRACT) {
+            double travel = g->distance_m > 0                                        ? g->distance_m
+                            : g->kind == VAFM_SEGMENT_EXTEND                         ? limit
+                            : g->end != VAFM_SEGMENT_END_TRAVEL                       ? extended
+                                                                                      : 0.0;
+            extended += g->kind == VAFM_SEGMENT_EXTEND ? travel : -fmin(travel, extended);
+            t = travel / g->speed_m_per_s;
+        } else
+            t = g->duration_s;
+        if (g->trigger == VAFM_SEGMENT_TRIGGER_TIME)
+            t = fmin(t, g->trigger_value);
+        if (t > worst) {
+            worst = t;
+            *slowest = i;
+        }
+        total += t;
+    }
+    return total;
 }
 
 int vafm_segments_validate(const vafm_segment_spec *segs, size_t n, const vafm_params *p, vafm_error *err)
@@ -163,6 +197,19 @@ int vafm_segments_validate(const vafm_segment_spec *segs, size_t n, const vafm_p
         }
         if (g->label < -1 || g->label > 254)
             return s_bad(err, i, k, "label", "label must be -1 (the segment's position) or 0 to 254");
+    }
+    size_t slow = 0;
+    const double t = s_list_time(segs, n, p, &slow), samples = t * rate;
+    if (!(samples <= (double)VAFM_SIM_MAX_SAMPLES)) {
+        const vafm_segment_spec *g = &segs[slow];
+        const int moves = g->kind == VAFM_SEGMENT_EXTEND || g->kind == VAFM_SEGMENT_RETRACT;
+        char name[64];
+        snprintf(name, sizeof name, "segments[%zu].%s", slow, moves ? "speed_m_per_s" : "duration_s");
+        vafm_err_set(err, VAFM_EINVAL, name, "the list runs ~%.3g s (simulated; segment %zu (%s) the longest) and would "
+                     "have ~%.3g samples at the scene's sample_rate_Hz = %.6g Hz: more than a curve may have (%llu, "
+                     "VAFM_SIM_MAX_SAMPLES); shorten it (%s)", t, slow, s_kind_names[g->kind], samples, rate,
+                     (unsigned long long)VAFM_SIM_MAX_SAMPLES, name);
+        return VAFM_EINVAL;
     }
     return 0;
 }
