@@ -422,3 +422,45 @@ def test_map_and_tune_views(panel):
     assert f"run {rep['reply']['run_id']}: k = " in info and " N/m, f0 = " in info, info
     a.save_screenshot(os.path.join(ART, "web-tune.png"))
     sub.close(0)
+
+
+def test_bridge_stream_queue_is_bounded():
+    """Behind a free run (blocks faster than Python decodes them) the bridge's stream queue is bounded: a
+    bridge that does not read for 8 s finds at most its 256 messages, the daemon's per-subscriber hwm (1000)
+    and what the OS socket buffers hold waiting, not every block of those 8 s (with the earlier 100 000 it
+    held 14 745 here, and grew by hundreds of MiB behind a free-run campaign)."""
+    import asyncio
+    import types
+
+    import zmq
+    sys.path.insert(0, os.path.dirname(BRIDGE))
+    import vafm_web
+    d = Daemon("--free-run")
+    try:
+        a = types.SimpleNamespace(daemon=d.rep, pub=None, allow_shutdown=False, connect_timeout=10.0,
+                                  columns_per_block=32)
+
+        async def run():
+            b = vafm_web.Bridge(a)
+            await b.connect()
+            await asyncio.sleep(0.5)  # subscribed
+            assert d.cmd({"cmd": "campaign", "n": 1000000})["status"] == "ok"
+            await asyncio.sleep(8.0)  # the bridge reads nothing
+            done = d.cmd({"cmd": "status"})
+            assert d.cmd({"cmd": "abort"})["status"] == "ok"
+            waiting = 0
+            while True:
+                try:
+                    await b.sub.recv_multipart(flags=zmq.NOBLOCK)
+                except zmq.Again:
+                    break
+                waiting += 1
+                assert waiting < 100000
+            b.sub.close(0)
+            b.req.close(0)
+            return waiting, done
+
+        waiting, done = asyncio.run(run())
+        assert waiting < 1000 + vafm_web.STREAM_QUEUE + 1500, (waiting, done)
+    finally:
+        assert d.stop() == 0

@@ -55,6 +55,8 @@ MAX_RUN_POINTS = 1 << 21     # decimated points of one run kept for late joiners
 MAX_TUNE_SAMPLES = 1 << 22   # raw deflection samples of a tune kept for its spectrum (32 MiB)
 KEEP_CURVES = 8              # completed curves kept for the overlay (and for a browser that joins)
 FLUSH_S = 0.05               # data frames go to the browsers every 50 ms
+STREAM_QUEUE = 256           # stream messages waiting for the bridge (~1.3 s of a paced 5 ms-block stream):
+                             # behind a free run the rest is dropped for the bridge alone (counted as gaps)
 STATUS_S = 0.5               # the daemon's status is polled (once, for all browsers) every 0.5 s
 NOT_FORWARDED = {"shutdown"}  # commands the panel never sends unless --allow-shutdown
 FRAME_MAGIC = 0x56574641     # "AFWV": binary data frame of the panel's WebSocket (docs/web.md)
@@ -202,7 +204,7 @@ class Bridge:
         pub = self.a.pub or r.get("stream")
         self.sub = self.ctx.socket(zmq.SUB)
         self.sub.setsockopt(zmq.LINGER, 0)
-        self.sub.setsockopt(zmq.RCVHWM, 100000)
+        self.sub.setsockopt(zmq.RCVHWM, STREAM_QUEUE)
         self.sub.setsockopt(zmq.SUBSCRIBE, b"")
         self.secure(self.sub)
         self.sub.connect(pub)
