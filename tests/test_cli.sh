@@ -545,5 +545,15 @@ printf '{"segments": [{"kind": "retract", "speed_m_per_s": 0, "distance_m": 1e-7
 expect_fail "--segments: a bad speed names the segment and field" 2 "segment 0" speed_m_per_s -- run --segments "$TMP/segbad.json"
 printf '[{"kind": "extend", "sped": 1}]' >"$TMP/segbad.json"
 expect_fail "--segments: an unknown key is named" 2 "segments[0].sped" -- run --segments "$TMP/segbad.json"
+# a nonzero number that underflows reads as 0 (an extend's distance 0 is the approach limit): refused, as in
+# scenes and vafmd; zero spelled 0e-400 is zero
+printf '[{"kind": "extend", "speed_m_per_s": 1e-6, "distance_m": 1e-400,\n "trigger": {"channel": "force", "op": ">", "value": 1e-9}}]' >"$TMP/segbad.json"
+expect_fail "--segments: 1e-400 underflows, named" 2 "segments.distance_m" "line 1: the number 1e-400 underflows" -- run --segments "$TMP/segbad.json"
+printf '[{"kind": "extend", "speed_m_per_s": 1e-6, "distance_m": 0e-400,\n "trigger": {"channel": "force", "op": ">", "value": 1e-9, "relative": false}}]' >"$TMP/segok.json"
+run run --segments "$TMP/segok.json"
+if [ "$rc" -eq 0 ]; then ok "--segments: 0e-400 is zero"; else bad "--segments: 0e-400 is zero" "exit $rc: $(head -c 300 "$TMP/err")"; fi
+# a list is costed as a scene's curve: a 1e4 s modulation at 10 kHz is refused before it runs
+printf '[{"kind": "modulate", "duration_s": 1e4, "amplitude_m": 1e-9, "frequency_Hz": 100}]' >"$TMP/segbad.json"
+expect_fail "--segments: a list beyond VAFM_SIM_MAX_SAMPLES is refused" 2 "segments[0].duration_s" VAFM_SIM_MAX_SAMPLES -- run --segments "$TMP/segbad.json"
 
 harness_done

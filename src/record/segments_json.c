@@ -6,6 +6,7 @@
  * {"channel": "force"|"deflection_V"|"height"|"time", "op": ">"|"<", "value": x, "relative": bool}; the
  * enumerations by name ("extend", "pause", "force", "detach", ...). Unknown keys are refused, naming them.
  */
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -13,6 +14,7 @@
 
 #include <jansson.h>
 
+#include "record/json_num.h"
 #include "record/record.h"
 #include "vafm/segments.h"
 
@@ -98,6 +100,21 @@ static int s_trigger(const json_t *t, vafm_segment_spec *g, const char *pre, vaf
     return 0;
 }
 
+/* A nonzero number that underflows (record/json_num.h): jansson reads "1e-400" as 0 without a word, and 0
+ * means something else here (an extend's distance_m 0 is the approach limit, a pause of 0 s is skipped). */
+static int s_underflow(const char *text, vafm_error *err)
+{
+    char key[48], lit[48], f[64], msg[200];
+    size_t line;
+    double x;
+    if (!vafm_rec_json_underflow(text, strlen(text), key, sizeof key, lit, sizeof lit, &line, &x))
+        return 0;
+    snprintf(f, sizeof f, "segments%s%s", key[0] ? "." : "", key);
+    snprintf(msg, sizeof msg, "line %zu: the number %s underflows: a nonzero value must be at least %.17g in magnitude "
+             "(it would read as %g)", line, lit, DBL_MIN, x);
+    return s_err(err, f, "%s: %s", f, msg);
+}
+
 int vafm_segments_from_json(const char *text, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err)
 {
     if (err)
@@ -111,6 +128,10 @@ int vafm_segments_from_json(const char *text, vafm_segment_spec *out, size_t cap
         char where[64];
         snprintf(where, sizeof where, "line %d column %d", je.line, je.column);
         return s_err(err, "segments", "not JSON (%s): %s", where, je.text);
+    }
+    if (s_underflow(text, err)) {
+        json_decref(root);
+        return VAFM_EINVAL;
     }
     json_t *arr = json_is_object(root) ? json_object_get(root, "segments") : root;
     int rc = 0;
