@@ -172,6 +172,13 @@ expect_fail "--T 1e-400 underflows" 2 T_K "'1e-400' underflows" "[0, 1e+09] K" -
 expect_fail "--setpoint 1e-400 underflows" 2 setpoint_N underflows "[0, 1] N" -- params --setpoint 1e-400
 expect_fail "--setpoint_N=1e-300fN underflows" 2 setpoint_N underflows -- params --setpoint_N=1e-300fN
 expect_fail "--flush-interval 1e-400 underflows" 2 --flush-interval underflows 86400 -- campaign -n 1 --preset paper-fig4 --out "$TMP/uf.h5" --flush-interval 1e-400
+# the same in a scene file (jansson reads 1e-400 as 0); zero spelled 0e-400 is zero
+printf '{"T_K": 300,\n "setpoint_N": 1e-400}' >"$TMP/uf.json"
+expect_fail "a scene file's 1e-400 underflows, named" 2 setpoint_N "line 2" "the number 1e-400 underflows" -- params --scene "$TMP/uf.json"
+printf '{"setpoint_N": 0e-400}' >"$TMP/uf0.json"
+run params --json --scene "$TMP/uf0.json"
+if [ "$rc" -eq 0 ] && grep -q '"setpoint_N": 0' "$TMP/out"; then ok "a scene file's 0e-400 is zero"
+else bad "a scene file's 0e-400 is zero" "exit $rc: $(head -c 300 "$TMP/err")"; fi
 run params --setpoint 0e-400
 if [ "$rc" -eq 0 ] && grep -qE "^ *setpoint_N +0 " "$TMP/out"; then ok "--setpoint 0e-400 is zero"; else bad "--setpoint 0e-400 is zero" "exit $rc: $(grep setpoint_N "$TMP/out" | head -c 200)"; fi
 expect_fail "a value in the wrong unit names field and unit" 2 setpoint_N "'2nm'" "in N" -- params --setpoint 2nm

@@ -8,6 +8,8 @@
  * integer where a boolean belongs, a negative or fractional seed are errors, not silent conversions.
  * The same code reads the scene and the campaign grid that vafm stores in its HDF5 files (vafm info).
  */
+#include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -17,6 +19,7 @@
 
 #include <jansson.h>
 
+#include "record/json_num.h"
 #include "record/scene_value.h"
 #include "record/scene.h"
 
@@ -210,16 +213,42 @@ int vafm_scene_load_file(vafm_params *p, const char *path, char *preset, size_t 
         s_fail(err, VAFM_EIO, "scene", path, what);
         return VAFM_EIO;
     }
-    json_error_t je;
-    json_t *root = json_load_file(path, JSON_REJECT_DUPLICATES, &je);
-    if (!root) {
-        int io = json_error_code(&je) == json_error_cannot_open_file;
-        if (io)
-            snprintf(what, sizeof what, "cannot read the scene file: %.200s", je.text);
+    /* read whole (bounded), so that the number literals can be checked as written */
+    FILE *f = fopen(path, "rb");
+    char *text = f ? malloc((size_t)VAFM_SCENE_MAX_FILE_BYTES + 1) : NULL;
+    size_t n = text ? fread(text, 1, (size_t)VAFM_SCENE_MAX_FILE_BYTES + 1, f) : 0;
+    int en = errno, bad = !f || !text || ferror(f);
+    if (f)
+        fclose(f);
+    if (bad || n > VAFM_SCENE_MAX_FILE_BYTES) {
+        if (n > VAFM_SCENE_MAX_FILE_BYTES)
+            snprintf(what, sizeof what, "is larger than a scene file can be (%u bytes)", VAFM_SCENE_MAX_FILE_BYTES);
         else
-            snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
-        s_fail(err, io ? VAFM_EIO : VAFM_EFORMAT, "scene", path, what);
-        return io ? VAFM_EIO : VAFM_EFORMAT;
+            snprintf(what, sizeof what, "cannot read the scene file: %.200s", text || !f ? strerror(en) : "out of memory");
+        free(text);
+        s_fail(err, VAFM_EIO, "scene", path, what);
+        return VAFM_EIO;
+    }
+    json_error_t je;
+    json_t *root = json_loadb(text, n, JSON_REJECT_DUPLICATES, &je);
+    if (!root) {
+        free(text);
+        snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
+        s_fail(err, VAFM_EFORMAT, "scene", path, what);
+        return VAFM_EFORMAT;
+    }
+    /* a nonzero number that underflows reads as 0 (or a subnormal): refused, as the CLI's and vafmd's */
+    char key[64], lit[48];
+    size_t line;
+    double x;
+    int uf = vafm_rec_json_underflow(text, n, key, sizeof key, lit, sizeof lit, &line, &x);
+    free(text);
+    if (uf) {
+        snprintf(what, sizeof what, "line %zu: %s%s%sthe number %s underflows: a nonzero value must be at least %.17g "
+                 "in magnitude (it would read as %g)", line, key, key[0] ? ": " : "", "", lit, DBL_MIN, x);
+        s_fail(err, VAFM_EINVAL, key[0] ? key : "scene", path, what);
+        json_decref(root);
+        return VAFM_EINVAL;
     }
     int r = s_apply_root(p, path, root, preset, preset_len, err);
     json_decref(root);
