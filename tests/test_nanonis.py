@@ -291,6 +291,34 @@ def test_zspectr_timing_and_settling(nd):
     assert dz == pytest.approx(-200e-9 / 50, rel=1e-3)
 
 
+def test_zspectr_scene_unchanged_while_it_runs(nd):
+    """The sweep's values are put back as soon as its curve has started (the curve keeps its own scene):
+    a JSON client sees the scene unchanged during a sweep, and its own `set` made then is not undone when
+    the sweep ends (before, the values stayed until the end of the last sweep, then overwrote it)."""
+    nd.cmd({"cmd": "set", "values": {"free_run": False, "speed": 1}})
+    before = nd.cmd({"cmd": "get"})["values"]
+    c = Conn(nd.port)
+    setup_sweep(c, points=100, t_int=5e-3, retract=(2, 0, 0, 0))  # 0.5 s each way at 1x, no trigger
+    c.call("ZSpectr.PropsSet", u16(0) + i32(0) + u16(2) + u16(0) + u16(0) + u16(0))  # two sweeps
+    out = {}
+    th = threading.Thread(target=lambda: out.setdefault("r", zspectr_start(c)))
+    th.start()
+    t0 = time.monotonic()
+    while nd.cmd({"cmd": "status"})["state"] != "running":
+        assert time.monotonic() - t0 < 20, "the sweep did not start"
+        time.sleep(0.01)
+    during = nd.cmd({"cmd": "get"})["values"]
+    assert {k: v for k, v in during.items() if before[k] != v} == {}
+    assert nd.cmd({"cmd": "set", "values": {"dwell_s": 0.25}})["status"] == "ok"
+    th.join(timeout=60)
+    names, data, params = out["r"]
+    assert data.shape == (8, 100) and np.isfinite(data).all() and params[4] == 2  # two whole sweeps
+    after = nd.cmd({"cmd": "get"})["values"]
+    assert after["dwell_s"] == 0.25
+    assert {k: v for k, v in after.items() if k != "dwell_s" and before[k] != v} == {}
+    c.close()
+
+
 def test_zspectr_2nd_condition_refused(nd):
     c = Conn(nd.port)
     c.call("ZSpectr.Retract2ndSet", i32(2) + f32(0) + i32(0) + u16(0))

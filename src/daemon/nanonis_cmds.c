@@ -755,6 +755,26 @@ static double s_mean(const double *v, int64_t a, int64_t b, size_t n)
     return k ? sum / (double)k : NAN;
 }
 
+/* Put the scene back as it was before the sweep (saved, less the values only read). A failure sets *rc to
+ * S_FAIL with the restore's message unless *rc already holds an error (its message is kept). @return the
+ * restore's own result. */
+static int s_restore(s_ctx *x, const json_t *saved, int *rc)
+{
+    json_t *back = json_deep_copy(saved);
+    json_object_del(back, "speed");
+    json_object_del(back, "free_run");
+    json_object_del(back, "k_N_per_m");
+    json_object_del(back, "sensitivity_m_per_V");
+    char tmp[S_ERR];
+    memcpy(tmp, x->err, sizeof tmp);
+    int r = s_call(x, json_pack("{s:s,s:o}", "cmd", "set", "values", back), NULL);
+    if (r && *rc == S_OK)
+        *rc = S_FAIL; /* the error message of the restore stays in x->err */
+    else
+        memcpy(x->err, tmp, sizeof tmp);
+    return r;
+}
+
 static int h_zs_start(s_ctx *x)
 {
     uint32_t get_data = nn_get_u32(&x->r, "Get data");
@@ -775,8 +795,8 @@ static int h_zs_start(s_ctx *x)
     m.running = 1;
     m.stop = 0;
     pthread_mutex_unlock(&s_mu);
-    int rc = S_OK;
-    json_t *saved = NULL;
+    int rc = S_OK, applied = 0; /* applied: the sweep's values are set and not yet put back */
+    json_t *saved = NULL, *vals = NULL;
     double *acc = NULL;
     const char **names = NULL;
     int n_rows = 1 + p.n_chs, n_dirs = p.backward ? 2 : 1, triggered = 0;
@@ -821,7 +841,7 @@ static int h_zs_start(s_ctx *x)
         goto out;
     }
     int64_t K = (int64_t)kpt, Ks = (int64_t)llround(kpt * (double)p.t_settle_s / tp);
-    json_t *vals = json_object();
+    vals = json_object();
     json_object_set_new(vals, "ramp_rate_Hz", json_real(0));
     json_object_set_new(vals, "segment_samples", json_integer(0));
     json_object_set_new(vals, "sample_rate_Hz", json_real(kpt / tp));
@@ -847,14 +867,11 @@ static int h_zs_start(s_ctx *x)
     size_t n_cols = (size_t)p.points;
     acc = calloc((size_t)n_rows * (size_t)n_dirs * n_cols, sizeof *acc);
     if (!acc) {
-        json_decref(vals);
         rc = s_fail(x, "%s", "out of memory");
         goto out;
     }
-    rc = s_call(x, json_pack("{s:s,s:O}", "cmd", "set", "values", vals), NULL);
-    json_decref(vals);
-    if (rc)
-        goto out;
+    /* each sweep: the sweep's values, its curve (which keeps the scene it started with), the scene put back
+     * at once: JSON clients see the scene unchanged while the curve runs, and their own `set`s survive */
     for (int sw = 0; sw < p.sweeps && rc == S_OK; sw++) {
         pthread_mutex_lock(&s_mu);
         int stop = m.stop;
@@ -867,8 +884,24 @@ static int h_zs_start(s_ctx *x)
             break;
         }
         json_t *reply = NULL;
-        rc = s_call(x, json_pack("{s:s,s:I}", "cmd", "curve", "index", (json_int_t)index), &reply);
+        if (sw > 0) { /* the scene to put back: as it is now (a JSON client may have set values meanwhile) */
+            json_t *now = s_get(x, s_saved_names, S_NSAVED, &rc);
+            if (!now) {
+                nn_collect_disarm();
+                break;
+            }
+            json_decref(saved);
+            saved = now;
+        }
+        rc = s_call(x, json_pack("{s:s,s:O}", "cmd", "set", "values", vals), NULL);
+        if (rc == S_OK) {
+            applied = 1;
+            rc = s_call(x, json_pack("{s:s,s:I}", "cmd", "curve", "index", (json_int_t)index), &reply);
+            if (s_restore(x, saved, &rc) == S_OK)
+                applied = 0;
+        }
         if (rc) {
+            json_decref(reply);
             nn_collect_disarm();
             break;
         }
@@ -971,20 +1004,10 @@ static int h_zs_start(s_ctx *x)
             nn_put_i32(x->o, 0);
     }
 out:
-    if (saved) { /* the scene as it was: the sweep's values applied to its own runs only */
-        json_t *back = json_deep_copy(saved);
-        json_object_del(back, "speed");
-        json_object_del(back, "free_run");
-        json_object_del(back, "k_N_per_m");
-        json_object_del(back, "sensitivity_m_per_V");
-        char tmp[S_ERR];
-        memcpy(tmp, x->err, sizeof tmp);
-        if (s_call(x, json_pack("{s:s,s:o}", "cmd", "set", "values", back), NULL) && rc == S_OK) {
-            rc = S_FAIL; /* the error message of the restore stays in x->err */
-        } else
-            memcpy(x->err, tmp, sizeof tmp);
-        json_decref(saved);
-    }
+    if (applied) /* a restore that failed after the curve started: once more */
+        s_restore(x, saved, &rc);
+    json_decref(saved);
+    json_decref(vals);
     free(acc);
     free(names);
     pthread_mutex_lock(&s_mu);
