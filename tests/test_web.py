@@ -438,7 +438,7 @@ def test_bridge_stream_queue_is_bounded():
     d = Daemon("--free-run")
     try:
         a = types.SimpleNamespace(daemon=d.rep, pub=None, allow_shutdown=False, connect_timeout=10.0,
-                                  columns_per_block=32)
+                                  columns_per_block=32, curve_keys=None)
 
         async def run():
             b = vafm_web.Bridge(a)
