@@ -181,3 +181,31 @@ def test_paced(vafmd, vafm_stream):
     r.assert_outcomes(passed=1)
     wall, folder = re.search(r"WALL (\S+) FOLDER (\S+)", r.stdout.str()).groups()
     assert {"vafmd-1.h5", "vafmd.stderr"} <= set(os.listdir(folder))
+
+
+def test_engaged_fixture(pytester):
+    """vafm_engaged: the controller engaged at the marker's setpoint, its live stream flowing (the Stream's
+    live=True must subscribe to "live" by name: the daemon sends it to no one else), the pacing restored; an
+    approach that cannot succeed fails the test with its reason."""
+    r = run(pytester, """
+import numpy as np
+import pytest
+
+@pytest.mark.vafm_engage(setpoint="1nN")
+def test_engaged(vafm_engaged, vafmd):
+    st = vafm_engaged.ctrl()
+    assert st["state"] == "engaged" and st["feedback"] and st["in_contact"], st
+    assert st["setpoint"]["value"] == 1e-9 and vafm_engaged.event["kind"] == "engaged"
+    assert vafmd.client.get("speed")["speed"] == 1.0                # the approach's pacing is undone
+    live = vafm_engaged.live(50)
+    assert len(live["force_N"]) == 50 and np.all(live["state"] == 2)
+    print("FORCE", live["force_N"].mean(), st["setpoint_N"])       # setpoint_N: from the free baseline
+    assert abs(live["force_N"].mean() - st["setpoint_N"]) < 0.05e-9
+
+@pytest.mark.vafm_engage(settings={"engage_timeout_s": "2s"})
+def test_timeout(vafm_engaged):
+    pass
+""", "-s")
+    r.assert_outcomes(passed=1, errors=1)                            # a fixture that fails: a setup error
+    out = r.stdout.str()
+    assert "vafm_engaged: engage failed" in out and "'reason': 'timeout'" in out, out

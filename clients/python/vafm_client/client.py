@@ -356,6 +356,8 @@ class Stream:
         if rcvhwm is not None:
             self.sock.setsockopt(zmq.RCVHWM, rcvhwm)
         self.sock.setsockopt(zmq.SUBSCRIBE, b"")
+        if live:  # the daemon sends "live" only to a subscription to it by name (wire.md §3.7), not to ""
+            self.sock.setsockopt(zmq.SUBSCRIBE, b"live")
         _apply_curve(self.sock, curve)
         self.sock.connect(endpoint)
         self.last_seq, self.gaps = None, 0

@@ -12,8 +12,19 @@ the daemon is stopped and checked (exit status, no process left) afterwards, als
 
 Loaded by its `pytest11` entry point (python3-vafm-client, `make install`) or with
 `-p vafm_client.pytest_plugin`. Options: --vafmd PATH, --vafm-speed, --vafm-keep-logs, --vafm-transport,
---vafm-share; markers `vafm(...)` and `skip_without_vafmd` (see pytest_configure). Not yet: fixtures for the
-always-on controller and the Nanonis interface (they do not exist yet; `vafm_engaged` will join here).
+--vafm-share; markers `vafm(...)`, `vafm_engage(...)` and `skip_without_vafmd` (see pytest_configure).
+
+The always-on controller (docs/instrument.md): a test that asks for `vafm_engaged` gets the same daemon with
+its controller engaged at the setpoint (the auto-approach done, feedback on) and a Stream that carries the
+`live` topic:
+
+    @pytest.mark.vafm_engage(setpoint="1nN")
+    def test_grid(vafm_engaged):
+        live = vafm_engaged.live(50)                      # the next 50 monitor points, every channel
+        assert abs(live["force_N"].mean() - 1e-9) < 1e-10
+        vafm_engaged.client.move(1e-6, 0)                 # the acquisition code under test goes on from here
+
+Not yet: a fixture for the Nanonis interface (`vafmd --nanonis`).
 """
 import json
 import math
@@ -73,6 +84,10 @@ def pytest_configure(config):
                             "log=True): how the vafmd fixture starts its daemon (a preset, 'free' or a multiple "
                             "of real time, extra vafmd arguments, 'test' or 'module', 'ipc' or 'tcp', HDF5 "
                             "logging on or off)")
+    config.addinivalue_line("markers", "vafm_engage(setpoint=None, settings=None, approach_speed=1000, "
+                            "timeout=60): how vafm_engaged engages (the setpoint with a unit, '2nN' or '0.1V', or "
+                            "a number in N; other ctrl_* settings, units allowed; the pacing factor of the "
+                            "approach, restored after it; the most seconds the approach may take)")
     config.addinivalue_line("markers", "skip_without_vafmd: skip, naming the reason, when no vafmd is found "
                             "(without it a missing vafmd fails the test)")
 
@@ -543,6 +558,108 @@ def vafm_faults(vafmd):
         return FaultPlan(vafmd, plan)
 
     return faults
+
+
+class Engaged:
+    """An instrument whose controller is engaged (the vafm_engaged fixture): `vafmd` (the Instrument),
+    `client`, `stream` (a Stream with the `live` topic), `event` (the `engaged` event), `generation` (the
+    controller's, wire.md §2.4), `ctrl()` (status.ctrl now), `live(n)` (the next n monitor points)."""
+
+    def __init__(self, inst, stream, event):
+        self.vafmd, self.client, self.stream, self.event = inst, inst.client, stream, event
+        self.generation = event.get("generation")
+
+    def ctrl(self):
+        return self.client.status()["ctrl"]
+
+    def live(self, n, timeout=30.0):
+        """{channel: numpy array} of the next n points of the `live` topic (wire.md §3.7), this controller's
+        only; raises TransportError if they do not come within `timeout` s (or a live message is lost:
+        the points would not be consecutive)."""
+        deadline = time.monotonic() + timeout
+        parts, got, last = [], 0, None
+        for topic, x in self.stream.messages(deadline=deadline):
+            if topic != "live" or x[0].get("generation") != self.generation:
+                continue
+            h, ch = x
+            if last is not None and h["seq"] != last + 1:
+                raise TransportError(f"live message {last + 1} lost (next seen: {h['seq']})")
+            last = h["seq"]
+            parts.append(ch)
+            got += h["points"]
+            if got >= n:
+                break
+        return {c: np.concatenate([p[c] for p in parts])[:n] for c in parts[0]}
+
+
+def _ctrl_event(stream, kinds, generation, deadline):
+    for topic, m in stream.messages(deadline=deadline):
+        if topic == "event" and m.get("source") == "ctrl" and m.get("kind") in kinds and \
+                (generation is None or m.get("generation") == generation):
+            return m
+    return None
+
+
+def engage(inst, setpoint=None, settings=None, approach_speed=1000, timeout=60.0):
+    """Engage the controller of `inst` (an Instrument): the ctrl_* settings and the setpoint (rebuilding the
+    controller), the auto-approach at pacing factor approach_speed (the `speed` setting is restored after
+    it), and wait for `engaged`. Returns an Engaged; raises RuntimeError naming the reason if the approach
+    failed, crashed or took longer than `timeout` seconds of wall-clock time."""
+    c = inst.client
+    values = {}
+    if settings:
+        info = c.get(info=True)[1]
+        for name, v in settings.items():
+            name = name if name.startswith("ctrl_") else "ctrl_" + name
+            if name not in info:
+                raise ValueError(f"{name}: no such controller setting (see protocol/wire.md §2.4)")
+            values[name] = quantity(v, info[name].get("unit") or "")
+    if setpoint is not None:
+        unit = "N"
+        if isinstance(setpoint, str):
+            unit = "V" if setpoint.strip().endswith("V") else "N"
+            setpoint = quantity(setpoint, unit)
+        values.update(ctrl_setpoint=float(setpoint), ctrl_setpoint_unit=unit)
+    stream = inst.stream(live=True)
+    st = c.status()["ctrl"]
+    if not st.get("available"):
+        raise RuntimeError(f"the daemon has no controller: {st.get('error')}")
+    if values:
+        c.set(values)  # a ctrl_* change rebuilds the controller: it starts again from far away
+    elif st["state"] == "engaged":  # a shared daemon already engaged as asked
+        return Engaged(inst, stream, {"kind": "engaged", "generation": st["generation"], "reused": True})
+    st = c.status()["ctrl"]
+    if st["state"] in ("approaching", "engaged", "crashed"):
+        c.withdraw()
+        if _ctrl_event(stream, ("withdrawn",), st["generation"], time.monotonic() + timeout) is None:
+            raise RuntimeError("the controller did not withdraw")
+    speed = c.get("speed")["speed"]
+    c.set({"speed": float(approach_speed)})
+    try:
+        r = c.engage()
+        gen = r["ctrl"]["generation"]
+        ev = _ctrl_event(stream, ("engaged", "engage_failed", "crash"), gen, time.monotonic() + timeout)
+    except TransportError:
+        ev = None
+    finally:
+        c.set({"speed": speed})
+    if ev is None:
+        raise RuntimeError(f"no engaged event within {timeout} s (status: {c.status()['ctrl']})")
+    if ev["kind"] != "engaged":
+        raise RuntimeError(f"engage failed: {ev}")
+    return Engaged(inst, stream, ev)
+
+
+@pytest.fixture
+def vafm_engaged(vafmd, request):
+    """The vafmd fixture's daemon with its controller engaged at the setpoint (the marker vafm_engage's, else
+    the daemon's ctrl_setpoint), feedback on, and a Stream carrying the `live` topic. Returns an Engaged."""
+    m = request.node.get_closest_marker("vafm_engage")
+    opts = dict(m.kwargs) if m else {}
+    try:
+        return engage(vafmd, **opts)
+    except RuntimeError as e:
+        pytest.fail(f"vafm_engaged: {e}\n--- vafmd stderr ---\n{vafmd.stderr()}", pytrace=False)
 
 
 @pytest.hookimpl(hookwrapper=True)
