@@ -209,3 +209,33 @@ def test_timeout(vafm_engaged):
     r.assert_outcomes(passed=1, errors=1)                            # a fixture that fails: a setup error
     out = r.stdout.str()
     assert "vafm_engaged: engage failed" in out and "'reason': 'timeout'" in out, out
+
+
+def test_nanonis_fixture(pytester):
+    """vafm_nanonis: the daemon also serves the Nanonis port on a free loopback port; one Signals.ValGet
+    framed from the vendor's spec (40-byte big-endian headers, the error part ending the response body)."""
+    r = run(pytester, """
+import socket, struct
+
+def test_valget(vafm_nanonis, vafmd):
+    host, port = vafm_nanonis
+    assert host == "127.0.0.1" and vafmd.nanonis_port == port and vafmd.client.status()["state"] == "idle"
+    with socket.create_connection((host, port), timeout=10) as s:
+        s.sendall(struct.pack(">32sih2x", b"Signals.ValGet", 8, 1) + struct.pack(">iI", 0, 0))
+        hdr = b""
+        while len(hdr) < 40:
+            hdr += s.recv(40 - len(hdr))
+        name, size = struct.unpack(">32si4x", hdr)
+        body = b""
+        while len(body) < size:
+            body += s.recv(size - len(body))
+    assert name.rstrip(b"\\0") == b"Signals.ValGet" and size == 12, (name, size)
+    value, status, desc_len = struct.unpack(">fIi", body)
+    assert status == 0 and desc_len == 0 and value == value
+    print("VALGET", value)
+
+def test_no_port(vafmd):
+    assert vafmd.nanonis_port is None
+""", "-s")
+    r.assert_outcomes(passed=2)
+    assert "VALGET" in r.stdout.str()

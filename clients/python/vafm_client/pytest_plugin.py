@@ -24,7 +24,8 @@ its controller engaged at the setpoint (the auto-approach done, feedback on) and
         assert abs(live["force_N"].mean() - 1e-9) < 1e-10
         vafm_engaged.client.move(1e-6, 0)                 # the acquisition code under test goes on from here
 
-Not yet: a fixture for the Nanonis interface (`vafmd --nanonis`).
+A test that asks for `vafm_nanonis` gets the vafmd fixture's daemon serving the Nanonis TCP programming
+interface (docs/nanonis.md) on a free loopback port too: the fixture is its (host, port).
 """
 import json
 import math
@@ -81,9 +82,10 @@ def pytest_configure(config):
     if config.getoption("vafmd"):
         find_vafmd(config)  # an explicit --vafmd that is not an executable: a usage error at once
     config.addinivalue_line("markers", "vafm(preset=None, speed=None, args=(), share=None, transport=None, "
-                            "log=True): how the vafmd fixture starts its daemon (a preset, 'free' or a multiple "
-                            "of real time, extra vafmd arguments, 'test' or 'module', 'ipc' or 'tcp', HDF5 "
-                            "logging on or off)")
+                            "log=True, nanonis=False): how the vafmd fixture starts its daemon (a preset, 'free' or "
+                            "a multiple of real time, extra vafmd arguments, 'test' or 'module', 'ipc' or 'tcp', "
+                            "HDF5 logging on or off, the Nanonis port on a free loopback port: also when the test "
+                            "asks for vafm_nanonis)")
     config.addinivalue_line("markers", "vafm_engage(setpoint=None, settings=None, approach_speed=1000, "
                             "timeout=60): how vafm_engaged engages (the setpoint with a unit, '2nN' or '0.1V', or "
                             "a number in N; other ctrl_* settings, units allowed; the pacing factor of the "
@@ -203,6 +205,7 @@ class Instrument:
         self.monitor = None
         self._streams = []
         self.status = None
+        self.nanonis_port = None  # the Nanonis port (vafm_nanonis), None without one
         self._err = open(self.stderr_path, "wb")
         self.proc = subprocess.Popen(self.args, stdin=subprocess.DEVNULL, stdout=self._err, stderr=self._err,
                                      cwd=self.folder)
@@ -440,9 +443,15 @@ def _start(request, folder, opts):
         args.append("--free-run")
     else:
         args += ["--speed", str(float(speed))]
+    nanonis = None
+    if opts.get("nanonis") or "vafm_nanonis" in getattr(request, "fixturenames", ()):
+        nanonis = _free_port()
+        args += ["--nanonis", f"127.0.0.1:{nanonis}"]
     args += list(opts.get("args", ()))
-    return Instrument(path, folder, args, transport=opts.get("transport") or request.config.getoption("vafm_transport"),
+    inst = Instrument(path, folder, args, transport=opts.get("transport") or request.config.getoption("vafm_transport"),
                       log=opts.get("log", True))
+    inst.nanonis_port = nanonis
+    return inst
 
 
 def _finish(inst, keep):
@@ -660,6 +669,15 @@ def vafm_engaged(vafmd, request):
         return engage(vafmd, **opts)
     except RuntimeError as e:
         pytest.fail(f"vafm_engaged: {e}\n--- vafmd stderr ---\n{vafmd.stderr()}", pytrace=False)
+
+
+@pytest.fixture
+def vafm_nanonis(vafmd):
+    """(host, port) of the vafmd fixture's Nanonis TCP programming interface (docs/nanonis.md), loopback."""
+    if getattr(vafmd, "nanonis_port", None) is None:
+        pytest.fail("vafm_nanonis: this daemon was started without --nanonis (a module-shared daemon: mark "
+                    "the module vafm(nanonis=True))", pytrace=False)
+    return ("127.0.0.1", vafmd.nanonis_port)
 
 
 @pytest.hookimpl(hookwrapper=True)
