@@ -1,0 +1,239 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: MIT
+"""What a real acquisition script does: engage, a grid of force curves with XY moves between them, withdraw.
+
+    python3 clients/python/examples/acquire_grid.py --rep tcp://127.0.0.1:5555 --pub tcp://127.0.0.1:5556
+    python3 clients/python/examples/acquire_grid.py --vafmd build/src/daemon/vafmd --faults   # self-test
+
+It engages (the controller's auto-approach, docs/instrument.md), moves the tip to each point of an n x n
+grid under feedback, takes one curve at each (curve index = grid point), withdraws, and recovers as an
+acquisition script must from what the instrument and its network do (protocol/faults.md):
+  - `busy` replies: retried (the Client does it);
+  - a lost reply to `move` (not resendable: it is not idempotent): the state is queried, and the move
+    waited for if it was executed, sent again if not;
+  - a lost reply to `curve`: resent with its client_run_id (the daemon answers with the same run);
+  - a lost data block (seq gap), a truncated run (no run.end), a saturated (CLIPPED) or NaN (dropout) run:
+    not saved, the curve is taken again (a curve is the same bit for bit from its (seed, index));
+  - a late block: nothing to do but wait (the stream's timeouts are longer).
+With --faults it sets one fault of each of these kinds first (a scripted plan) and checks at the end that
+the daemon injected each one and the script noticed it. What it recorded is compared with the ground truth
+of each run: run.end's pull-off (`pulloff_sampled_N`) equals the streamed retract's most tensile sample bit
+for bit, and run.start's controller position (`ctrl.x_m`, `y_m`) is the grid point. Exit status 0 when all
+holds, 1 otherwise (the reason on stderr).
+
+The sample is the daemon's flat uniform one: the sample under the tip is not wired into vafmd's runs yet
+(docs/instrument.md "The daemon"); over a patterned sample the same script would see its topography in the
+controller's piezo Z at each point.
+"""
+import argparse
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from vafm_client import Client, Stream  # noqa: E402
+from vafm_client.client import DaemonError, GapError, TransportError  # noqa: E402
+
+# one fault of each kind the script can meet; run ids count every run the daemon starts (re-takes included)
+FAULT_PLAN = {"seed": 5, "script": [
+    {"kind": "busy", "cmd": "engage", "nth": 1},
+    {"kind": "no_reply", "cmd": "move", "nth": 2},
+    {"kind": "no_reply", "cmd": "curve", "nth": 3},
+    {"kind": "drop", "run": 2, "block": 1},
+    {"kind": "truncate", "run": 4, "block": 2},
+    {"kind": "saturate", "run": 6, "block": 1, "samples": 50},
+    {"kind": "dropout", "run": 8, "block": 1, "samples": 20},
+    {"kind": "late", "run": 9, "block": 1, "delay_s": 0.3},
+]}
+# the report (or recovery) that shows each kind was noticed
+NOTICED_BY = {"busy": "busy", "no_reply": "no_reply", "drop": "gap", "truncate": "truncated",
+              "saturate": "saturate", "dropout": "dropout", "late": None}
+
+
+class Acquisition:
+    def __init__(self, rep, pub, say=print):
+        self.c = Client(rep, timeout=3.0, retries=3)
+        self.s = Stream(pub, timeout=20.0)
+        self.say = say
+        self.noticed = []   # what this script saw go wrong: kinds of NOTICED_BY's values
+        self.saved = {}     # grid index -> (target, Run)
+
+    def close(self):
+        self.s.close()
+        self.c.close()
+
+    def _ctrl_event(self, kinds, timeout=60.0):
+        deadline = time.monotonic() + timeout
+        for topic, m in self.s.messages(deadline=deadline):
+            if topic == "event" and m.get("source") == "ctrl" and m.get("kind") in kinds:
+                return m
+        raise TransportError(f"no controller event {kinds} within {timeout} s")
+
+    def _busy_seen(self, before):
+        if any("busy" in text for _, text in self.c.log[before:]):
+            self.noticed.append("busy")
+
+    def engage(self):
+        n = len(self.c.log)
+        self.c.engage()
+        self._busy_seen(n)
+        ev = self._ctrl_event(("engaged", "engage_failed", "crash"))
+        if ev["kind"] != "engaged":
+            raise RuntimeError(f"engage failed: {ev}")
+        st = self.c.status()["ctrl"]
+        self.say(f"engaged: motor at {st['motor_z_m'] * 1e6:.1f} um, piezo {st['piezo_z_m'] * 1e6:.3f} um, "
+                 f"force {st['force_N'] * 1e9:.3f} nN (setpoint {st['setpoint_N'] * 1e9:.3f} nN)")
+
+    def move(self, x, y):
+        n = len(self.c.log)
+        try:
+            self.c.move(x, y)
+        except TransportError:  # the reply was lost: was the move executed? ask, do not resend blindly
+            self.noticed.append("no_reply")
+            st = self.c.status()["ctrl"]
+            if not st.get("moving") and (abs(st["x_m"] - x) > 1e-12 or abs(st["y_m"] - y) > 1e-12):
+                self.say(f"move to ({x:g}, {y:g}): reply lost, not executed: sent again")
+                self.c.move(x, y)
+            else:
+                self.say(f"move to ({x:g}, {y:g}): reply lost, executed: waiting for it")
+        self._busy_seen(n)
+        st = self.c.status()["ctrl"]
+        if st.get("moving"):
+            self._ctrl_event(("moved",))
+        st = self.c.status()["ctrl"]
+        if abs(st["x_m"] - x) > 1e-12 or abs(st["y_m"] - y) > 1e-12:
+            raise RuntimeError(f"the tip is at ({st['x_m']}, {st['y_m']}), not at ({x}, {y})")
+
+    def curve(self, index, tries=5):
+        """Take curve `index` until it arrives whole and clean; returns the Run."""
+        for attempt in range(tries):
+            self.c.wait_idle()
+            n = len(self.c.log)
+            rid = self.c.curve(index=index)["run_id"]
+            if any("no reply" in text for _, text in self.c.log[n:]):
+                self.noticed.append("no_reply")  # resent with its client_run_id: the same run
+            self._busy_seen(n)
+            try:
+                run = self.s.run(rid, strict=True)
+            except GapError as e:  # a lost block (gap) or no run.end (truncated, TruncatedError)
+                kind = "truncated" if "truncat" in type(e).__name__.lower() or "run.end" in str(e) else "gap"
+                self.noticed.append(kind)
+                self.say(f"curve {index}: run {rid} {kind}: {e}; taken again")
+                continue
+            if not run.clean:
+                kinds = (["saturate"] if run.clipped_blocks else []) + (["dropout"] if run.nan_samples else [])
+                self.noticed += kinds
+                self.say(f"curve {index}: run {rid} not clean ({'; '.join(run.warnings)}): taken again")
+                continue
+            return run
+        raise RuntimeError(f"curve {index}: no clean run in {tries} tries")
+
+    def withdraw(self):
+        self.c.withdraw(motor_steps=2)
+        self._ctrl_event(("withdrawn",))
+
+
+def check_truth(saved):
+    """What was recorded against each run's ground truth: a list of problems."""
+    bad = []
+    for idx, ((x, y), run) in sorted(saved.items()):
+        ctrl = run.start.get("ctrl") or {}
+        if ctrl.get("x_m") != x or ctrl.get("y_m") != y:
+            bad.append(f"curve {idx}: run.start records the tip at ({ctrl.get('x_m')}, {ctrl.get('y_m')}), "
+                       f"the grid point is ({x}, {y})")
+        res = run.end["result"]
+        retract = run.segment == 1
+        f = float(-run["force_N"][retract].min()) if retract.any() else math.nan
+        if res.get("pulloff_sampled_N") is None or f != res["pulloff_sampled_N"]:
+            bad.append(f"curve {idx}: recorded pull-off {f!r} N, run.end's {res.get('pulloff_sampled_N')!r} N")
+    return bad
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[1])
+    ap.add_argument("--rep", default="tcp://127.0.0.1:5555", help="command endpoint")
+    ap.add_argument("--pub", default="tcp://127.0.0.1:5556", help="stream endpoint")
+    ap.add_argument("--vafmd", help="start this vafmd (free run, private ipc endpoints) and stop it after")
+    ap.add_argument("-n", type=int, default=3, help="grid points per side (1-20)")
+    ap.add_argument("--pitch", type=float, default=1e-6, help="grid pitch, m")
+    ap.add_argument("--speed", type=float, default=1000.0,
+                    help="the daemon's pacing factor while the script runs (engage and moves; restored after)")
+    ap.add_argument("--faults", action="store_true", help="inject one fault of each kind first and check "
+                    "that each was noticed")
+    a = ap.parse_args(argv)
+    if not 1 <= a.n <= 20:
+        ap.error("-n must be in [1, 20]")
+    proc = tmp = None
+    if a.vafmd:
+        tmp = tempfile.mkdtemp(prefix="vafm-grid-")
+        a.rep, a.pub = f"ipc://{tmp}/rep", f"ipc://{tmp}/pub"
+        proc = subprocess.Popen([a.vafmd, "--rep", a.rep, "--pub", a.pub, "--free-run"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        for _ in range(100):
+            if os.path.exists(f"{tmp}/rep") and os.path.exists(f"{tmp}/pub"):
+                break
+            time.sleep(0.05)
+    t0 = time.monotonic()
+    acq = Acquisition(a.rep, a.pub)
+    problems = []
+    try:
+        c = acq.c
+        speed = c.get("speed")["speed"]
+        c.set({"speed": a.speed})
+        if a.faults:
+            c.faults(FAULT_PLAN)
+        acq.engage()
+        half = (a.n - 1) / 2
+        for iy in range(a.n):
+            for ix in range(a.n) if iy % 2 == 0 else reversed(range(a.n)):  # a serpentine, as scanners do
+                x, y = (ix - half) * a.pitch, (iy - half) * a.pitch
+                idx = iy * a.n + ix
+                acq.move(x, y)
+                run = acq.curve(idx)
+                acq.saved[idx] = ((x, y), run)
+                acq.say(f"curve {idx} at ({x * 1e6:+.2f}, {y * 1e6:+.2f}) um: run {run.run_id}, "
+                        f"pull-off {run.end['result']['pulloff_sampled_N'] * 1e9:.3f} nN")
+        acq.withdraw()
+        c.set({"speed": speed})
+        problems += check_truth(acq.saved)
+        if len(acq.saved) != a.n * a.n:
+            problems.append(f"{len(acq.saved)} of {a.n * a.n} grid points recorded")
+        if a.faults:
+            injected = [r["kind"] for r in c.faults()["last"]]
+            for kind in injected:
+                want = NOTICED_BY.get(kind)
+                if want and want not in acq.noticed:
+                    problems.append(f"fault {kind} was injected, the script did not notice it")
+            missing = sorted({e["kind"] for e in FAULT_PLAN["script"]} - set(injected))
+            if missing:
+                problems.append(f"faults of the plan never injected: {missing}")
+            print(f"faults injected: {injected}; noticed: {acq.noticed}")
+    except (DaemonError, TransportError, RuntimeError) as e:
+        problems.append(f"{type(e).__name__}: {e}")
+    finally:
+        acq.close()
+        if proc:
+            try:
+                Client(a.rep, timeout=2, retries=0).shutdown()
+            except TransportError:
+                pass
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            for f in ("rep", "pub"):
+                if os.path.exists(os.path.join(tmp, f)):
+                    os.unlink(os.path.join(tmp, f))
+            os.rmdir(tmp)
+    print(f"{len(acq.saved)} curves on a {a.n}x{a.n} grid in {time.monotonic() - t0:.1f} s")
+    for p in problems:
+        print("error:", p, file=sys.stderr)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
