@@ -31,6 +31,8 @@ static const char *s_ctl_usage =
     "  get [NAME...]                 scene parameters/settings (all without NAME)\n"
     "  set NAME=VALUE...             set values; preset=NAME applies a preset first; a value with its\n"
     "                                unit (setpoint_N=1nN, v_approach_m_per_s=2um/s) is sent in SI\n"
+    "  CMD KEY=VALUE...              other commands: a value with its unit, for a key that ends in it\n"
+    "                                (move x_m=2um speed_m_per_s=1um/s), or feedback setpoint=1nN|0.5V\n"
     "  curve [--index I]             start a force curve\n"
     "  tune [SECONDS] [--index I]    start a thermal tune\n"
     "  --wait                        (curve, tune, replay, campaign) subscribe first and print the run.end\n"
@@ -69,6 +71,46 @@ static json_t *s_set_units(const char *key, json_t *v)
         if (n) {
             json_decref(v);
             return n;
+        }
+    }
+    return v;
+}
+
+/* Any other command: a value typed with its unit, for a key whose name ends in its SI unit (x_m=2um,
+ * speed_m_per_s=1um/s, at_s=500ms, force_N=1nN), goes out in SI; `setpoint` (the controller's `feedback`,
+ * in N or V) takes "1nN" or "0.5V" and, unless `unit` is given, sets `unit` to the one typed. Anything else
+ * goes out as the string, for the daemon to judge. Takes v, returns one. */
+static json_t *s_arg_units(const char *key, json_t *v, json_t *req)
+{
+    static const struct { const char *suffix, *unit; } tab[] = {
+        { "_m_per_s", "m/s" }, { "_m", "m" }, { "_N", "N" }, { "_s", "s" }, { "_Hz", "Hz" }, { "_V", "V" },
+    };
+    const char *text = json_string_value(v);
+    size_t kl = strlen(key);
+    double d;
+    if (!strcmp(key, "setpoint")) {
+        for (int k = 0; k < 2; k++) {
+            const char *u = k ? "V" : "N";
+            if (text[0] && !vafm_units_parse(key, text, u, &d, NULL) && text[strlen(text) - 1] == u[0]) {
+                if (!json_object_get(req, "unit"))
+                    json_object_set_new(req, "unit", json_string(u));
+                json_decref(v);
+                return json_real(d);
+            }
+        }
+        return v;
+    }
+    for (size_t k = 0; k < sizeof tab / sizeof tab[0]; k++) {
+        size_t sl = strlen(tab[k].suffix);
+        if (kl > sl && !strcmp(key + kl - sl, tab[k].suffix)) {
+            if (!vafm_units_parse(key, text, tab[k].unit, &d, NULL)) {
+                json_t *n = json_real(d);
+                if (n) {
+                    json_decref(v);
+                    return n;
+                }
+            }
+            break;
         }
     }
     return v;
@@ -160,6 +202,8 @@ static int s_ctl_run(vafm_cli_conn *x, int argc, char **argv)
             json_t *v = s_value(eq + 1);
             if (is_set && json_is_string(v))
                 v = s_set_units(key, v);
+            else if (json_is_string(v) && strcmp(key, "unit"))
+                v = s_arg_units(key, v, req);
             if (!v || json_object_set_new(is_set && strcmp(key, "preset") ? values : req, key, v)) {
                 json_t *text = json_string(eq + 1); /* NULL: not UTF-8; else a number beyond a double */
                 if (text)
