@@ -14,6 +14,10 @@ cut at every run sample that is a multiple of B (B = max(1, block_samples // col
 `run.start`) and at a segment change; each piece gives the sample of its smallest and the sample of its largest
 `force_N` (numpy's argmin/argmax: the first one), in sample order, once if they are the same sample. So the
 pull-off and the trigger survive, and a 1 MS/s curve draws the same ~64 points per block as a 200 kS/s one.
+The always-on controller's `live` topic (protocol/wire.md §3.7; the bridge subscribes to it by name) follows the
+same rule on its points: a message is cut at every live point index (first_sample / decimation + j) that is a
+multiple of L (L = max(1, ceil(monitor_rate_Hz / --live-columns-per-s))) and at a change of `state`; each piece
+gives its min and max `force_N`. At the default 100 points/s and 100 columns/s every point is drawn.
 
 Each browser has a bounded queue of frames (--queue); a browser that cannot keep up loses its oldest data
 frames (counted, shown on its page), never the daemon's or other browsers' data: the bridge never waits for
@@ -58,6 +62,7 @@ FLUSH_S = 0.05               # data frames go to the browsers every 50 ms
 STREAM_QUEUE = 256           # stream messages waiting for the bridge (~1.3 s of a paced 5 ms-block stream):
                              # behind a free run the rest is dropped for the bridge alone (counted as gaps)
 STATUS_S = 0.5               # the daemon's status is polled (once, for all browsers) every 0.5 s
+LIVE_KEEP_S = 12.0           # live frames kept for a browser that joins (the scope shows 10 s)
 NOT_FORWARDED = {"shutdown"}  # commands the panel never sends unless --allow-shutdown
 FRAME_MAGIC = 0x56574641     # "AFWV": binary data frame of the panel's WebSocket (docs/web.md)
 
@@ -162,6 +167,8 @@ class Bridge:
         self.commands = set()
         self.stats = {"blocks": 0, "frames": 0, "gaps": 0}
         self.last_seq = None
+        self.live_frames = collections.deque()  # (t_recv, frame) of the last LIVE_KEEP_S seconds
+        self.live_stats = {"messages": 0, "gaps": 0, "last_seq": None, "generation": None}
         self.t0 = time.time()  # the page's times are seconds since this (time.time(): the browser's clock too)
 
     # ---- the daemon --------------------------------------------------------------------------------------
@@ -206,6 +213,7 @@ class Bridge:
         self.sub.setsockopt(zmq.LINGER, 0)
         self.sub.setsockopt(zmq.RCVHWM, STREAM_QUEUE)
         self.sub.setsockopt(zmq.SUBSCRIBE, b"")
+        self.sub.setsockopt(zmq.SUBSCRIBE, b"live")  # the daemon sends `live` only to a subscription by name
         self.secure(self.sub)
         self.sub.connect(pub)
         self.pub = pub
@@ -218,6 +226,8 @@ class Bridge:
             try:
                 if topic == "data":
                     self.on_data(parts, t_recv)
+                elif topic == "live":
+                    self.on_live(parts, t_recv)
                 elif topic in ("run.start", "run.end", "event", "heartbeat", "campaign.end", "faults"):
                     self.on_json(topic, json.loads(parts[1]), t_recv)
             except (ValueError, KeyError, IndexError) as e:  # a message off the protocol: say so, go on
@@ -240,7 +250,8 @@ class Bridge:
 
     def bridge_info(self):
         return {"viewers": len(self.viewers), "blocks": self.stats["blocks"], "gaps": self.stats["gaps"],
-                "frames": self.stats["frames"], "pub": self.pub, "daemon": self.a.daemon}
+                "frames": self.stats["frames"], "pub": self.pub, "daemon": self.a.daemon,
+                "live_messages": self.live_stats["messages"], "live_gaps": self.live_stats["gaps"]}
 
     # ---- stream messages ---------------------------------------------------------------------------------
     def on_data(self, parts, t_recv):
@@ -260,6 +271,39 @@ class Bridge:
             run.pending = (h, chans, t_recv, None)  # its segment event follows at once
         else:
             self.process_block(run, h, chans, t_recv, None)
+
+    def on_live(self, parts, t_recv):
+        """A `live` message: decimated (the module docstring's rule) into one data frame of run_id 0, sent to
+        every browser at once and kept LIVE_KEEP_S seconds for the ones that join."""
+        h = json.loads(parts[1])
+        names, n = list(h["channels"]), int(h["points"])
+        if len(parts) != 2 + len(names) or any(len(p) != 8 * n for p in parts[2:]):
+            raise ValueError(f"{len(parts) - 2} frames for {len(names)} channels of {n} points")
+        if n == 0:
+            return
+        st = self.live_stats
+        st["messages"] += 1
+        if st["last_seq"] is not None and h["generation"] == st["generation"] and h["seq"] > st["last_seq"] + 1:
+            st["gaps"] += h["seq"] - st["last_seq"] - 1
+        st["last_seq"], st["generation"] = h["seq"], h["generation"]
+        chans = [np.frombuffer(p, "<f8") for p in parts[2:]]
+        m = max(1, int(h["decimation"]))
+        p0 = int(h["first_sample"]) // m
+        L = max(1, math.ceil(float(h["monitor_rate_Hz"]) / self.a.live_columns_per_s))
+        state = chans[names.index("state")].astype(np.int64)
+        idx = decimate_indices(chans[names.index("force_N")], state, p0, L)
+        # on the page's clock: the last point is now; the others earlier by the controller's time / speed
+        speed = float((self.status or {}).get("speed") or 1.0)
+        ts = chans[names.index("time_s")]
+        t = t_recv - (ts[-1] - ts[idx]) / speed - self.t0
+        meta = {"type": "live", "run_id": 0, "cols": ["i", "t"] + names, "n": len(idx), "seqs": [h["seq"]],
+                "generation": h["generation"], "state": h.get("state"), "L": L, "t_recv": [t_recv]}
+        frame = encode_frame(meta, [(p0 + idx).astype(np.float64), t] + [c[idx] for c in chans])
+        self.live_frames.append((t_recv, frame))
+        while self.live_frames and self.live_frames[0][0] < t_recv - LIVE_KEEP_S:
+            self.live_frames.popleft()
+        for v in list(self.viewers):
+            v.put(frame, data=True)
 
     def process_block(self, run, h, chans, t_recv, change):
         names = run.names
@@ -418,6 +462,8 @@ class Bridge:
             for f in frames:
                 put(f)
             put(json.dumps({"type": "run.end", "msg": clean_json(end), "history": True}))
+        for _, f in self.live_frames:
+            put(f)
         for run in self.runs.values():
             put(json.dumps({"type": "run.start", "msg": run.start, "B": run.B}))
             for f in run.points:
@@ -429,14 +475,23 @@ class Bridge:
         for f in self.faults:
             put(json.dumps({"type": "faults", "msg": clean_json(f), "history": True}))
 
-    async def set_with_units(self, text):
-        """`set` typed as NAME=VALUE... with units ("2um/s", "1nN"): the CLI's own parser converts them
-        (`vafm ctl set`, one place for units), and its reply, ok or the daemon's error, comes back as it is."""
-        words = text.split()
-        if not words or not all("=" in w for w in words):
+    async def ctl_with_units(self, cmd, args):
+        """A command typed as KEY=VALUE words with units ("x_m=2um", "speed_m_per_s=1um/s", "setpoint=1nN"):
+        `vafm ctl CMD KEY=VALUE...` converts them (the CLI's units, one place) and sends it; its reply, ok or
+        the daemon's error, comes back as it is. Only a command of hello's (less NOT_FORWARDED) is sent."""
+        if not isinstance(cmd, str) or cmd not in self.commands:
+            return {"status": "error", "code": "unknown_command", "field": "cmd",
+                    "message": f"{cmd}: not a command this panel forwards (hello's capabilities)"}
+        if not isinstance(args, list) or len(args) > 16 or not all(
+                isinstance(w, str) and len(w) <= 200 and "=" in w and w[0].isalpha() for w in args):
             return {"status": "error", "code": "malformed", "field": None,
-                    "message": "type NAME=VALUE pairs separated by spaces, e.g. v_approach_m_per_s=2um/s setpoint_N=1nN"}
+                    "message": "arguments are KEY=VALUE words, e.g. x_m=1um y_m=0 speed_m_per_s=2um/s"}
+        return await self.run_ctl(cmd, args)
+
+    async def run_ctl(self, cmd, words):
+        """`vafm ctl CMD WORDS...` (an argv list: no shell), or without --vafm the words as JSON numbers."""
         if not self.a.vafm:
+            req = {"cmd": cmd}
             vals = {}
             for w in words:
                 k, _, v = w.partition("=")
@@ -444,10 +499,14 @@ class Bridge:
                     vals[k] = json.loads(v)
                 except ValueError:
                     vals[k] = v
-            return await self.request({"cmd": "set", "values": vals})
+            if cmd == "set":
+                req["values"] = vals
+            else:
+                req.update(vals)
+            return await self.request(req)
         proc = await asyncio.create_subprocess_exec(
             self.a.vafm, "ctl", "--rep", self.a.daemon, *(["--pub", self.pub] if self.pub else []),
-            *(["--curve", self.a.curve] if self.a.curve else []), "set", *words,
+            *(["--curve", self.a.curve] if self.a.curve else []), cmd, *words,
             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         out, err = await asyncio.wait_for(proc.communicate(), 30)
         for blob in (out, err):
@@ -460,6 +519,15 @@ class Bridge:
                 pass
         return {"status": "error", "code": "transport", "field": None,
                 "message": (err or out).decode("utf-8", "replace").strip() or f"vafm ctl exited {proc.returncode}"}
+
+    async def set_with_units(self, text):
+        """`set` typed as NAME=VALUE... with units ("2um/s", "1nN"): the CLI's own parser converts them
+        (`vafm ctl set`, one place for units), and its reply, ok or the daemon's error, comes back as it is."""
+        words = text.split()
+        if not words or not all("=" in w for w in words):
+            return {"status": "error", "code": "malformed", "field": None,
+                    "message": "type NAME=VALUE pairs separated by spaces, e.g. v_approach_m_per_s=2um/s setpoint_N=1nN"}
+        return await self.run_ctl("set", words)
 
     # ---- HTTP and WebSocket ------------------------------------------------------------------------------
     def authorised(self, request):
@@ -500,6 +568,8 @@ class Bridge:
     async def on_command(self, m):
         if m.get("type") == "set_text":
             return await self.set_with_units(str(m.get("text", "")))
+        if m.get("type") == "ctl":
+            return await self.ctl_with_units(m.get("cmd"), m.get("args"))
         req = m.get("request")
         if not isinstance(req, dict) or not isinstance(req.get("cmd"), str):
             return {"status": "error", "code": "malformed", "field": "cmd", "message": "a request needs \"cmd\""}
@@ -569,6 +639,8 @@ def main(argv=None):
     ap.add_argument("--uplot-dir", default=os.path.join(HERE, "node_modules", "uplot", "dist"),
                     help="uPlot's dist folder (default: npm ci's, in clients/web)")
     ap.add_argument("--columns-per-block", type=int, default=32, help="display columns per data block (default %(default)s)")
+    ap.add_argument("--live-columns-per-s", type=float, default=100.0,
+                    help="display columns per second of the live scope (default %(default)s: 10 s on 1000 columns)")
     ap.add_argument("--queue", type=int, default=64, help="frames queued per browser before the oldest data frame is dropped")
     ap.add_argument("--allow-shutdown", action="store_true", help="let the panel send `shutdown`")
     ap.add_argument("--connect-timeout", type=float, default=10.0, help="seconds to wait for the daemon's hello")
@@ -576,6 +648,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     if not 1 <= a.columns_per_block <= 4096:
         ap.error("--columns-per-block: allowed range [1, 4096]")
+    if not 1 <= a.live_columns_per_s <= 1e5:
+        ap.error("--live-columns-per-s: allowed range [1, 1e5]")
     if not 2 <= a.queue <= 100000:
         ap.error("--queue: allowed range [2, 100000]")
     a.curve_keys = load_curve(ap, a.curve) if a.curve else None

@@ -29,6 +29,7 @@ static const struct {
 } s_opts[] = {
     { "--daemon", 1 }, { "--pub", 1 }, { "--listen", 1 }, { "--token", 1 }, { "--curve", 1 },
     { "--vafm", 1 }, { "--uplot-dir", 1 }, { "--columns-per-block", 1 }, { "--queue", 1 },
+    { "--live-columns-per-s", 1 },
     { "--allow-shutdown", 0 }, { "--connect-timeout", 1 }, { "--ready-file", 1 },
 };
 #define S_NOPTS ((int)(sizeof s_opts / sizeof s_opts[0]))
@@ -46,6 +47,7 @@ static const char s_help[] =
     "                          {\"server_public_key\": Z85, \"public_key\": Z85, \"secret_key\": Z85}\n"
     "  --allow-shutdown        let the panel send `shutdown` (never forwarded otherwise)\n"
     "  --columns-per-block N   display columns per data block (default 32; 1-4096): min/max per column\n"
+    "  --live-columns-per-s N  display columns per second of the live scope (default 100; 1-1e5)\n"
     "  --queue N               frames queued per browser before its oldest data frame is dropped (default 64)\n"
     "  --connect-timeout S     seconds to wait for the daemon's hello (default 10)\n"
     "  --ready-file FILE       write the panel's URL here once it listens (scripts, tests)\n"

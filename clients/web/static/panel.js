@@ -9,11 +9,14 @@ const SEG = {0: "approach", 1: "retract", 2: "dwell", 3: "tune"};
 const P = window.vafmPanel = {
   connected: false, hello: null, t0: null, status: null, runs: {}, order: [], curves: [], faults: [],
   replies: [], messages: [], drawLog: [], frames: 0, map: null, tune: null, droppedFrames: 0,
+  // the controller's live points (decimated by the bridge; "seq": the live message each came in), the live
+  // messages' draw times, the run the stream says is in progress, and every (state, run) the panel showed
+  live: {cols: {}, n: 0}, liveDrawLog: [], streamRun: null, stateShown: [],
   // the points the page holds for run `rid`, as plain arrays (the test compares them with the stream)
   points(rid) { const r = this.runs[rid]; return r ? r.cols : null; },
 };
 const $ = (id) => document.getElementById(id);
-let ws = null, reqId = 0, dirty = {scope: false, curve: false}, pendingSeqs = [];
+let ws = null, reqId = 0, dirty = {scope: false, curve: false}, pendingSeqs = [], pendingLive = [];
 const pending = {};
 
 // ---- the WebSocket ---------------------------------------------------------------------------------------
@@ -68,6 +71,11 @@ function onJson(m) {
     P.hello = m.hello; P.t0 = m.t0_epoch; P.commands = m.commands;
     $("daemon").textContent = `${m.hello.daemon} ${m.hello.daemon_version} at ${m.bridge.daemon}`;
     send({cmd: "presets"}, "presets");
+    for (const [id, cmd] of [["btn-engage", "engage"], ["btn-withdraw", "withdraw"], ["btn-move", "move"], ["btn-z", "z"],
+      ["btn-fb-on", "feedback"], ["btn-fb-off", "feedback"], ["btn-fb-setpoint", "feedback"]]) {
+      $(id).disabled = !m.commands.includes(cmd);
+      if ($(id).disabled) $(id).title = `${cmd}: not a command of this daemon`;
+    }
     break;
   case "status":
     P.status = m.status; P.bridge = m.bridge; P.droppedFrames = m.dropped_frames || 0;
@@ -91,12 +99,14 @@ function onJson(m) {
     const s = m.msg, r = runOf(s.run_id);
     r.start = s; r.history = !!m.history;
     if (s.kind === "curve" || s.kind === "replay") P.current = s.run_id;
+    if (!m.history && !r.end) { P.streamRun = s.run_id; drawState(); }  // shown at once, not at the next poll
     dirty.curve = true;
     break;
   }
   case "run.end": {
     const e = m.msg, r = runOf(e.run_id);
     r.end = e; r.t1 = r.t1 || nowT();
+    if (P.streamRun === e.run_id) { P.streamRun = null; drawState(); }
     if (r.start && r.start.kind === "curve" && !P.curves.includes(e.run_id)) { P.curves.push(e.run_id); if (P.curves.length > 9) P.curves.shift(); }
     if (e.status !== "ok" && !m.history) message(`run ${e.run_id} ${e.status}` + (e.error ? `: ${e.error.message}` : ""), e.status === "error");
     dirty.curve = true;
@@ -115,6 +125,15 @@ function onJson(m) {
   case "map": P.map = m.map; drawMap(); break;
   case "tune": P.tune = m.tune; drawTune(); break;
   case "heartbeat": P.heartbeat = m.msg; break;
+  case "event":
+    if (m.msg && m.msg.source === "ctrl") {  // the controller's events (wire.md §3.4), as the daemon words them
+      const e = m.msg, skip = new Set(["run_id", "source", "kind", "generation", "sample", "time_s"]);
+      const detail = Object.keys(e).filter((k) => !skip.has(k)).map((k) => `${k} ${typeof e[k] === "number" ? e[k].toPrecision(4) : JSON.stringify(e[k])}`);
+      const bad = ["crash", "engage_failed", "xy_range", "z_saturated", "lost_contact", "sim_error", "ctrl_refused", "events_dropped"].includes(e.kind);
+      message(`controller: ${e.kind}` + (detail.length ? ` (${detail.join(", ")})` : "") + ` at ${(+e.time_s).toFixed(3)} s`, bad);
+      P.ctrlEvents = (P.ctrlEvents || []).concat([e]).slice(-200);
+    }
+    break;
   case "panel_error": message(`panel: ${m.message}`, true); break;
   default: break;
   }
@@ -130,6 +149,7 @@ function onFrame(buf) {
   let off = 8 + jl;
   const a = {};
   for (const c of meta.cols) { a[c] = new Float64Array(buf, off, meta.n); off += 8 * meta.n; }
+  if (meta.type === "live") { onLive(meta, a); return; }
   const r = runOf(meta.run_id);
   for (const c of meta.cols) { if (!r.cols[c]) r.cols[c] = []; const dst = r.cols[c]; for (let k = 0; k < meta.n; k++) dst.push(a[c][k]); }
   r.n += meta.n;
@@ -140,9 +160,23 @@ function onFrame(buf) {
   dirty.scope = dirty.curve = true;
 }
 
+const LIVE_KEEP = 200000;
+function onLive(meta, a) {
+  const L = P.live, cols = meta.cols.concat(["seq"]);
+  a.seq = new Float64Array(meta.n).fill(meta.seqs[0]);
+  for (const c of cols) { if (!L.cols[c]) L.cols[c] = []; const dst = L.cols[c]; for (let k = 0; k < meta.n; k++) dst.push(a[c][k]); }
+  L.n += meta.n;
+  if (L.cols.i.length > LIVE_KEEP) for (const c of cols) L.cols[c].splice(0, L.cols[c].length - LIVE_KEEP);
+  P.liveState = meta.state; L.L = meta.L;
+  // the scope's channels, as the controller names them
+  scopeAppend({t: a.t, vDeflection_V: a.signal_V, force_N: a.force_N, height_m: a.piezo_z_m, motor_z_m: a.motor_z_m}, meta.n, {start: {run_id: 0}});
+  pendingLive.push(...meta.seqs);
+  dirty.scope = true;
+}
+
 // ---- scope -----------------------------------------------------------------------------------------------
 const scope = {t: [], y: {}, lastRun: null};
-const SCOPE_CH = ["vDeflection_V", "force_N", "height_m", "height_measured_m"];
+const SCOPE_CH = ["vDeflection_V", "force_N", "height_m", "height_measured_m", "motor_z_m"];
 for (const c of SCOPE_CH) scope.y[c] = [];
 
 function scopeAppend(a, n, r) {
@@ -285,9 +319,20 @@ function drawTune() {
 
 // ---- state -----------------------------------------------------------------------------------------------
 let lastRate = null;
+const CTRL_WORDS = {idle: "out of contact", approaching: "approaching", engaged: "engaged (in contact)",
+  withdrawing: "withdrawing", withdrawn: "withdrawn", crashed: "crashed"};
+const um = (x) => x == null ? "—" : `${(x * 1e6).toFixed(3)} µm`;
+const nm = (x) => x == null ? "—" : `${(x * 1e9).toFixed(2)} nm`;
+const nN = (x) => x == null ? "—" : `${(x * 1e9).toFixed(3)} nN`;
 function drawState() {
   const s = P.status; if (!s) return;
-  const cur = s.run_id ? P.runs[s.run_id] : null, kind = cur && cur.start ? cur.start.kind : null;
+  // the run in progress: the stream's run.start/run.end (at once) over the 0.5 s poll (which may be older)
+  let state = s.state, rid = s.run_id;
+  if (P.streamRun !== null) { state = "running"; rid = P.streamRun; }
+  else if (rid && P.runs[rid] && P.runs[rid].end) { state = "idle"; rid = null; }
+  const cur = rid ? P.runs[rid] : null, kind = cur && cur.start ? cur.start.kind : null;
+  const shown = P.stateShown.length ? P.stateShown[P.stateShown.length - 1] : null;
+  if (!shown || shown[0] !== state || shown[1] !== rid) { P.stateShown.push([state, rid]); if (P.stateShown.length > 1000) P.stateShown.shift(); }
   let rtf = "—";
   if (lastRate && s.state === "running" && cur && cur.start) {
     const dt = (performance.now() - lastRate.t) / 1000, ds = s.samples - lastRate.samples;
@@ -296,30 +341,51 @@ function drawState() {
   lastRate = {t: performance.now(), samples: s.samples};
   const z = cur && cur.cols.height_m && cur.cols.height_m.length ? (cur.cols.height_m[cur.cols.height_m.length - 1] * 1e9).toFixed(1) + " nm" : "—";
   const mp = cur && cur.start && cur.start.campaign && cur.start.campaign.map;
-  const lg = s.log || {}, c = s.campaign;
+  const lg = s.log || {}, c = s.campaign, k = s.ctrl;
+  const esc = (t) => String(t).replace(/[&<>]/g, (ch) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;"})[ch]);
+  let ctrlRows;
+  if (!k) ctrlRows = [["controller", "none in this daemon (no status.ctrl)"]];
+  else if (!k.available) ctrlRows = [["controller", `unavailable: ${esc(k.error || "")}`]];
+  else {
+    const held = state === "running" ? " — held: in a run" : "";
+    ctrlRows = [
+      ["controller", `<b id="state-ctrl">${k.state}</b> (${CTRL_WORDS[k.state] || k.state}${held})` +
+        (k.last_fail ? `; last failure ${esc(k.last_fail)}` : "") + (k.moving ? "; moving" : "")],
+      ["Z", `motor <span id="state-motor">${um(k.motor_z_m)}</span>, piezo <span id="state-piezo">${nm(k.piezo_z_m)}</span>` +
+        (k.gap_m != null ? `, gap ${nm(k.gap_m)}` : "") + (k.saturated ? " (saturated)" : "")],
+      ["XY", `<span id="state-xy">${um(k.x_m)}, ${um(k.y_m)}</span>` + (k.moving ? ` → ${um(k.target_x_m)}, ${um(k.target_y_m)}` : "") +
+        (mp ? `; run: ${(mp.x_m * 1e6).toFixed(2)}, ${(mp.y_m * 1e6).toFixed(2)} µm (pixel ${mp.ix}, ${mp.iy})` : "")],
+      ["feedback", `<span id="state-fb">${k.feedback ? "on" : "off"}</span>, setpoint ${nN(k.setpoint_N)}, error ${nN(k.error_N)}, force ${nN(k.force_N)}`],
+    ];
+  }
   const rows = [
-    ["daemon", `<b id="state-daemon">${s.state}</b>` + (s.run_id ? ` run <span id="state-run">${s.run_id}</span> (${kind || "?"})` : "")],
-    ["controller", "not yet (always-on controller, issue #26): out of contact between runs"],
-    ["Z (piezo)", z], ["XY", mp ? `${(mp.x_m * 1e6).toFixed(2)}, ${(mp.y_m * 1e6).toFixed(2)} µm (pixel ${mp.ix}, ${mp.iy})` : "—"],
-    ["feedback", "not yet (issue #26)"],
+    ["daemon", `<b id="state-daemon">${state}</b>` + (rid ? ` run <span id="state-run">${rid}</span> (${kind || "?"})` : "")],
+    ...ctrlRows,
+    ["run Z (piezo)", z],
     ["pacing", `speed ${s.speed}${s.free_run ? ", free run" : ""}; late blocks ${s.late_blocks} (worst ${(s.worst_late_ns / 1e6).toFixed(2)} ms); real-time factor ${rtf}`],
     ["campaign", c ? `#${c.campaign_id} ${c.running ? "running" : "ended"}: ${c.curves_done} / ${c.curves}` : "—"],
-    ["logging", `${lg.state}${lg.path ? " " + lg.path : ""}; curves ${lg.curves || 0}, pending ${lg.queued || 0}` + (lg.error ? `; error ${lg.error}` : "")],
+    ["logging", `${lg.state}${lg.path ? " " + esc(lg.path) : ""}; curves ${lg.curves || 0}, pending ${lg.queued || 0}` + (lg.error ? `; error ${esc(lg.error)}` : "")],
     ["faults", `${(s.faults && s.faults.count) || 0} injected` + (s.faults && s.faults.plan ? " (plan set)" : "")],
-    ["stream", `${s.blocks} blocks, dropped ${s.dropped}; this page lost ${P.droppedFrames} frames`],
+    ["stream", `${s.blocks} blocks, dropped ${s.dropped}; this page lost ${P.droppedFrames} frames` +
+      (k && k.live ? `; live ${P.live.n} points (${k.live.monitor_rate_Hz} /s, dropped ${k.live.dropped})` : "")],
   ];
-  $("state").innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
+  $("state").innerHTML = rows.map(([a, v]) => `<tr><td>${a}</td><td>${v}</td></tr>`).join("");
 }
 
 // ---- drawing loop: redraw what changed, log when each block was drawn ------------------------------------
 function frame() {
-  const drawn = pendingSeqs; pendingSeqs = [];
+  const drawn = pendingSeqs, drawnLive = pendingLive; pendingSeqs = []; pendingLive = [];
   if (dirty.curve) { dirty.curve = false; drawCurve(); }
   drawScope();
   if (drawn.length) {
     const t = (performance.timeOrigin + performance.now()) / 1000;
     for (const s of drawn) P.drawLog.push([s, t]);
     if (P.drawLog.length > 200000) P.drawLog.splice(0, 100000);
+  }
+  if (drawnLive.length) {
+    const t = (performance.timeOrigin + performance.now()) / 1000;
+    for (const s of drawnLive) P.liveDrawLog.push([s, t]);
+    if (P.liveDrawLog.length > 200000) P.liveDrawLog.splice(0, 100000);
   }
   requestAnimationFrame(frame);
 }
@@ -340,6 +406,19 @@ $("btn-faults").onclick = () => {
   send({cmd: "faults", plan}, "faults");
 };
 $("btn-faults-clear").onclick = () => send({cmd: "faults", clear: true}, "faults clear");
+// the controller (wire.md §2.4): values with units go through the bridge's `vafm ctl` (one parser of units)
+function ctl(cmd, args) {
+  const id = ++reqId;
+  pending[id] = cmd;
+  ws.send(JSON.stringify({type: "ctl", id, cmd, args}));
+}
+$("btn-engage").onclick = () => send({cmd: "engage"});
+$("btn-withdraw").onclick = () => send({cmd: "withdraw", motor_steps: +$("withdraw-steps").value});
+$("btn-move").onclick = () => ctl("move", [`x_m=${$("move-x").value.trim()}`, `y_m=${$("move-y").value.trim()}`, `speed_m_per_s=${$("move-speed").value.trim()}`]);
+$("btn-z").onclick = () => ctl("z", [`z_m=${$("z-z").value.trim()}`]);
+$("btn-fb-on").onclick = () => send({cmd: "feedback", on: true}, "feedback");
+$("btn-fb-off").onclick = () => send({cmd: "feedback", on: false}, "feedback");
+$("btn-fb-setpoint").onclick = () => ctl("feedback", [`setpoint=${$("fb-setpoint").value.trim()}`]);
 $("truth").onchange = $("overlay-n").onchange = () => { dirty.curve = true; };
 
 connect();
