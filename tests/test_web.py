@@ -421,6 +421,13 @@ def test_map_and_tune_views(panel):
     assert red > 200, f"{red} red pixels: the tune's fit is not drawn"
     info = a.find_element("id", "tune-info").text
     assert f"run {rep['reply']['run_id']}: k = " in info and " N/m, f0 = " in info, info
+    # the scope's shading of the tune ends where the run ended, not when the panel had fitted it: it spans the
+    # run's time at the daemon's speed (0.5), within 0.5 s of transport and drawing
+    tid = rep["reply"]["run_id"]
+    span = js(a, f"(() => {{ const r = window.vafmPanel.runs[{tid}]; return r.end ? [r.t0, r.t1, r.end.samples, r.start.sample_rate_Hz] : null; }})()")
+    assert span is not None, "the page has no run.end of the tune"
+    t0, t1, samples, fs = span
+    assert 0 < t1 - t0 <= samples / fs / 0.5 + 0.5, (t1 - t0, samples / fs / 0.5)
     a.save_screenshot(os.path.join(ART, "web-tune.png"))
     sub.close(0)
 

@@ -335,7 +335,7 @@ class Bridge:
                 start["replay"] = {k: v for k, v in start["replay"].items() if k != "curves"}
             self.last_json["run.start"] = start
             self.map_start(p)
-            self.broadcast_json({"type": "run.start", "msg": start, "B": self.runs[rid].B})
+            self.broadcast_json({"type": "run.start", "msg": start, "B": self.runs[rid].B, "t": t_recv - self.t0})
             return
         if topic == "event":
             run = self.runs.get(rid)
@@ -351,14 +351,17 @@ class Bridge:
             if run is not None and run.pending is not None:
                 self.process_block(run, *run.pending)
             self.flush()
-            if run is not None:
-                if run.kind == "curve":
-                    self.curves.append((run.start, p, run.points))
-                if run.tune is not None and run.tune:
-                    self.tune_done(run, p)
+            if run is not None and run.kind == "curve":
+                self.curves.append((run.start, p, run.points))
             self.map_end(p)
             self.last_json["run.end"] = p
-            self.broadcast_json({"type": "run.end", "msg": clean_json(p)})
+            # t: when the run ended on the page's clock (its scope shading ends there)
+            self.broadcast_json({"type": "run.end", "msg": clean_json(p), "t": t_recv - self.t0})
+            if run is not None and run.tune is not None and run.tune:
+                # the spectrum and its fit take a while (0.7 s for 0.2 s at 200 kS/s): in a thread, so that the
+                # run.end, the live signal and the other browsers are not held up
+                fut = asyncio.get_running_loop().run_in_executor(None, self.tune_fit, run)
+                fut.add_done_callback(self.tune_done)
             return
         if topic == "faults":
             self.faults.append(p)
@@ -397,7 +400,8 @@ class Bridge:
     def map_public(self):
         return clean_json({k: v for k, v in self.map.items() if k != "runs"})
 
-    def tune_done(self, run, end):
+    def tune_fit(self, run):
+        """The tune's spectrum and fit (in a worker thread: touches nothing of the bridge's)."""
         x = np.concatenate(run.tune)
         sens = run.start.get("sensitivity_m_per_V") or 1.0
         if "vDeflection_V" in run.names:
@@ -417,7 +421,16 @@ class Bridge:
             out["fit_psd"] = sampled_psd(f[keep], fit["k"], fit["f0"], fit["Q"], kT, run.fs, mean).tolist()
         except Exception as e:  # noqa: BLE001 - a fit that does not converge is shown as such, not raised
             out["fit_error"] = f"{type(e).__name__}: {e}"
-        self.tune_result = clean_json(out)
+        return clean_json(out)
+
+    def tune_done(self, fut):
+        if fut.cancelled():
+            return
+        e = fut.exception()
+        if e is not None:
+            self.broadcast_json({"type": "panel_error", "message": f"tune spectrum: {type(e).__name__}: {e}"})
+            return
+        self.tune_result = fut.result()
         self.broadcast_json({"type": "tune", "tune": self.tune_result})
 
     # ---- to the browsers ---------------------------------------------------------------------------------

@@ -105,7 +105,7 @@ function onJson(m) {
   }
   case "run.end": {
     const e = m.msg, r = runOf(e.run_id);
-    r.end = e; r.t1 = r.t1 || nowT();
+    r.end = e; r.t1 = r.t1 || (m.t != null ? m.t : nowT());  // the bridge's time of the run.end (history: none)
     if (P.streamRun === e.run_id) { P.streamRun = null; drawState(); }
     if (r.start && r.start.kind === "curve" && !P.curves.includes(e.run_id)) { P.curves.push(e.run_id); if (P.curves.length > 9) P.curves.shift(); }
     if (e.status !== "ok" && !m.history) message(`run ${e.run_id} ${e.status}` + (e.error ? `: ${e.error.message}` : ""), e.status === "error");
