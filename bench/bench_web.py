@@ -4,6 +4,8 @@
   - lag from a block's publication to its drawing in the page (p50, p99), at the default scene and at 1 MS/s:
     a Python subscriber stamps each block's arrival (time.time(), on this machine ≈ publication), the page
     stamps the animation frame that drew it (performance.timeOrigin + now(), the same wall clock);
+  - the same for the always-on controller's `live` messages while idle (a subscriber to `live` by name
+    stamps each message's arrival, the page its drawing);
   - the daemon's CPU (utime + stime from /proc) over the same paced campaign with no panel, the panel and
     1 browser, and 5 browsers: what the panel adds to the daemon.
 usage: bench_web.py VAFMD OUT_DIR"""
@@ -48,6 +50,22 @@ def campaign(d, sub):
     return arrive, cpu_s(d.proc.pid) - c0
 
 
+LIVE_S = 3.0
+
+
+def live_arrivals(d):
+    """{live seq: arrival time} over LIVE_S seconds of an idle daemon."""
+    sub = d.sub(topics=(b"live", b"heartbeat"), greet=True)
+    arrive, end = {}, time.monotonic() + LIVE_S
+    while time.monotonic() < end:
+        if sub.poll(100):
+            parts = sub.recv_multipart()
+            if parts[0] == b"live":
+                arrive[json.loads(parts[1])["seq"]] = time.time()
+    sub.close(0)
+    return arrive
+
+
 def run_case(rate, viewers, measure_lag):
     d = vafmd_harness.Daemon()
     web, drivers = None, []
@@ -61,6 +79,14 @@ def run_case(rate, viewers, measure_lag):
             wait_for("panel", lambda: os.path.exists(ready))
             url = open(ready).read().strip()
             drivers = [browser(url) for _ in range(viewers)]
+        live_lags = []
+        if measure_lag and drivers:
+            larr = live_arrivals(d)
+            last = max(larr)
+            wait_for("the last live message drawn", lambda: any(s == last for s, _ in drivers[0].execute_script(
+                "return window.vafmPanel.liveDrawLog.slice(-100)")), timeout=30)
+            drawn = dict((int(s), t) for s, t in drivers[0].execute_script("return window.vafmPanel.liveDrawLog"))
+            live_lags = [(drawn[s] - t) * 1e3 for s, t in larr.items() if s in drawn]
         sub = d.sub(greet=True)
         arrive, cpu = campaign(d, sub)
         lags = []
@@ -71,7 +97,8 @@ def run_case(rate, viewers, measure_lag):
             drawn = dict((int(s), t) for s, t in drivers[0].execute_script("return window.vafmPanel.drawLog"))
             lags = [(drawn[s] - t) * 1e3 for s, t in arrive.items() if s in drawn]
         sub.close(0)
-        return {"rate": rate, "viewers": viewers, "blocks": len(arrive), "daemon_cpu_s": cpu, "lags_ms": lags}
+        return {"rate": rate, "viewers": viewers, "blocks": len(arrive), "daemon_cpu_s": cpu, "lags_ms": lags,
+                "live_lags_ms": live_lags}
     finally:
         for drv in drivers:
             drv.quit()
@@ -90,10 +117,13 @@ def main():
         lag = np.array(r["lags_ms"])
         rows.append(f"| lag, {label} | {len(lag)} of {r['blocks']} blocks | p50 {np.percentile(lag, 50):.1f} ms | "
                     f"p99 {np.percentile(lag, 99):.1f} ms | max {lag.max():.1f} ms |")
+        ll = np.array(r["live_lags_ms"])
+        rows.append(f"| live lag (idle), {label} | {len(ll)} live messages in {LIVE_S:g} s | p50 {np.percentile(ll, 50):.1f} ms | "
+                    f"p99 {np.percentile(ll, 99):.1f} ms | max {ll.max():.1f} ms |")
     cpu = {}
-    for v in (0, 1, 5):
+    for v in ((0, 1, 5) if "--no-cpu" not in sys.argv else ()):
         cpu[v] = run_case(None, v, False)["daemon_cpu_s"]
-    for v in (1, 5):
+    for v in (1, 5) if cpu else ():
         rows.append(f"| daemon CPU, {v} browser(s) | campaign of {CURVES} curves | {cpu[v]:.3f} s | "
                     f"without panel {cpu[0]:.3f} s | added {cpu[v] - cpu[0]:+.3f} s |")
     text = "| measure | over | | | |\n|---|---|---|---|---|\n" + "\n".join(rows) + "\n"
