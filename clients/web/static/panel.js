@@ -367,7 +367,7 @@ function drawState() {
     ["logging", `${lg.state}${lg.path ? " " + esc(lg.path) : ""}; curves ${lg.curves || 0}, pending ${lg.queued || 0}` + (lg.error ? `; error ${esc(lg.error)}` : "")],
     ["faults", `${(s.faults && s.faults.count) || 0} injected` + (s.faults && s.faults.plan ? " (plan set)" : "")],
     ["stream", `${s.blocks} blocks, dropped ${s.dropped}; this page lost ${P.droppedFrames} frames` +
-      (k && k.live ? `; live ${P.live.n} points (${k.live.monitor_rate_Hz} /s, dropped ${k.live.dropped})` : "")],
+      (k && k.live ? `; live ${P.live.n} points (${(+k.live.monitor_rate_Hz).toPrecision(4)} /s, dropped ${k.live.dropped})` : "")],
   ];
   $("state").innerHTML = rows.map(([a, v]) => `<tr><td>${a}</td><td>${v}</td></tr>`).join("");
 }
