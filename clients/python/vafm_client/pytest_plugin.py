@@ -586,6 +586,7 @@ class Engaged:
         only; raises TransportError if they do not come within `timeout` s (or a live message is lost:
         the points would not be consecutive)."""
         deadline = time.monotonic() + timeout
+        since = self.event.get("sample")  # points that begin before the engaged event are not "engaged" points
         parts, got, last = [], 0, None
         for topic, x in self.stream.messages(deadline=deadline):
             if topic != "live" or x[0].get("generation") != self.generation:
@@ -594,8 +595,14 @@ class Engaged:
             if last is not None and h["seq"] != last + 1:
                 raise TransportError(f"live message {last + 1} lost (next seen: {h['seq']})")
             last = h["seq"]
-            parts.append(ch)
-            got += h["points"]
+            skip = 0
+            if since is not None and not parts:  # the stream may hold points from before the engage ended
+                m = int(h.get("decimation") or 1)
+                skip = min(h["points"], max(0, -(-(since - int(h["first_sample"])) // m)))
+            if skip == h["points"]:
+                continue
+            parts.append({c: v[skip:] for c, v in ch.items()})
+            got += h["points"] - skip
             if got >= n:
                 break
         return {c: np.concatenate([p[c] for p in parts])[:n] for c in parts[0]}
