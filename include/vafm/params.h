@@ -4,7 +4,8 @@
  * Scene parameters in SI, named presets, validation, and the field table that the CLI, JSON scene
  * files, the daemon and the HDF5 provenance all read (one place lists names, units, ranges, docs).
  *
- * The core works in reduced units (units.h); conversion lives in units.c only.
+ * The core works in reduced units (units.h): units.c makes the scale and the reduced scene; every other
+ * core file scales a value through the vafm_scale_<quantity>_si/_red helpers declared with vafm_scale.
  */
 #ifndef VAFM_PARAMS_H
 #define VAFM_PARAMS_H

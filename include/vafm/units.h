@@ -28,6 +28,26 @@ typedef struct vafm_scale {
     double stiffness_N_per_m; /**< E*R */
 } vafm_scale;
 
+/* Reduced ↔ SI, declared once. Outside units.c the core scales a value only through these: `_si` is one
+ * multiplication by the factor (reduced → SI), `_red` one division by it (SI → reduced), so a call is
+ * the same double as the expression `x * s->factor` or `x / s->factor` it stands for (x*f and x/f are
+ * not the same double as each other: a site keeps the operation it had). */
+static inline double vafm_scale_length_si(const vafm_scale *s, double x) { return x * s->length_m; }
+static inline double vafm_scale_length_red(const vafm_scale *s, double x_m) { return x_m / s->length_m; }
+static inline double vafm_scale_time_si(const vafm_scale *s, double x) { return x * s->time_s; }
+static inline double vafm_scale_time_red(const vafm_scale *s, double x_s) { return x_s / s->time_s; }
+static inline double vafm_scale_force_si(const vafm_scale *s, double x) { return x * s->force_N; }
+static inline double vafm_scale_force_red(const vafm_scale *s, double x_N) { return x_N / s->force_N; }
+static inline double vafm_scale_energy_si(const vafm_scale *s, double x) { return x * s->energy_J; }
+static inline double vafm_scale_energy_red(const vafm_scale *s, double x_J) { return x_J / s->energy_J; }
+static inline double vafm_scale_speed_si(const vafm_scale *s, double x) { return x * s->speed_m_per_s; }
+static inline double vafm_scale_speed_red(const vafm_scale *s, double x_m_per_s) { return x_m_per_s / s->speed_m_per_s; }
+static inline double vafm_scale_stiffness_si(const vafm_scale *s, double x) { return x * s->stiffness_N_per_m; }
+static inline double vafm_scale_stiffness_red(const vafm_scale *s, double x_N_per_m)
+{
+    return x_N_per_m / s->stiffness_N_per_m;
+}
+
 /** A scene's physics in reduced units. */
 typedef struct vafm_reduced {
     double m;        /**< m̃ = mη²/(E*R) */

@@ -14,33 +14,33 @@
 void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out)
 {
     const vafm_reduced *r = &nm->r;
-    const double L = nm->sc.length_m, T = nm->sc.time_s;
+    const vafm_scale *sc = &nm->sc;
     memset(out, 0, sizeof *out);
     /* a typical curve: approach from the start to the trigger, dwell, retract to the quasi-static
      * detachment and the margin after it (sim.c: s_begin, s_start_retract) */
-    double uspr_start = -p->start_height_m / L;
-    double approach = fmax(0.0, nm->u_spr_turn - uspr_start), margin = p->retract_margin_m / L;
-    double t = approach / r->v_approach + p->dwell_s / T + (nm->u_c + margin) / r->v_retract;
+    double uspr_start = vafm_scale_length_red(sc, -p->start_height_m);
+    double approach = fmax(0.0, nm->u_spr_turn - uspr_start), margin = vafm_scale_length_red(sc, p->retract_margin_m);
+    double t = approach / r->v_approach + vafm_scale_time_red(sc, p->dwell_s) + (nm->u_c + margin) / r->v_retract;
     /* the longest: the approach to its travel limit, the retract to its own */
     double sigma = r->k > 0 ? sqrt(r->kT / r->k) : 0.0;
-    double zr = p->z_range_m > 0 ? p->z_range_m / L
-                                 : fmax(0.0, -uspr_start) + 2.0 * (p->setpoint_N / nm->sc.force_N) / r->k + 20.0 * sigma + 1.0;
-    double ret = p->retract_max_m > 0 ? p->retract_max_m / L : 4.0 * fmax(zr + uspr_start - (nm->u_spr_turn - nm->u_c), 0.0) + margin + 1.0;
-    double tmax = zr / r->v_approach + p->dwell_s / T + (zr + ret) / r->v_retract;
+    double zr = p->z_range_m > 0 ? vafm_scale_length_red(sc, p->z_range_m)
+                                 : fmax(0.0, -uspr_start) + 2.0 * vafm_scale_force_red(sc, p->setpoint_N) / r->k + 20.0 * sigma + 1.0;
+    double ret = p->retract_max_m > 0 ? vafm_scale_length_red(sc, p->retract_max_m) : 4.0 * fmax(zr + uspr_start - (nm->u_spr_turn - nm->u_c), 0.0) + margin + 1.0;
+    double tmax = zr / r->v_approach + vafm_scale_time_red(sc, p->dwell_s) + (zr + ret) / r->v_retract;
     if (p->ramp_size_m > 0) {
         /* a fixed ramp: the ramp down (to the trigger, here taken at its end) and back up; from the trigger
          * point up to twice the ramp */
-        double ramp = p->ramp_size_m / L, span = p->ramp_start == VAFM_RAMP_START_TRIGGER ? 2.0 * ramp : ramp;
-        t = ramp / r->v_approach + p->dwell_s / T + ramp / r->v_retract;
-        tmax = span / r->v_approach + p->dwell_s / T + span / r->v_retract;
+        double ramp = vafm_scale_length_red(sc, p->ramp_size_m), span = p->ramp_start == VAFM_RAMP_START_TRIGGER ? 2.0 * ramp : ramp;
+        t = ramp / r->v_approach + vafm_scale_time_red(sc, p->dwell_s) + ramp / r->v_retract;
+        tmax = span / r->v_approach + vafm_scale_time_red(sc, p->dwell_s) + span / r->v_retract;
     }
-    out->duration_s = t * T;
-    out->duration_max_s = fmax(t, tmax) * T;
+    out->duration_s = vafm_scale_time_si(sc, t);
+    out->duration_max_s = vafm_scale_time_si(sc, fmax(t, tmax));
     out->samples = t / nm->Ts;
-    out->samples_max = out->duration_max_s / T / nm->Ts;
+    out->samples_max = vafm_scale_time_red(sc, out->duration_max_s) / nm->Ts;
     out->steps = t / nm->dt;
     out->tune_samples = p->tune_duration_s * p->sample_rate_Hz;
-    out->tune_steps = p->tune_duration_s / T / nm->dt;
+    out->tune_steps = vafm_scale_time_red(sc, p->tune_duration_s) / nm->dt;
 }
 
 /* Refuse a scene whose curve or tune would exceed the documented cost limits (vafm/sim.h), naming the
@@ -49,12 +49,12 @@ static int s_check_cost(const vafm_params *p, const vafm_numerics *nm, vafm_erro
 {
     vafm_sim_estimate est;
     vafm_numerics_estimate(p, nm, &est);
-    const double T = nm->sc.time_s;
+    const vafm_scale *sc = &nm->sc;
     /* the part of the typical curve's time that dominates names the field */
     double t_dwell = p->dwell_s, t_ret = est.duration_s - t_dwell, t_app = 0.0;
-    double uspr_start = -p->start_height_m / nm->sc.length_m;
-    t_app = p->ramp_size_m > 0 ? p->ramp_size_m / nm->sc.length_m / nm->r.v_approach * T
-                               : fmax(0.0, nm->u_spr_turn - uspr_start) / nm->r.v_approach * T;
+    double uspr_start = vafm_scale_length_red(sc, -p->start_height_m);
+    t_app = p->ramp_size_m > 0 ? vafm_scale_time_si(sc, vafm_scale_length_red(sc, p->ramp_size_m) / nm->r.v_approach)
+                               : vafm_scale_time_si(sc, fmax(0.0, nm->u_spr_turn - uspr_start) / nm->r.v_approach);
     t_ret -= t_app;
     const char *slow = t_dwell >= t_app && t_dwell >= t_ret ? "dwell_s"
                        : t_app >= t_ret                       ? "v_approach_m_per_s"
@@ -76,7 +76,7 @@ static int s_check_cost(const vafm_params *p, const vafm_numerics *nm, vafm_erro
         vafm_err_set(e, VAFM_EINVAL, tune ? "tune_duration_s" : slow,
                      "a %s of this scene runs ~%.3g s (simulated) at a time step of %.3g s: ~%.3g integrator steps, "
                      "more than %.0e (VAFM_SIM_MAX_STEPS, hours of CPU); %s",
-                     tune ? "thermal tune" : "curve", tune ? p->tune_duration_s : est.duration_s, nm->dt * T,
+                     tune ? "thermal tune" : "curve", tune ? p->tune_duration_s : est.duration_s, vafm_scale_time_si(sc, nm->dt),
                      tune ? est.tune_steps : est.steps, VAFM_SIM_MAX_STEPS,
                      tune ? "shorten tune_duration_s" : "raise the speeds or shorten dwell_s");
         return VAFM_EINVAL;
@@ -114,6 +114,7 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     vafm_numerics nm_local, *nm = out ? out : &nm_local;
     vafm_units_reduce(p, &nm->r);
     nm->sc = vafm_units_scale(p);
+    const vafm_scale *sc = &nm->sc;
     const vafm_reduced *r = &nm->r;
     const unsigned cf = p->contact ? p->contact->flags : 0u;
     if (vafm_contact_init(&nm->contact, p->contact, (cf & VAFM_CONTACT_ADHESIVE) ? r->gamma : 0.0)) {
@@ -123,17 +124,17 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     }
     const vafm_contact *c = &nm->contact;
     const int has_contact = (cf & VAFM_CONTACT_SURFACE) != 0;
-    nm->Ts = 1.0 / p->sample_rate_Hz / nm->sc.time_s;
+    nm->Ts = vafm_scale_time_red(sc, 1.0 / p->sample_rate_Hz);
 
     /* The stiffest contact: at the largest repulsive force expected, with room for the overshoot of
      * the jump into contact and of the trigger's latency (one sample). */
-    const double F_set = p->setpoint_N / nm->sc.force_N;
+    const double F_set = vafm_scale_force_red(sc, p->setpoint_N);
     double u_spr_turn;
     if (p->trigger == VAFM_TRIGGER_FORCE) {
         nm->F_max = F_set + fmax(c->F_jkr, 0.25 * F_set) + r->k * r->v_approach * nm->Ts;
         u_spr_turn = F_set / r->k; /* + indentation at F_set, added below */
     } else {
-        u_spr_turn = -p->trigger_height_m / nm->sc.length_m;
+        u_spr_turn = vafm_scale_length_red(sc, -p->trigger_height_m);
         nm->F_max = r->k * fmax(0.0, u_spr_turn - fmin(0.0, c->u_detach)) + c->F_jkr;
     }
     nm->K_max = r->k;
@@ -162,13 +163,13 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     nm->u_spr_turn = u_spr_turn;
     if (p->start_in_contact) {
         /* an equilibrium on the contact branch exists for spring positions above the instability */
-        double uspr0 = -p->start_height_m / nm->sc.length_m;
+        double uspr0 = vafm_scale_length_red(sc, -p->start_height_m);
         double lowest = isfinite(nm->u_spr_star) ? nm->u_spr_star : 0.0;
         if (!has_contact || !(uspr0 > lowest)) {
             vafm_err_set(err, VAFM_EINVAL, "start_height_m",
                          "start_in_contact: start_height_m = %.6g m has no contact equilibrium; with contact %s it "
                          "must be below %.6g m (the quasi-static pull-off instability)",
-                         p->start_height_m, p->contact->name, -lowest * nm->sc.length_m);
+                         p->start_height_m, p->contact->name, vafm_scale_length_si(sc, -lowest));
             return VAFM_EINVAL;
         }
     }
@@ -177,7 +178,7 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     const double zeta_min = r->m; /* out of contact ζ = mη; in contact larger */
     double dt;
     if (p->dt_s > 0) {
-        dt = p->dt_s / nm->sc.time_s;
+        dt = vafm_scale_time_red(sc, p->dt_s);
     } else {
         if (it->overdamped)
             dt = fmin(0.05, p->omega_dt * zeta_min / nm->K_max); /* the paper: dt = 1/(20η) */
@@ -193,21 +194,21 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
     if ((double)nm->n_sub > 9e15) {
         vafm_err_set(err, VAFM_EINVAL, "sample_rate_Hz",
                      "sample_rate_Hz = %.6g Hz needs %.3g steps per sample at dt = %.3g s; raise the sample rate",
-                     p->sample_rate_Hz, nm->Ts / dt, dt * nm->sc.time_s);
+                     p->sample_rate_Hz, nm->Ts / dt, vafm_scale_time_si(sc, dt));
         return VAFM_EINVAL;
     }
     nm->dt = nm->Ts / (double)nm->n_sub;
     dt = nm->dt;
     nm->stab = it->overdamped ? nm->K_max * dt / zeta_min : sqrt(nm->K_max / r->m) * dt;
     if (!(nm->stab < it->stability_limit)) {
-        double dt_stable = (it->overdamped ? it->stability_limit * zeta_min / nm->K_max
-                                           : it->stability_limit / sqrt(nm->K_max / r->m)) * nm->sc.time_s;
+        double dt_stable = vafm_scale_time_si(sc, it->overdamped ? it->stability_limit * zeta_min / nm->K_max
+                                                              : it->stability_limit / sqrt(nm->K_max / r->m));
         vafm_err_set(err, VAFM_EUNSTABLE, "dt_s",
                      "dt_s = %.6g s (step used %.6g s) is beyond the %s stability limit: %s = %.4g at the stiffest "
                      "contact reached (%.4g N/m, force %.4g N) must be < %.3g, i.e. dt_s < %.4g s; "
                      "lower dt_s (or 0 for automatic)",
-                     p->dt_s, dt * nm->sc.time_s, it->name, it->overdamped ? "K_max*dt/zeta" : "omega_max*dt",
-                     nm->stab, nm->K_max * nm->sc.stiffness_N_per_m, nm->F_max * nm->sc.force_N,
+                     p->dt_s, vafm_scale_time_si(sc, dt), it->name, it->overdamped ? "K_max*dt/zeta" : "omega_max*dt",
+                     nm->stab, vafm_scale_stiffness_si(sc, nm->K_max), vafm_scale_force_si(sc, nm->F_max),
                      it->stability_limit, dt_stable);
         return VAFM_EUNSTABLE;
     }
@@ -244,7 +245,7 @@ int vafm_numerics_check_scene(const vafm_params *p, vafm_numerics *out, int tune
         if (!(eta_dt < it->eta_dt_limit)) {
             vafm_err_set(err, VAFM_EUNSTABLE, "dt_s",
                          "dt_s = %.6g s gives eta*dt = %.4g: integrator %s is unstable for eta*dt >= %g",
-                         dt * nm->sc.time_s, eta_dt, it->name, it->eta_dt_limit);
+                         vafm_scale_time_si(sc, dt), eta_dt, it->name, it->eta_dt_limit);
             return VAFM_EUNSTABLE;
         }
     }

@@ -221,13 +221,13 @@ static void s_fill_fig4(vafm_params *p)
     vafm_reduced r = { .m = 0.01, .k = 0.1, .kT = 0.01, .gamma = 0.229,
                        .v_approach = 1e-3, .v_retract = 1e-3 };
     vafm_units_from_reduced(p, &r);
-    vafm_scale s = vafm_units_scale(p);
-    p->start_height_m = 2.0 * s.length_m;
-    p->setpoint_N = 0.5 * (3.0 * M_PI * r.gamma / 2.0) * s.force_N;
-    p->trigger_height_m = -1.0 * s.length_m;
-    p->retract_margin_m = 1.0 * s.length_m;
-    p->sample_rate_Hz = 1.0 / (2.0 * s.time_s); /* one sample per 2 reduced time units */
-    p->tune_duration_s = 2e4 * s.time_s;
+    const vafm_scale sc = vafm_units_scale(p);
+    p->start_height_m = vafm_scale_length_si(&sc, 2.0);
+    p->setpoint_N = vafm_scale_force_si(&sc, 0.5 * (3.0 * M_PI * r.gamma / 2.0));
+    p->trigger_height_m = vafm_scale_length_si(&sc, -1.0);
+    p->retract_margin_m = vafm_scale_length_si(&sc, 1.0);
+    p->sample_rate_Hz = 1.0 / vafm_scale_time_si(&sc, 2.0); /* one sample per 2 reduced time units */
+    p->tune_duration_s = vafm_scale_time_si(&sc, 2e4);
 }
 
 /* The same with Brownian dynamics at friction ζ = mη = 1 (reduced), as the paper's Fig. 4/6. */
@@ -238,10 +238,10 @@ static void s_fill_fig4_bd(vafm_params *p)
     vafm_units_reduce(p, &r);
     r.m = 1.0;
     vafm_units_from_reduced(p, &r);
-    vafm_scale s = vafm_units_scale(p);
+    const vafm_scale sc = vafm_units_scale(p);
     p->integrator = vafm_integrator_brownian;
-    p->sample_rate_Hz = 1.0 / (2.0 * s.time_s);
-    p->tune_duration_s = 2e4 * s.time_s;
+    p->sample_rate_Hz = 1.0 / vafm_scale_time_si(&sc, 2.0);
+    p->tune_duration_s = vafm_scale_time_si(&sc, 2e4);
 }
 
 /* ---- instrument presets: real measurements at room temperature, in an instrument's words (issue #16).

@@ -157,7 +157,7 @@ const vafm_params *vafm_sim_params(const vafm_sim *s)
 
 double vafm_sim_dt(const vafm_sim *s)
 {
-    return s->nm.dt * s->nm.sc.time_s;
+    return vafm_scale_time_si(&s->nm.sc, s->nm.dt);
 }
 
 /* ---- scene start ------------------------------------------------------------------------------ */
@@ -236,11 +236,12 @@ static inline double s_ucmd(const vafm_sim *s)
 static void s_piezo_next(vafm_sim *s)
 {
     vafm_kernel *K = &s->K;
-    const double L = s->nm.sc.length_m, Ts = s->nm.Ts;
+    const vafm_scale *sc = &s->nm.sc;
+    const double Ts = s->nm.Ts;
     s->ucmd_now = s->ucmd_next;
     s->ucmd_next = s->ucmd_now + s->v_cmd * Ts;
-    double ea = vafm_piezo_step(&s->pz, s->ucmd_next * L, Ts * s->nm.sc.time_s);
-    double target = ea / L + s->v_drift * (K->t + Ts);
+    double ea = vafm_piezo_step(&s->pz, vafm_scale_length_si(sc, s->ucmd_next), vafm_scale_time_si(sc, Ts));
+    double target = vafm_scale_length_red(sc, ea) + s->v_drift * (K->t + Ts);
     s_kernel_phase(K, (target - K->u_spr) / Ts);
     s->need_prepare = 1;
 }
@@ -281,23 +282,23 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->batch_back = 0;
     s->need_prepare = 1;
 
-    const double L = s->nm.sc.length_m;
+    const vafm_scale *sc = &s->nm.sc;
     /* the sample's artefacts: where its surface is for this curve, and how fast it rises (a tune has neither) */
     s->surf0_m = scene == S_SCENE_CURVE  ? vafm_artefact_contact_point(&s->p, index)
                  : scene == S_SCENE_LIVE ? 0.0 /* the commander owns the geometry */
                                          : s->p.surface_height_m;
     s->drift_m_per_s = scene == S_SCENE_CURVE ? s->p.sample_drift_m_per_s : 0.0;
-    s->v_drift = s->drift_m_per_s / s->nm.sc.speed_m_per_s;
-    s->uspr_start = -(scene == S_SCENE_LIVE ? s->live_h0_m : s->p.start_height_m) / L;
-    s->F_set = s->p.setpoint_N / s->nm.sc.force_N;
-    s->uspr_trigger = -s->p.trigger_height_m / L;
-    s->margin = s->p.retract_margin_m / L;
-    double zr = s->p.z_range_m > 0 ? s->p.z_range_m / L
+    s->v_drift = vafm_scale_speed_red(sc, s->drift_m_per_s);
+    s->uspr_start = vafm_scale_length_red(sc, -(scene == S_SCENE_LIVE ? s->live_h0_m : s->p.start_height_m));
+    s->F_set = vafm_scale_force_red(sc, s->p.setpoint_N);
+    s->uspr_trigger = vafm_scale_length_red(sc, -s->p.trigger_height_m);
+    s->margin = vafm_scale_length_red(sc, s->p.retract_margin_m);
+    double zr = s->p.z_range_m > 0 ? vafm_scale_length_red(sc, s->p.z_range_m)
                                    : fmax(0.0, -s->uspr_start) + 2.0 * s->F_set / rd->k + 20.0 * s->sigma_free + 1.0;
     if (s->p.ramp_size_m > 0) {
         /* a fixed ramp: from the start height down by at most the ramp size (from the trigger point's ramp
          * size above it, up to twice that: the thermal tip meets the setpoint earlier or later) */
-        zr = s->p.ramp_size_m / L;
+        zr = vafm_scale_length_red(sc, s->p.ramp_size_m);
         if (scene == S_SCENE_CURVE && s->p.ramp_start == VAFM_RAMP_START_TRIGGER) {
             s->uspr_start = s_trigger_point(s) - zr;
             zr *= 2.0;
@@ -308,19 +309,19 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->base_n = 0;
     s->F_hold = s->F_set;
     double tau = s->p.dwell_feedback_s > 0 ? s->p.dwell_feedback_s : 10.0 / s->p.sample_rate_Hz;
-    s->fb_gain = 1.0 / (rd->k * tau / s->nm.sc.time_s);
+    s->fb_gain = 1.0 / vafm_scale_time_red(sc, rd->k * tau); /* (k̃·τ)/T, the gain's order of operations */
 
     K->t = 0.0;
     K->u_spr = s->uspr_start;
     /* the support's speed in the first phase (the body's initial velocity is drawn about it): the approach's,
      * or the first segment's of a list */
     double v0 = scene != S_SCENE_CURVE ? 0.0 : !s->list ? rd->v_approach
-                : s->seg[0].kind == VAFM_SEGMENT_EXTEND  ? s->seg[0].speed_m_per_s / s->nm.sc.speed_m_per_s
-                : s->seg[0].kind == VAFM_SEGMENT_RETRACT ? -(s->seg[0].speed_m_per_s / s->nm.sc.speed_m_per_s)
+                : s->seg[0].kind == VAFM_SEGMENT_EXTEND  ? vafm_scale_speed_red(sc, s->seg[0].speed_m_per_s)
+                : s->seg[0].kind == VAFM_SEGMENT_RETRACT ? -vafm_scale_speed_red(sc, s->seg[0].speed_m_per_s)
                                                          : 0.0;
     s->pz.on = 0;
     if (scene == S_SCENE_CURVE && vafm_piezo_on(&s->p))
-        vafm_piezo_begin(&s->pz, &s->p, s->uspr_start * L);
+        vafm_piezo_begin(&s->pz, &s->p, vafm_scale_length_si(sc, s->uspr_start));
     s->ucmd_now = s->ucmd_next = s->uspr_start;
     s_set_speed(s, v0);
     vafm_kernel_set_dt(K, s->nm.dt);
@@ -561,8 +562,8 @@ static int s_step_interval(vafm_sim *s, uint64_t *budget)
     if (!isfinite(K->u) || !isfinite(K->w)) {
         vafm_err_set(&s->err, VAFM_EUNSTABLE, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
                      "curve %llu: the state became non-finite at t = %.6g s: the step %.6g s is unstable for the "
-                     "contact reached; lower %s", (unsigned long long)s->index, K->t * s->nm.sc.time_s,
-                     s->dt_cur * s->nm.sc.time_s, s->p.dt_s > 0 ? "dt_s" : "omega_dt");
+                     "contact reached; lower %s", (unsigned long long)s->index, vafm_scale_time_si(&s->nm.sc, K->t),
+                     vafm_scale_time_si(&s->nm.sc, s->dt_cur), s->p.dt_s > 0 ? "dt_s" : "omega_dt");
         return VAFM_EUNSTABLE;
     }
     if (K->in_contact && !(K->u <= s_guard_u(s))) {
@@ -574,11 +575,11 @@ static int s_step_interval(vafm_sim *s, uint64_t *budget)
                 vafm_err_set(&s->err, VAFM_EUNSTABLE, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
                              "curve %llu at t = %.6g s: the contact reached (stiffness %.4g N/m, force %.4g N) gives "
                              "%s = %.4g >= %.3g with the step %.6g s; lower %s (the scene predicted %.4g N/m at most)",
-                             (unsigned long long)s->index, K->t * s->nm.sc.time_s,
-                             Kl * s->nm.sc.stiffness_N_per_m, K->Fc * s->nm.sc.force_N,
+                             (unsigned long long)s->index, vafm_scale_time_si(&s->nm.sc, K->t),
+                             vafm_scale_stiffness_si(&s->nm.sc, Kl), vafm_scale_force_si(&s->nm.sc, K->Fc),
                              s->it->overdamped ? "K*dt/zeta" : "omega*dt", stab, s->it->stability_limit,
-                             s->dt_cur * s->nm.sc.time_s, s->p.dt_s > 0 ? "dt_s" : "omega_dt",
-                             s->nm.K_max * s->nm.sc.stiffness_N_per_m);
+                             vafm_scale_time_si(&s->nm.sc, s->dt_cur), s->p.dt_s > 0 ? "dt_s" : "omega_dt",
+                             vafm_scale_stiffness_si(&s->nm.sc, s->nm.K_max));
                 return VAFM_EUNSTABLE;
             }
         }
@@ -609,7 +610,7 @@ static void s_start_retract_at(vafm_sim *s, double v_retract)
     K->fs_min = INFINITY;
     s->phase = S_PH_RETRACT;
     double end = isfinite(s->nm.u_spr_star) ? s->nm.u_spr_star : fmin(0.0, K->contact.u_detach);
-    s->retract_travel_max = s->p.retract_max_m > 0 ? s->p.retract_max_m / s->nm.sc.length_m
+    s->retract_travel_max = s->p.retract_max_m > 0 ? vafm_scale_length_red(&s->nm.sc, s->p.retract_max_m)
                                                    : 4.0 * fmax(s->uspr_turn - end, 0.0) + s->margin + 1.0;
 }
 
@@ -716,8 +717,8 @@ static void s_list_modulate(vafm_sim *s, const vafm_segment_spec *g)
 {
     const vafm_scale *sc = &s->nm.sc;
     const double Ts = s->nm.Ts;
-    const double tau_s = (s->K.t + Ts - s->seg_t0) * sc->time_s;
-    const double target = s->seg_u0 - g->amplitude_m / sc->length_m * sin(2.0 * M_PI * g->frequency_Hz * tau_s);
+    const double tau_s = vafm_scale_time_si(sc, s->K.t + Ts - s->seg_t0);
+    const double target = s->seg_u0 - vafm_scale_length_red(sc, g->amplitude_m) * sin(2.0 * M_PI * g->frequency_Hz * tau_s);
     s_set_speed(s, (target - s_ucmd_boundary(s)) / Ts);
     s->need_prepare = 1;
 }
@@ -729,7 +730,7 @@ static void s_list_enter(vafm_sim *s, size_t i, double force, int first)
 {
     vafm_kernel *K = &s->K;
     const vafm_scale *sc = &s->nm.sc;
-    const double L = sc->length_m, rate = s->p.sample_rate_Hz;
+    const double rate = s->p.sample_rate_Hz;
     const int prev_force_trig = i > 0 && s->seg[i - 1].kind == VAFM_SEGMENT_EXTEND && s_force_type(s->seg[i - 1].trigger);
     for (; i < s->nseg; i++, first = 0) {
         const vafm_segment_spec *g = &s->seg[i];
@@ -743,23 +744,23 @@ static void s_list_enter(vafm_sim *s, size_t i, double force, int first)
         s->seg_ch = g->trigger;
         s->seg_op = g->trigger_op;
         switch (g->trigger) {
-        case VAFM_SEGMENT_TRIGGER_FORCE: s->seg_thr = g->trigger_value / sc->force_N; break;
+        case VAFM_SEGMENT_TRIGGER_FORCE: s->seg_thr = vafm_scale_force_red(sc, g->trigger_value); break;
         case VAFM_SEGMENT_TRIGGER_DEFLECTION_V:
-            s->seg_thr = (g->trigger_value - (g->trigger_relative ? 0.0 : s->p.baseline_offset_V)) *
-                         s->p.sensitivity_m_per_V * s->p.k_N_per_m / sc->force_N;
+            s->seg_thr = vafm_scale_force_red(sc, (g->trigger_value - (g->trigger_relative ? 0.0 : s->p.baseline_offset_V)) *
+                                                      s->p.sensitivity_m_per_V * s->p.k_N_per_m);
             break;
-        case VAFM_SEGMENT_TRIGGER_HEIGHT: s->seg_thr = -g->trigger_value / L; break;
-        case VAFM_SEGMENT_TRIGGER_TIME: s->seg_thr = g->trigger_value / sc->time_s; break;
+        case VAFM_SEGMENT_TRIGGER_HEIGHT: s->seg_thr = vafm_scale_length_red(sc, -g->trigger_value); break;
+        case VAFM_SEGMENT_TRIGGER_TIME: s->seg_thr = vafm_scale_time_red(sc, g->trigger_value); break;
         default: s->seg_thr = 0.0; break;
         }
-        const double v = g->speed_m_per_s / sc->speed_m_per_s;
+        const double v = vafm_scale_speed_red(sc, g->speed_m_per_s);
         switch (g->kind) {
         case VAFM_SEGMENT_EXTEND:
             if (!first) {
                 s_set_speed(s, v);
                 s->need_prepare = 1;
             }
-            s->seg_ulim = g->distance_m > 0 ? s->seg_u0 + g->distance_m / L : s->uspr_zlimit;
+            s->seg_ulim = g->distance_m > 0 ? s->seg_u0 + vafm_scale_length_red(sc, g->distance_m) : s->uspr_zlimit;
             s->phase = S_PH_APPROACH;
             return;
         case VAFM_SEGMENT_RETRACT:
@@ -772,7 +773,7 @@ static void s_list_enter(vafm_sim *s, size_t i, double force, int first)
                 s->uspr_turn = s_ucmd(s);
                 K->fs_min = INFINITY;
                 s->phase = S_PH_RETRACT;
-                s->seg_ulim = s->seg_u0 - g->distance_m / L;
+                s->seg_ulim = s->seg_u0 - vafm_scale_length_red(sc, g->distance_m);
             }
             return;
         case VAFM_SEGMENT_PAUSE: {
@@ -782,9 +783,9 @@ static void s_list_enter(vafm_sim *s, size_t i, double force, int first)
             const double tau = g->feedback_s > 0         ? g->feedback_s
                                : s->p.dwell_feedback_s > 0 ? s->p.dwell_feedback_s
                                                            : 10.0 / rate;
-            s->fb_gain = 1.0 / (s->nm.r.k * tau / sc->time_s);
+            s->fb_gain = 1.0 / vafm_scale_time_red(sc, s->nm.r.k * tau);
             if (!isnan(g->hold_force_N))
-                s->F_hold = g->hold_force_N / sc->force_N;
+                s->F_hold = vafm_scale_force_red(sc, g->hold_force_N);
             else if (!prev_force_trig)
                 s->F_hold = force;
             s_set_speed(s, g->pause_mode == VAFM_PAUSE_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0);
@@ -932,7 +933,7 @@ static void s_live_logic(vafm_sim *s, size_t j)
         s->phase = S_PH_DONE;
         return;
     }
-    s_set_speed(s, (-h / sc->length_m - K->u_spr) / s->nm.Ts);
+    s_set_speed(s, (vafm_scale_length_red(sc, -h) - K->u_spr) / s->nm.Ts);
     s->need_prepare = 1;
 }
 
@@ -1058,16 +1059,16 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         }
         double defl = uspr_m - u_m, force = K->k * defl;
         size_t j = s->nblk;
-        s->bt[j] = t_m * sc->time_s;
-        s->bh[j] = s_height(s, -uspr_m * sc->length_m, s->bt[j]);
+        s->bt[j] = vafm_scale_time_si(sc, t_m);
+        s->bh[j] = s_height(s, vafm_scale_length_si(sc, -uspr_m), s->bt[j]);
         if (s->pz.on) { /* the files' piezo height is the command; where the support was is the actual one */
             double uc = s->p.antialias == VAFM_ANTIALIAS_MEAN ? 0.5 * (s->ucmd_now + s->ucmd_next) : s->ucmd_next;
             s->bha[j] = s->bh[j];
-            s->bh[j] = -uc * sc->length_m + s->surf0_m;
+            s->bh[j] = vafm_scale_length_si(sc, -uc) + s->surf0_m;
         }
-        s->bd[j] = defl * sc->length_m;
-        s->bf[j] = force * sc->force_N;
-        s->btip[j] = s_height(s, -u_m * sc->length_m, s->bt[j]);
+        s->bd[j] = vafm_scale_length_si(sc, defl);
+        s->bf[j] = vafm_scale_force_si(sc, force);
+        s->btip[j] = s_height(s, vafm_scale_length_si(sc, -u_m), s->bt[j]);
         s->bseg[j] = (uint8_t)seg;
         if (s->list && (s->dec > 1 || s->dec_n > 0)) {
             /* a segment at a lower rate: its output sample gathers dec samples of the scene's rate (the triggers
@@ -1124,28 +1125,29 @@ int vafm_sim_result(const vafm_sim *s, vafm_curve_result *out)
     out->flags = s->flags;
     if (!s->touched)
         out->flags |= VAFM_CURVE_NO_CONTACT;
-    out->pulloff_sampled_N = s->retract_samples ? -s->sample_min_force * sc->force_N : NAN;
+    out->pulloff_sampled_N = s->retract_samples ? vafm_scale_force_si(sc, -s->sample_min_force) : NAN;
     out->pulloff_spring_N = s->phase == S_PH_RETRACT || (s->phase == S_PH_DONE && isfinite(s->t_retract0))
-                                ? -K->fs_min * sc->force_N
+                                ? vafm_scale_force_si(sc, -K->fs_min)
                                 : NAN;
     if (s->detached_in_retract) {
-        out->detach_force_N = -s->fs_detach * sc->force_N;
-        out->detach_height_m = s_height(s, -s->uspr_detach * sc->length_m, (s->t_detach + s->t_retract0) * sc->time_s);
-        out->detach_time_s = s->t_detach * sc->time_s;
+        out->detach_force_N = vafm_scale_force_si(sc, -s->fs_detach);
+        out->detach_height_m = s_height(s, vafm_scale_length_si(sc, -s->uspr_detach),
+                                         vafm_scale_time_si(sc, s->t_detach + s->t_retract0));
+        out->detach_time_s = vafm_scale_time_si(sc, s->t_detach);
         double ueq, Feq;
         if ((K->contact.type->flags & VAFM_CONTACT_JKR_BRANCH) && K->contact.gamma > 0 &&
             vafm_theory_equilibrium(K->contact.gamma, K->k, s->uspr_detach, &ueq, &Feq) == 0)
-            out->detach_eq_force_N = -Feq * sc->force_N;
+            out->detach_eq_force_N = vafm_scale_force_si(sc, -Feq);
         else
             out->detach_eq_force_N = NAN;
     } else {
         out->detach_force_N = out->detach_height_m = out->detach_time_s = out->detach_eq_force_N = NAN;
     }
-    out->touch_time_s = s->touch_t * sc->time_s;
-    out->touch_height_m = s_height(s, -s->touch_uspr * sc->length_m, s->touch_t * sc->time_s);
+    out->touch_time_s = vafm_scale_time_si(sc, s->touch_t);
+    out->touch_height_m = s_height(s, vafm_scale_length_si(sc, -s->touch_uspr), vafm_scale_time_si(sc, s->touch_t));
     out->surface_height_m = s->surf0_m;
-    out->retract_start_s = s->t_retract0 * sc->time_s;
-    out->duration_s = K->t * sc->time_s;
+    out->retract_start_s = vafm_scale_time_si(sc, s->t_retract0);
+    out->duration_s = vafm_scale_time_si(sc, K->t);
     out->samples = s->sample_index;
     out->steps = K->steps;
     out->steps_contact = K->steps_contact;
