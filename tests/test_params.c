@@ -141,6 +141,13 @@ static void test_presets(void)
     ENSURE(err.code == VAFM_ENOTFOUND);
     ENSURE(strstr(err.message, "no-such-preset") != NULL);
     ENSURE(strstr(err.message, "paper-fig1") != NULL); /* names the known ones */
+    /* ... all of them, from the preset table in its order (a new preset is named without a second list) */
+    char known[512] = "";
+    for (int i = 0; i < vafm_preset_count(); i++)
+        snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s", i ? ", " : "", vafm_preset_name(i));
+    char want[700];
+    snprintf(want, sizeof want, "unknown preset 'no-such-preset' (known: %s)", known);
+    ENSURE_MSG(!strcmp(err.message, want), "%s", err.message);
     ENSURE(vafm_params_validate(NULL, &err) == VAFM_EINVAL);
 }
 
