@@ -87,6 +87,9 @@ static void test_bad_input(void)
     ENSURE(vafm_map_to_json(&s, js, sizeof js) > 0 && strstr(js, "\"pattern\": \"uniform\"") &&
            strstr(js, "\"a_E_star_Pa\": null"));
     ENSURE(vafm_map_to_json(&s, js, 10) == VAFM_EINVAL);
+    const int nj = vafm_map_to_json(&s, js, sizeof js); /* the exact room: the text and its NUL */
+    ENSURE(nj > 0 && vafm_map_to_json(&s, js, (size_t)nj) == VAFM_EINVAL);
+    ENSURE(vafm_map_to_json(&s, js, (size_t)nj + 1) == nj && (int)strlen(js) == nj);
 }
 
 /* ---- the campaign over a map, collected in memory ------------------------------------------------- */

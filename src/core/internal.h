@@ -25,6 +25,10 @@
 /** Fill err (if not NULL) with a code, a field and a formatted message. */
 void vafm_err_set(vafm_error *err, int code, const char *field, const char *fmt, ...) VAFM_PRINTF(4, 5);
 
+/** Append formatted text at buf + *n (buf holds len bytes, NUL-terminated) and advance *n.
+ *  @return 0, or VAFM_EINVAL if it does not fit (or fails): the text written so far is cut there. */
+int vafm_buf_appendf(char *buf, size_t len, size_t *n, const char *fmt, ...) VAFM_PRINTF(4, 5);
+
 typedef struct vafm_numerics {
     vafm_reduced r;       /* the physics in reduced units */
     vafm_scale sc;        /* reduced → SI */

@@ -215,6 +215,19 @@ static int s_check_spec(const vafm_map_spec *s, vafm_error *err)
     return 0;
 }
 
+/* The spec, and a base scene to apply it to. */
+static int s_check_spec_base(const vafm_map_spec *s, const vafm_params *base, vafm_error *err)
+{
+    int r = s_check_spec(s, err);
+    if (r)
+        return r;
+    if (!base) {
+        vafm_err_set(err, VAFM_EINVAL, "", "no base scene given");
+        return VAFM_EINVAL;
+    }
+    return 0;
+}
+
 /* ---- the patterns ---------------------------------------------------------------------------------- */
 
 /* A uniform number in [0, 1) from (seed, i, j): splitmix64 of a combined key. */
@@ -315,13 +328,9 @@ int vafm_map_surface_at(const vafm_map_spec *s, double x_m, double y_m, int *mat
 int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int iy, vafm_params *out,
                    vafm_map_truth *truth, vafm_error *err)
 {
-    int r = s_check_spec(s, err);
+    int r = s_check_spec_base(s, base, err);
     if (r)
         return r;
-    if (!base) {
-        vafm_err_set(err, VAFM_EINVAL, "", "no base scene given");
-        return VAFM_EINVAL;
-    }
     if (ix < 0 || ix >= s->nx || iy < 0 || iy >= s->ny) {
         vafm_err_set(err, VAFM_EINVAL, ix < 0 || ix >= s->nx ? "ix" : "iy",
                      "pixel (%d, %d) is outside the %d x %d grid", ix, iy, s->nx, s->ny);
@@ -372,13 +381,9 @@ int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int 
 
 int vafm_map_validate(const vafm_map_spec *s, const vafm_params *base, vafm_error *err)
 {
-    int r = s_check_spec(s, err);
+    int r = s_check_spec_base(s, base, err);
     if (r)
         return r;
-    if (!base) {
-        vafm_err_set(err, VAFM_EINVAL, "", "no base scene given");
-        return VAFM_EINVAL;
-    }
     /* every pixel's scene (the errors name the pixel and its material) */
     vafm_params prev;
     int have_prev = 0;
@@ -562,8 +567,8 @@ int vafm_map_to_json(const vafm_map_spec *s, char *buf, size_t len)
     if (!s || !buf || len < 3)
         return VAFM_EINVAL;
     size_t n = 0;
-    int w = snprintf(buf, len, "{");
-    n = (size_t)w;
+    if (vafm_buf_appendf(buf, len, &n, "{"))
+        return VAFM_EINVAL;
     for (int i = 0; i < S_NFIELDS; i++) {
         const s_mfield *f = &s_fields[i];
         const char *base = (const char *)s + f->offset;
@@ -604,10 +609,8 @@ int vafm_map_to_json(const vafm_map_spec *s, char *buf, size_t len)
         default:
             snprintf(val, sizeof val, "null");
         }
-        w = snprintf(buf + n, len - n, "%s\"%s\": %s", i ? ", " : "", f->name, val);
-        if (w < 0 || (size_t)w >= len - n)
+        if (vafm_buf_appendf(buf, len, &n, "%s\"%s\": %s", i ? ", " : "", f->name, val))
             return VAFM_EINVAL;
-        n += (size_t)w;
     }
     if (s->pattern == VAFM_MAP_GRID && s->grid) { /* the measured map: its geometry, what it holds, where from */
         const vafm_map_grid *g = s->grid;
@@ -624,17 +627,14 @@ int vafm_map_to_json(const vafm_map_spec *s, char *buf, size_t len)
             src[k++] = '"';
             src[k] = '\0';
         }
-        w = snprintf(buf + n, len - n, ", \"grid\": {\"nx\": %d, \"ny\": %d, \"x0_m\": %.17g, \"y0_m\": %.17g, \"dx_m\": %.17g, "
-                     "\"dy_m\": %.17g, \"E_star_Pa\": %s, \"gamma_J_per_m2\": %s, \"height_m\": %s, \"values_hash\": "
-                     "\"%016" PRIx64 "\", \"source\": %s}", g->nx, g->ny, g->x0_m, g->y0_m, g->dx_m, g->dy_m,
-                     g->E_star_Pa ? "true" : "false", g->gamma_J_per_m2 ? "true" : "false", g->height_m ? "true" : "false",
-                     s_grid_hash(g), src);
-        if (w < 0 || (size_t)w >= len - n)
+        if (vafm_buf_appendf(buf, len, &n, ", \"grid\": {\"nx\": %d, \"ny\": %d, \"x0_m\": %.17g, \"y0_m\": %.17g, \"dx_m\": %.17g, "
+                             "\"dy_m\": %.17g, \"E_star_Pa\": %s, \"gamma_J_per_m2\": %s, \"height_m\": %s, \"values_hash\": "
+                             "\"%016" PRIx64 "\", \"source\": %s}", g->nx, g->ny, g->x0_m, g->y0_m, g->dx_m, g->dy_m,
+                             g->E_star_Pa ? "true" : "false", g->gamma_J_per_m2 ? "true" : "false", g->height_m ? "true" : "false",
+                             s_grid_hash(g), src))
             return VAFM_EINVAL;
-        n += (size_t)w;
     }
-    w = snprintf(buf + n, len - n, "}");
-    if (w < 0 || (size_t)w >= len - n)
+    if (vafm_buf_appendf(buf, len, &n, "}"))
         return VAFM_EINVAL;
-    return (int)(n + (size_t)w);
+    return (int)n;
 }

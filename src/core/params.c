@@ -389,25 +389,20 @@ int vafm_params_to_json(const vafm_params *p, char *buf, size_t len)
 {
     size_t n = 0;
     char val[64];
-    int w = snprintf(buf, len, "{");
-    if (w < 0 || (size_t)w >= len)
+    if (vafm_buf_appendf(buf, len, &n, "{"))
         return VAFM_EINVAL;
-    n = (size_t)w;
     for (int i = 0; i < S_NFIELDS; i++) {
         const s_field *f = &s_fields[i];
         vafm_params_get(p, f->info.name, val, sizeof val);
         /* seeds are quoted: JSON readers (jansson) reject integers above INT64_MAX */
         int quoted = f->info.kind == VAFM_PARAM_CHOICE || f->info.kind == VAFM_PARAM_SEED;
-        w = snprintf(buf + n, len - n, "%s\"%s\": %s%s%s", i ? ", " : "", f->info.name, quoted ? "\"" : "", val,
-                     quoted ? "\"" : "");
-        if (w < 0 || (size_t)w >= len - n)
+        if (vafm_buf_appendf(buf, len, &n, "%s\"%s\": %s%s%s", i ? ", " : "", f->info.name, quoted ? "\"" : "",
+                             val, quoted ? "\"" : ""))
             return VAFM_EINVAL;
-        n += (size_t)w;
     }
-    w = snprintf(buf + n, len - n, "}");
-    if (w < 0 || (size_t)w >= len - n)
+    if (vafm_buf_appendf(buf, len, &n, "}"))
         return VAFM_EINVAL;
-    return (int)(n + (size_t)w);
+    return (int)n;
 }
 
 double vafm_params_tune_rate_Hz(const vafm_params *p)

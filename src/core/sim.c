@@ -1164,27 +1164,26 @@ static int s_run_all(vafm_sim *s, vafm_sample_fn fn, void *user)
     return r;
 }
 
-int vafm_sim_curve(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user, vafm_curve_result *out)
+/* A begun run (begun: its _begin's code) to its end, then its result into out (if given). */
+static int s_run_to_result(vafm_sim *s, int begun, vafm_sample_fn fn, void *user, vafm_curve_result *out)
 {
-    int r = vafm_sim_curve_begin(s, index);
-    if (r)
-        return r;
-    r = s_run_all(s, fn, user);
+    if (begun)
+        return begun;
+    int r = s_run_all(s, fn, user);
     if (out)
         vafm_sim_result(s, out);
     return r;
 }
 
+int vafm_sim_curve(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user, vafm_curve_result *out)
+{
+    return s_run_to_result(s, vafm_sim_curve_begin(s, index), fn, user, out);
+}
+
 int vafm_sim_segments(vafm_sim *s, uint64_t index, const vafm_segment_spec *segs, size_t n, vafm_sample_fn fn,
                       void *user, vafm_curve_result *out)
 {
-    int r = vafm_sim_segments_begin(s, index, segs, n);
-    if (r)
-        return r;
-    r = s_run_all(s, fn, user);
-    if (out)
-        vafm_sim_result(s, out);
-    return r;
+    return s_run_to_result(s, vafm_sim_segments_begin(s, index, segs, n), fn, user, out);
 }
 
 int vafm_sim_tune(vafm_sim *s, uint64_t index, vafm_sample_fn fn, void *user)

@@ -51,3 +51,17 @@ void vafm_err_set(vafm_error *err, int code, const char *field, const char *fmt,
     vsnprintf(err->message, sizeof err->message, fmt, ap);
     va_end(ap);
 }
+
+int vafm_buf_appendf(char *buf, size_t len, size_t *n, const char *fmt, ...)
+{
+    if (*n >= len)
+        return VAFM_EINVAL;
+    va_list ap;
+    va_start(ap, fmt);
+    int w = vsnprintf(buf + *n, len - *n, fmt, ap);
+    va_end(ap);
+    if (w < 0 || (size_t)w >= len - *n)
+        return VAFM_EINVAL;
+    *n += (size_t)w;
+    return 0;
+}
