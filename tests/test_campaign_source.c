@@ -265,10 +265,58 @@ static void test_grid_order(void)
     ENSURE(q.T_K == T[1] && q.k_N_per_m == k[1] && q.v_approach_m_per_s == base.v_approach_m_per_s);
 }
 
+/* The grid's axes are one table (campaign.h): their names in files and on the wire, their symbols and units
+ * in messages and CLI options; the lists set and read through it are the spec's own fields. */
+static void test_axes(void)
+{
+    static const char *const name[3] = { "T_K", "v_m_per_s", "k_N_per_m" }, *const sym[3] = { "T", "v", "k" },
+                             *const unit[3] = { "K", "m/s", "N/m" },
+                             *const param[3] = { "T_K", "v_approach_m_per_s", "k_N_per_m" };
+    ENSURE(VAFM_CAMPAIGN_NAXES == 3 && !vafm_campaign_axis_at(-1) && !vafm_campaign_axis_at(VAFM_CAMPAIGN_NAXES));
+    for (int a = 0; a < VAFM_CAMPAIGN_NAXES; a++) {
+        const vafm_campaign_axis *x = vafm_campaign_axis_at(a);
+        ENSURE_MSG(x && !strcmp(x->name, name[a]) && !strcmp(x->symbol, sym[a]) && !strcmp(x->unit, unit[a]) &&
+                       !strcmp(x->param, param[a]),
+                   "axis %d", a);
+    }
+    const double T[2] = { 300.0, -5.0 }, v[1] = { 2e-6 }, k[3] = { 0.5, 1.0, 1.5 };
+    vafm_campaign_spec spec;
+    memset(&spec, 0, sizeof spec);
+    vafm_campaign_axis_set(&spec, VAFM_CAMPAIGN_AXIS_T, T, 2);
+    vafm_campaign_axis_set(&spec, VAFM_CAMPAIGN_AXIS_V, v, 1);
+    vafm_campaign_axis_set(&spec, VAFM_CAMPAIGN_AXIS_K, k, 3);
+    vafm_campaign_axis_set(&spec, VAFM_CAMPAIGN_NAXES, T, 7); /* ignored */
+    ENSURE(spec.T_K == T && spec.n_T == 2 && spec.v_m_per_s == v && spec.n_v == 1 && spec.k_N_per_m == k &&
+           spec.n_k == 3 && vafm_campaign_points(&spec) == 6);
+    const double *got = T;
+    ENSURE(vafm_campaign_axis_values(&spec, VAFM_CAMPAIGN_AXIS_K, &got) == 3 && got == k);
+    ENSURE(vafm_campaign_axis_values(&spec, -1, &got) == 0 && got == NULL);
+
+    vafm_params p;
+    vafm_preset_apply(&p, "paper-fig4", NULL);
+    vafm_campaign_axis_apply(&p, VAFM_CAMPAIGN_AXIS_V, 3e-6);
+    ENSURE(p.v_approach_m_per_s == 3e-6 && p.v_retract_m_per_s == 3e-6);
+    vafm_campaign_axis_apply(&p, VAFM_CAMPAIGN_AXIS_T, 310.0);
+    vafm_campaign_axis_apply(&p, VAFM_CAMPAIGN_AXIS_K, 0.25);
+    ENSURE(vafm_campaign_axis_value(&p, VAFM_CAMPAIGN_AXIS_T) == 310.0 &&
+           vafm_campaign_axis_value(&p, VAFM_CAMPAIGN_AXIS_V) == 3e-6 &&
+           vafm_campaign_axis_value(&p, VAFM_CAMPAIGN_AXIS_K) == 0.25 && isnan(vafm_campaign_axis_value(&p, 3)));
+
+    /* a bad point's error names its values axis by axis, in the table's order (the text 0.6 wrote) */
+    vafm_preset_apply(&p, "contact-silica", NULL);
+    vafm_error e = { 0 };
+    size_t bad = 99;
+    ENSURE(vafm_campaign_validate(&p, &spec, &bad, &e) == VAFM_EINVAL);
+    char want[200];
+    snprintf(want, sizeof want, "grid point 3 (T = -5 K, v = %g m/s, k = %g N/m): ", v[0], k[0]);
+    ENSURE_MSG(bad == 3 && !strncmp(e.message, want, strlen(want)), "bad %zu: %s", bad, e.message);
+}
+
 int main(void)
 {
     t_setup();
     RUN_TEST(test_grid_order);
+    RUN_TEST(test_axes);
     RUN_TEST(test_source_order_and_identity);
     RUN_TEST(test_source_errors);
     return harness_done();

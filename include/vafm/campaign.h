@@ -71,6 +71,35 @@ typedef int (*vafm_campaign_fn)(void *user, const vafm_campaign_curve *c);
 /** @return the number of grid points of a spec. */
 VAFM_API size_t vafm_campaign_points(const vafm_campaign_spec *spec);
 
+/** The axes of the T × v × k grid, slowest first: one table (campaign.c) that the grid's points, the
+ *  CLI's --T/--v/--k, the daemon's `campaign` lists and the error messages read. */
+enum { VAFM_CAMPAIGN_AXIS_T = 0, VAFM_CAMPAIGN_AXIS_V = 1, VAFM_CAMPAIGN_AXIS_K = 2, VAFM_CAMPAIGN_NAXES = 3 };
+
+/** What an axis is called. */
+typedef struct vafm_campaign_axis {
+    const char *name;   /**< in files' grids and on the wire: "T_K", "v_m_per_s", "k_N_per_m" */
+    const char *symbol; /**< in messages and CLI options (--T): "T", "v", "k" */
+    const char *unit;   /**< "K", "m/s", "N/m" */
+    const char *param;  /**< the scene parameter a bad value is reported as: "T_K", "v_approach_m_per_s", "k_N_per_m" */
+} vafm_campaign_axis;
+
+/** @return axis `axis` (VAFM_CAMPAIGN_AXIS_*), or NULL outside [0, VAFM_CAMPAIGN_NAXES). */
+VAFM_API const vafm_campaign_axis *vafm_campaign_axis_at(int axis);
+
+/** @return the number of values of an axis' list in spec (0: the base scene's value), with *values the list
+ *  (may be NULL); 0 for an axis outside the table. */
+VAFM_API size_t vafm_campaign_axis_values(const vafm_campaign_spec *spec, int axis, const double **values);
+
+/** Set an axis' list in spec (values borrowed: they must outlive the spec's use). An axis outside the table is
+ *  ignored. */
+VAFM_API void vafm_campaign_axis_set(vafm_campaign_spec *spec, int axis, const double *values, size_t n);
+
+/** Set a scene's value of an axis (v: both the approach and the retract speed). */
+VAFM_API void vafm_campaign_axis_apply(vafm_params *p, int axis, double value);
+
+/** @return a scene's value of an axis (v: the retract speed), NaN for an axis outside the table. */
+VAFM_API double vafm_campaign_axis_value(const vafm_params *p, int axis);
+
 /** The SIMD lanes a campaign with this spec steps curves in: 1 for the scalar kernel (or a CPU without
  *  AVX2), else 4 or 8. */
 VAFM_API int vafm_campaign_kernel_width(const vafm_campaign_spec *spec);

@@ -58,14 +58,16 @@ static int s_on_curve(void *user, const vafm_campaign_curve *c)
 
 typedef struct s_grid {
     vafm_campaign_spec spec;
-    double *T, *v, *k;
+    double *list[VAFM_CAMPAIGN_NAXES]; /* --T, --v, --k: the grid's axes, in the table's order */
 } s_grid;
+
+/* option O_T + axis is the axis' list */
+_Static_assert(O_V == O_T + VAFM_CAMPAIGN_AXIS_V && O_K == O_T + VAFM_CAMPAIGN_AXIS_K, "--T --v --k follow the axes");
 
 static void s_grid_free(s_grid *g)
 {
-    free(g->T);
-    free(g->v);
-    free(g->k);
+    for (int ax = 0; ax < VAFM_CAMPAIGN_NAXES; ax++)
+        free(g->list[ax]);
 }
 
 static int s_grid_parse(const vafm_cli_args *a, s_grid *g)
@@ -79,16 +81,20 @@ static int s_grid_parse(const vafm_cli_args *a, s_grid *g)
     }
     if ((rc = vafm_cli_parse_u64("-n", a->val[O_N], 1, 1000000000ULL, &N)) ||
         (a->val[O_THREADS] && (rc = vafm_cli_parse_u64("--threads", a->val[O_THREADS], 0, 256, &threads))) ||
-        (a->val[O_FIRST] && (rc = vafm_cli_parse_u64("--first", a->val[O_FIRST], 0, UINT64_MAX, &first))) ||
-        (a->val[O_T] && (rc = vafm_cli_parse_list("--T", "T_K", a->val[O_T], &g->T, &g->spec.n_T))) ||
-        (a->val[O_V] && (rc = vafm_cli_parse_list("--v", "v_approach_m_per_s", a->val[O_V], &g->v, &g->spec.n_v))) ||
-        (a->val[O_K] && (rc = vafm_cli_parse_list("--k", "k_N_per_m", a->val[O_K], &g->k, &g->spec.n_k))))
+        (a->val[O_FIRST] && (rc = vafm_cli_parse_u64("--first", a->val[O_FIRST], 0, UINT64_MAX, &first))))
         return rc;
+    for (int ax = 0; ax < VAFM_CAMPAIGN_NAXES; ax++) {
+        const vafm_campaign_axis *x = vafm_campaign_axis_at(ax);
+        const char *text = a->val[O_T + ax];
+        char opt[16];
+        size_t n = 0;
+        snprintf(opt, sizeof opt, "--%s", x->symbol);
+        if (text && (rc = vafm_cli_parse_list(opt, x->param, text, &g->list[ax], &n)))
+            return rc;
+        vafm_campaign_axis_set(&g->spec, ax, g->list[ax], n);
+    }
     if ((rc = vafm_cli_parse_kernel(a->val[O_KERNEL], &g->spec)))
         return rc;
-    g->spec.T_K = g->T;
-    g->spec.v_m_per_s = g->v;
-    g->spec.k_N_per_m = g->k;
     g->spec.curves_per_point = N;
     g->spec.threads = (int)threads;
     g->spec.first_curve = first;
@@ -132,7 +138,9 @@ static void s_print_curves_summary(FILE *o, const vafm_cli_scene *sc, const s_gr
  * (the campaign's own check prefixes the grid point). */
 static int s_curves_check(const vafm_cli_args *a, vafm_cli_scene *sc, const s_grid *g)
 {
-    int grid = g->spec.n_T || g->spec.n_v || g->spec.n_k;
+    int grid = 0;
+    for (int ax = 0; ax < VAFM_CAMPAIGN_NAXES; ax++)
+        grid |= vafm_campaign_axis_values(&g->spec, ax, NULL) != 0;
     return vafm_cli_resolve_scene(a, sc, !grid);
 }
 

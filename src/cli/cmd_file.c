@@ -121,9 +121,11 @@ static void s_info_provenance(FILE *o, const char *path, const vafm_h5_provenanc
                         sp->curves_per_point * (uint64_t)vafm_campaign_points(sp));
             else
                 fputs("? curves;", o);
-            s_print_list(o, "T", sp->T_K, sp->n_T, "K");
-            s_print_list(o, "v", sp->v_m_per_s, sp->n_v, "m/s");
-            s_print_list(o, "k", sp->k_N_per_m, sp->n_k, "N/m");
+            for (int ax = 0; ax < VAFM_CAMPAIGN_NAXES; ax++) {
+                const double *v;
+                size_t n = vafm_campaign_axis_values(sp, ax, &v);
+                s_print_list(o, vafm_campaign_axis_at(ax)->symbol, v, n, vafm_campaign_axis_at(ax)->unit);
+            }
             fputc('\n', o);
         } else {
             fprintf(o, "grid         cannot be read: %s\n", err.message);

@@ -29,12 +29,9 @@ const double vafm_study_v_full[VAFM_STUDY_N_V_FULL] = { 1e-5, 3e-5, 1e-4, 3e-4, 
 static void s_spec(const vafm_study_run *r, vafm_campaign_spec *sp)
 {
     memset(sp, 0, sizeof *sp);
-    sp->T_K = r->nT ? r->T : NULL;
-    sp->n_T = r->nT;
-    sp->v_m_per_s = &r->v;
-    sp->n_v = 1;
-    sp->k_N_per_m = r->nk ? r->k : NULL;
-    sp->n_k = r->nk;
+    vafm_campaign_axis_set(sp, VAFM_CAMPAIGN_AXIS_T, r->nT ? r->T : NULL, r->nT);
+    vafm_campaign_axis_set(sp, VAFM_CAMPAIGN_AXIS_V, &r->v, 1);
+    vafm_campaign_axis_set(sp, VAFM_CAMPAIGN_AXIS_K, r->nk ? r->k : NULL, r->nk);
     sp->curves_per_point = r->N;
 }
 

@@ -13,6 +13,7 @@
  */
 #include <math.h>
 #include <pthread.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,30 +24,100 @@
 #include "core/batch.h"
 #include "core/internal.h"
 
+/* ---- the grid's axes: one row each, slowest first ------------------------------------------------ */
+
+typedef struct s_axis {
+    vafm_campaign_axis info;
+    size_t values, count; /* offsets of the list and its length in vafm_campaign_spec */
+    size_t param;         /* offset of the scene's double it sets (v: also v_approach_m_per_s) */
+} s_axis;
+
+#define S_AXIS(name, sym, unit, param, list, n, field) \
+    { { name, sym, unit, param }, offsetof(vafm_campaign_spec, list), offsetof(vafm_campaign_spec, n), \
+      offsetof(vafm_params, field) }
+static const s_axis s_axes[VAFM_CAMPAIGN_NAXES] = {
+    S_AXIS("T_K", "T", "K", "T_K", T_K, n_T, T_K),
+    S_AXIS("v_m_per_s", "v", "m/s", "v_approach_m_per_s", v_m_per_s, n_v, v_retract_m_per_s),
+    S_AXIS("k_N_per_m", "k", "N/m", "k_N_per_m", k_N_per_m, n_k, k_N_per_m),
+};
+#undef S_AXIS
+
+const vafm_campaign_axis *vafm_campaign_axis_at(int axis)
+{
+    return axis >= 0 && axis < VAFM_CAMPAIGN_NAXES ? &s_axes[axis].info : NULL;
+}
+
+size_t vafm_campaign_axis_values(const vafm_campaign_spec *spec, int axis, const double **values)
+{
+    if (axis < 0 || axis >= VAFM_CAMPAIGN_NAXES) {
+        if (values)
+            *values = NULL;
+        return 0;
+    }
+    const char *sp = (const char *)spec;
+    if (values)
+        memcpy(values, sp + s_axes[axis].values, sizeof *values);
+    size_t n;
+    memcpy(&n, sp + s_axes[axis].count, sizeof n);
+    return n;
+}
+
+void vafm_campaign_axis_set(vafm_campaign_spec *spec, int axis, const double *values, size_t n)
+{
+    if (axis < 0 || axis >= VAFM_CAMPAIGN_NAXES)
+        return;
+    char *sp = (char *)spec;
+    memcpy(sp + s_axes[axis].values, &values, sizeof values);
+    memcpy(sp + s_axes[axis].count, &n, sizeof n);
+}
+
+void vafm_campaign_axis_apply(vafm_params *p, int axis, double value)
+{
+    if (axis < 0 || axis >= VAFM_CAMPAIGN_NAXES)
+        return;
+    memcpy((char *)p + s_axes[axis].param, &value, sizeof value);
+    if (axis == VAFM_CAMPAIGN_AXIS_V)
+        p->v_approach_m_per_s = value; /* a grid speed is the approach's and the retract's */
+}
+
+double vafm_campaign_axis_value(const vafm_params *p, int axis)
+{
+    if (axis < 0 || axis >= VAFM_CAMPAIGN_NAXES)
+        return NAN;
+    double v;
+    memcpy(&v, (const char *)p + s_axes[axis].param, sizeof v);
+    return v;
+}
+
 size_t vafm_campaign_points(const vafm_campaign_spec *spec)
 {
     if (spec->point_fn)
         return spec->n_points;
-    size_t nT = spec->n_T ? spec->n_T : 1, nv = spec->n_v ? spec->n_v : 1, nk = spec->n_k ? spec->n_k : 1;
-    return nT * nv * nk;
+    size_t np = 1;
+    for (int a = 0; a < VAFM_CAMPAIGN_NAXES; a++) {
+        size_t n = vafm_campaign_axis_values(spec, a, NULL);
+        np *= n ? n : 1;
+    }
+    return np;
 }
 
 int vafm_campaign_point_params(const vafm_params *base, const vafm_campaign_spec *spec, size_t point,
                                vafm_params *out)
 {
-    size_t nv = spec->n_v ? spec->n_v : 1, nk = spec->n_k ? spec->n_k : 1;
     if (point >= vafm_campaign_points(spec))
         return VAFM_EINVAL;
     if (spec->point_fn)
         return spec->point_fn(spec->point_user, base, point, out);
     *out = *base;
-    size_t ik = point % nk, iv = (point / nk) % nv, iT = point / (nk * nv);
-    if (spec->n_T)
-        out->T_K = spec->T_K[iT];
-    if (spec->n_v)
-        out->v_approach_m_per_s = out->v_retract_m_per_s = spec->v_m_per_s[iv];
-    if (spec->n_k)
-        out->k_N_per_m = spec->k_N_per_m[ik];
+    /* the last axis fastest: peel the point's index from the fastest axis up */
+    for (int a = VAFM_CAMPAIGN_NAXES - 1; a >= 0; a--) {
+        const double *v;
+        size_t n = vafm_campaign_axis_values(spec, a, &v);
+        if (n) {
+            vafm_campaign_axis_apply(out, a, v[point % n]);
+            point /= n;
+        }
+    }
     return 0;
 }
 
@@ -545,7 +616,10 @@ int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *sp
         vafm_err_set(err, VAFM_EINVAL, "", "vafm_campaign_validate: no scene or no spec");
         return VAFM_EINVAL;
     }
-    if (spec->point_fn && (spec->n_T || spec->n_v || spec->n_k || spec->n_points == 0)) {
+    int lists = 0;
+    for (int a = 0; a < VAFM_CAMPAIGN_NAXES; a++)
+        lists |= vafm_campaign_axis_values(spec, a, NULL) != 0;
+    if (spec->point_fn && (lists || spec->n_points == 0)) {
         vafm_err_set(err, VAFM_EINVAL, "n_points",
                      "a grid given point by point takes no T, v or k lists and at least one point");
         return VAFM_EINVAL;
@@ -578,9 +652,12 @@ int vafm_campaign_validate(const vafm_params *base, const vafm_campaign_spec *sp
             if (bad_point)
                 *bad_point = i;
             if (err) {
-                char msg[sizeof err->message + 128];
-                snprintf(msg, sizeof msg, "grid point %zu (T = %g K, v = %g m/s, k = %g N/m): %s", i, p.T_K,
-                         p.v_retract_m_per_s, p.k_N_per_m, err->message[0] ? err->message : vafm_strerror(r));
+                char msg[sizeof err->message + 128], at[128] = "";
+                for (int a = 0; a < VAFM_CAMPAIGN_NAXES; a++) /* "T = 300 K, v = 1e-06 m/s, k = 0.1 N/m" */
+                    snprintf(at + strlen(at), sizeof at - strlen(at), "%s%s = %g %s", a ? ", " : "",
+                             s_axes[a].info.symbol, vafm_campaign_axis_value(&p, a), s_axes[a].info.unit);
+                snprintf(msg, sizeof msg, "grid point %zu (%s): %s", i, at,
+                         err->message[0] ? err->message : vafm_strerror(r));
                 snprintf(err->message, sizeof err->message, "%.*s", (int)(sizeof err->message - 1), msg);
             }
             return r;

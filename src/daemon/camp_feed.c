@@ -112,7 +112,9 @@ int vafmd_feed_start(vafmd_feed **out, const vafm_params *base, const vafm_campa
     if (spec->point_fn)
         return VAFM_EINVAL; /* a map's pixels come from its spec, which belongs to the campaign */
     vafmd_feed *f = calloc(1, sizeof *f);
-    size_t nl = spec->n_T + spec->n_v + spec->n_k;
+    size_t nl = 0;
+    for (int a = 0; a < VAFM_CAMPAIGN_NAXES; a++)
+        nl += vafm_campaign_axis_values(spec, a, NULL);
     if (!f || !(f->lists = malloc((nl ? nl : 1) * sizeof(double)))) {
         free(f);
         return VAFM_ENOMEM;
@@ -120,14 +122,13 @@ int vafmd_feed_start(vafmd_feed **out, const vafm_params *base, const vafm_campa
     f->base = *base;
     f->spec = *spec;
     double *l = f->lists;
-    if (spec->n_T)
-        f->spec.T_K = memcpy(l, spec->T_K, spec->n_T * sizeof(double));
-    l += spec->n_T;
-    if (spec->n_v)
-        f->spec.v_m_per_s = memcpy(l, spec->v_m_per_s, spec->n_v * sizeof(double));
-    l += spec->n_v;
-    if (spec->n_k)
-        f->spec.k_N_per_m = memcpy(l, spec->k_N_per_m, spec->n_k * sizeof(double));
+    for (int a = 0; a < VAFM_CAMPAIGN_NAXES; a++) { /* the feed owns copies of the grid's lists */
+        const double *v;
+        size_t n = vafm_campaign_axis_values(spec, a, &v);
+        if (n)
+            vafm_campaign_axis_set(&f->spec, a, memcpy(l, v, n * sizeof(double)), n);
+        l += n;
+    }
     f->spec.threads = 1; /* the simulation thread streams on the other core */
     f->spec.keep_samples = 1;
     f->spec.kernel = VAFM_CAMPAIGN_KERNEL_BATCH;

@@ -591,7 +591,6 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         c->duration_s = x;
     }
     if (kind == VAFMD_CMD_CAMPAIGN) {
-        static const char *const lists[3] = { "T_K", "v_m_per_s", "k_N_per_m" };
         v = json_object_get(root, "n");
         if (!v) {
             vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "n", "'campaign' needs \"n\" (curves per grid point)");
@@ -608,30 +607,31 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         c->camp_n = (uint64_t)json_integer_value(v);
         uint64_t points = 1;
-        for (int l = 0; l < 3; l++) {
-            if (!(v = json_object_get(root, lists[l])))
+        for (int l = 0; l < VAFM_CAMPAIGN_NAXES; l++) { /* camp_list[l]: the grid's axis l */
+            const char *const name = vafm_campaign_axis_at(l)->name;
+            if (!(v = json_object_get(root, name)))
                 continue;
             size_t i, n = json_is_array(v) ? json_array_size(v) : 0;
             json_t *x;
             if (!json_is_array(v)) {
-                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, lists[l], "\"%s\" must be an array of numbers", lists[l]);
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, name, "\"%s\" must be an array of numbers", name);
                 return -1;
             }
             json_array_foreach(v, i, x) if (!json_is_number(x))
             {
-                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, lists[l], "\"%s\" must be an array of numbers", lists[l]);
+                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, name, "\"%s\" must be an array of numbers", name);
                 return -1;
             }
             if (n < 1 || n > VAFMD_CAMPAIGN_LIST_MAX) {
-                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, lists[l], "\"%s\" must have 1 to %d values (omit it for "
-                              "the scene's value)", lists[l], VAFMD_CAMPAIGN_LIST_MAX);
+                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, name, "\"%s\" must have 1 to %d values (omit it for "
+                              "the scene's value)", name, VAFMD_CAMPAIGN_LIST_MAX);
                 return -1;
             }
             c->camp_list[l] = v;
             points *= n;
         }
         if (points > VAFMD_CAMPAIGN_POINTS_MAX) {
-            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "T_K", "the grid has %" PRIu64 " points, more than %d", points,
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, vafm_campaign_axis_at(0)->name, "the grid has %" PRIu64 " points, more than %d", points,
                           VAFMD_CAMPAIGN_POINTS_MAX);
             return -1;
         }

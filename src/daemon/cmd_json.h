@@ -76,7 +76,8 @@ typedef struct vafmd_cmd {
     int replay_has_loop;
     int64_t replay_loop;     /* replay: passes over the selection, 0 = until abort */
     uint64_t camp_n;       /* campaign: curves per grid point (≥ 1) */
-    json_t *camp_list[3];  /* campaign: borrowed T_K, v_m_per_s, k_N_per_m arrays of numbers, or NULL */
+    json_t *camp_list[VAFM_CAMPAIGN_NAXES]; /* campaign: borrowed arrays of numbers per grid axis (T_K, v_m_per_s,
+                                             k_N_per_m: vafm_campaign_axis_at), or NULL */
     uint64_t camp_first;   /* campaign, map: first_index (0 if absent) */
     vafm_map_spec map;     /* map: the spec (vafm_map_set of each key of "map") */
     double map_lateral_speed; /* map: lateral_speed_m_per_s */

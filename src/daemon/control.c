@@ -558,7 +558,6 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
  * error can still be answered; the simulation thread then runs the curves one after the other. */
 static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
-    static const char *const names[3] = { "T_K", "v_m_per_s", "k_N_per_m" };
     if (c->client_run_id[0]) {
         const s_hist *h = s_history_find(c->client_run_id);
         if (h) {
@@ -583,8 +582,8 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         return NULL;
     }
     vafmd_campaign *cp = calloc(1, sizeof *cp);
-    size_t n[3] = { 0, 0, 0 }, total_vals = 0;
-    for (int l = 0; l < 3; l++)
+    size_t n[VAFM_CAMPAIGN_NAXES] = { 0 }, total_vals = 0;
+    for (int l = 0; l < VAFM_CAMPAIGN_NAXES; l++)
         total_vals += n[l] = c->camp_list[l] ? json_array_size(c->camp_list[l]) : 0;
     if (!cp || !(cp->lists = malloc((total_vals + 1) * sizeof(double)))) {
         free(cp);
@@ -592,8 +591,8 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         return NULL;
     }
     double *lp = cp->lists;
-    const double *lists[3];
-    for (int l = 0; l < 3; l++) {
+    const double *lists[VAFM_CAMPAIGN_NAXES];
+    for (int l = 0; l < VAFM_CAMPAIGN_NAXES; l++) {
         lists[l] = n[l] ? lp : NULL;
         for (size_t i = 0; i < n[l]; i++)
             *lp++ = json_number_value(json_array_get(c->camp_list[l], i));
@@ -616,12 +615,8 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             return NULL;
         }
     }
-    cp->spec.T_K = lists[0];
-    cp->spec.n_T = n[0];
-    cp->spec.v_m_per_s = lists[1];
-    cp->spec.n_v = n[1];
-    cp->spec.k_N_per_m = lists[2];
-    cp->spec.n_k = n[2];
+    for (int l = 0; l < VAFM_CAMPAIGN_NAXES; l++) /* camp_list[l] is axis l's */
+        vafm_campaign_axis_set(&cp->spec, l, lists[l], n[l]);
     cp->spec.curves_per_point = c->camp_n; /* a map: 1 */
     cp->spec.first_curve = c->camp_first;
     size_t points = vafm_campaign_points(&cp->spec);
@@ -632,10 +627,10 @@ static json_t *s_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     vafm_error cverr = { 0 };
     int crc = vafm_campaign_validate(&cp->base, &cp->spec, &bad, &cverr);
     if (crc) {
-        const char *field = !strcmp(cverr.field, "T_K") && n[0]                   ? names[0]
-                            : strstr(cverr.field, "_m_per_s") && n[1]             ? names[1]
-                            : !strcmp(cverr.field, "k_N_per_m") && n[2]           ? names[2]
-                                                                                  : cverr.field;
+        const char *field = !strcmp(cverr.field, "T_K") && n[0] ? vafm_campaign_axis_at(VAFM_CAMPAIGN_AXIS_T)->name
+                            : strstr(cverr.field, "_m_per_s") && n[1] ? vafm_campaign_axis_at(VAFM_CAMPAIGN_AXIS_V)->name
+                            : !strcmp(cverr.field, "k_N_per_m") && n[2] ? vafm_campaign_axis_at(VAFM_CAMPAIGN_AXIS_K)->name
+                                                                        : cverr.field;
         vafmd_err_set(e, n[0] + n[1] + n[2] ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_INVALID_SCENE, field, "%s",
                       cverr.message[0] ? cverr.message : vafm_strerror(crc));
         free(cp->lists);
