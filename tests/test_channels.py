@@ -11,18 +11,9 @@ import re
 import subprocess
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-VAFMD = os.environ.get("VAFMD")
-VAFM_CLI = os.environ.get("VAFM_CLI")
+from vafmd_harness import ROOT, VAFM_CLI, VAFMD, Daemon, read, reap_daemons  # noqa: F401
+
 sys.path.insert(0, os.path.join(ROOT, "clients", "python"))
-
-from vafmd_harness import Daemon, reap_daemons  # noqa: E402,F401
-
-
-def read(*parts):
-    with open(os.path.join(ROOT, *parts), encoding="utf-8") as f:
-        return f.read()
 
 
 def table():

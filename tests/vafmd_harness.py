@@ -15,6 +15,16 @@ import pytest
 import zmq
 
 VAFMD = os.environ.get("VAFMD")
+VAFM_CLI = os.environ.get("VAFM_CLI")
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the source tree
+
+
+def read(*parts):
+    """A file of the source tree (ROOT/parts...) as text: the tables the tests parse (commands.def,
+    channels.h) and the documents they check against them."""
+    with open(os.path.join(ROOT, *parts), encoding="utf-8") as f:
+        return f.read()
+
 TIMEOUT_MS = 20000
 HEADER = struct.Struct("<IHHQQQQIHHdqII")  # the data header, protocol/wire.md §4 (72 bytes)
 
