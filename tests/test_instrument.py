@@ -7,7 +7,7 @@ import time
 import numpy as np
 import zmq
 
-from vafmd_harness import Daemon, TIMEOUT_MS
+from vafmd_harness import Daemon, TIMEOUT_MS, collect_run
 
 KB = 1.380649e-23
 
@@ -249,3 +249,54 @@ def test_scripted_session_reproducible():
     c, _ = session(8)
     m = min(n, c.shape[1])
     assert a[:, :m].tobytes() != c[:, :m].tobytes()
+
+
+def curve_at(d, s, index):
+    r = d.cmd({"cmd": "curve", "index": index})
+    assert r["status"] == "ok", r
+    start, blocks, _, end = collect_run(s, r["run_id"])
+    assert end["status"] == "ok", end
+    return start, b"".join(b"".join(p) for _, p in blocks)
+
+
+def test_curve_from_live_state_over_a_sample():
+    """ctrl_sample puts a map's sample under the controller; a curve then takes the material and the surface
+    height under the tip (vafm_map_point, a map pixel's rule), names the point in run.start ("sample") and
+    records the derived scene, so that the same (seed, index) over that scene without a sample is the same
+    curve bit for bit. Without ctrl_sample a curve is today's."""
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    plain, data0 = curve_at(d, s, 5)
+    assert "sample" not in plain
+    assert "wrong_type" == d.cmd({"cmd": "set", "values": {"ctrl_sample": 3}})["code"]
+    err(d.cmd({"cmd": "set", "values": {"ctrl_sample": "pattern"}}), "out_of_range", "ctrl_sample")
+    err(d.cmd({"cmd": "set", "values": {"ctrl_sample": "colour=red"}}), "unknown_field", "ctrl_sample")
+    spec = "pattern=dome,radius_m=3e-6,height_m=40e-9,b_E_star_Pa=5e9,b_gamma_J_per_m2=0.5"
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": spec}})["status"] == "ok"
+    assert d.cmd({"cmd": "get", "names": ["ctrl_sample"]})["values"]["ctrl_sample"] == spec
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert abs(st["surface_m"] - 40e-9) < 1e-18, st  # the dome's top under (0, 0): the controller's own sample
+    on, data_on = curve_at(d, s, 5)
+    t = on["sample"]
+    assert t["x_m"] == 0 and t["material"] == 1 and abs(t["surface_height_m"] - 40e-9) < 1e-18, t
+    assert on["scene"]["E_star_Pa"] == 5e9 and on["scene"]["gamma_J_per_m2"] == 0.5, on["scene"]
+    assert on["scene"]["surface_height_m"] == t["surface_height_m"] == on["ctrl"]["surface_m"]
+    assert data_on != data0
+    # off the dome: the substrate, the scene's own material
+    assert d.cmd({"cmd": "move", "x_m": 4e-6, "y_m": 0, "speed_m_per_s": 1e-3})["status"] == "ok"
+    for _ in range(100):
+        if not d.cmd({"cmd": "status"})["ctrl"]["moving"]:
+            break
+        time.sleep(0.05)
+    off, _ = curve_at(d, s, 5)
+    assert off["sample"]["material"] == 0 and off["sample"]["x_m"] == 4e-6
+    assert off["scene"]["E_star_Pa"] == plain["scene"]["E_star_Pa"] and off["scene"]["surface_height_m"] == 0
+    # re-run from the record: the derived scene, no sample: the same curve, bit for bit
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": ""}})["status"] == "ok"
+    keys = ("E_star_Pa", "gamma_J_per_m2", "contact", "surface_height_m", "start_height_m")
+    assert d.cmd({"cmd": "set", "values": {k: on["scene"][k] for k in keys}})["status"] == "ok"
+    again, data_again = curve_at(d, s, 5)
+    assert "sample" not in again and again["scene"] == on["scene"]
+    assert data_again == data_on
+    d.stop()

@@ -499,11 +499,49 @@ static void test_patterns(void)
     ENSURE(t_material(&s, &base, 10, 10) == 1);
 }
 
+/* vafm_map_point: at every pixel centre the scene and truth of vafm_map_pixel, bit for bit; between centres the
+ * material and height of vafm_map_surface_at; outside the grid ix = iy = -1; a point not finite is refused. */
+static void test_point(void)
+{
+    vafm_map_spec s;
+    vafm_params base;
+    vafm_error e;
+    vafm_preset_apply(&base, "contact-silica", NULL);
+    vafm_map_spec_default(&s);
+    ENSURE(vafm_map_set(&s, "pattern", "dome", NULL) == 0);
+    ENSURE(vafm_map_set(&s, "nx", "7", NULL) == 0 && vafm_map_set(&s, "ny", "5", NULL) == 0);
+    ENSURE(vafm_map_set(&s, "b_E_star_Pa", "3e9", NULL) == 0 && vafm_map_set(&s, "start", "fixed", NULL) == 0);
+    for (int iy = 0; iy < s.ny; iy++)
+        for (int ix = 0; ix < s.nx; ix++) {
+            vafm_params a, b;
+            vafm_map_truth ta, tb;
+            memset(&a, 0, sizeof a); /* padding compared below */
+            memset(&b, 0, sizeof b);
+            ENSURE(vafm_map_pixel(&s, &base, ix, iy, &a, &ta, NULL) == 0);
+            ENSURE(vafm_map_point(&s, &base, ta.x_m, ta.y_m, &b, &tb, NULL) == 0);
+            ENSURE_MSG(!memcmp(&a, &b, sizeof a) && !memcmp(&ta, &tb, sizeof ta), "pixel (%d, %d)", ix, iy);
+        }
+    int mat = -1;
+    double h = NAN;
+    vafm_params p;
+    vafm_map_truth t;
+    ENSURE(vafm_map_surface_at(&s, 0.3e-6, -0.2e-6, &mat, &h) == 0);
+    ENSURE(vafm_map_point(&s, &base, 0.3e-6, -0.2e-6, &p, &t, NULL) == 0);
+    ENSURE(t.material == mat && t.surface_height_m == h && p.surface_height_m == h && h > 0 && mat == 1);
+    ENSURE(p.E_star_Pa == 3e9 && p.start_height_m == base.start_height_m - h);
+    ENSURE(vafm_map_point(&s, &base, 6e-6, 0, &p, &t, NULL) == 0 && t.ix == -1 && t.iy == -1);
+    ENSURE(t.material == 0 && p.E_star_Pa == base.E_star_Pa && t.index == UINT64_MAX);
+    memset(&e, 0, sizeof e);
+    ENSURE(vafm_map_point(&s, &base, NAN, 0, &p, NULL, &e) == VAFM_EINVAL && !strcmp(e.field, "x_m"));
+    ENSURE(vafm_map_point(&s, NULL, 0, 0, &p, NULL, &e) == VAFM_EINVAL);
+}
+
 int main(void)
 {
     RUN_TEST(test_bad_input);
     RUN_TEST(test_patterns);
     RUN_TEST(test_surface_height_param);
+    RUN_TEST(test_point);
     RUN_TEST(test_uniform_is_single_curve);
     RUN_TEST(test_stripes_hertz_moduli);
     RUN_TEST(test_topography);

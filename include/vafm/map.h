@@ -156,6 +156,13 @@ VAFM_API int vafm_map_validate(const vafm_map_spec *s, const vafm_params *base, 
 VAFM_API int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int iy, vafm_params *out,
                             vafm_map_truth *truth, vafm_error *err);
 
+/** The scene and ground truth at any point (x_m, y_m) of the scan plane, by vafm_map_pixel's rule (at a pixel's
+ *  centre the two agree bit for bit): the scene of a curve taken where the live controller's tip is
+ *  (vafm/ctrl.h). truth->ix, iy are the pixel that holds the point (−1, −1 and index UINT64_MAX outside the
+ *  grid). @return 0 or VAFM_EINVAL (a spec field out of range, no base, a coordinate not finite). */
+VAFM_API int vafm_map_point(const vafm_map_spec *s, const vafm_params *base, double x_m, double y_m, vafm_params *out,
+                            vafm_map_truth *truth, vafm_error *err);
+
 /** The sample at any point (x_m, y_m) of the scan plane, not only at pixel centres (the live controller's
  *  surface under the tip, vafm/ctrl.h): its material (0 or 1) and its surface height above the substrate, m.
  *  Pure and allocation-free; the spec is not validated here. Either output may be NULL.

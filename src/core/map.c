@@ -325,19 +325,10 @@ int vafm_map_surface_at(const vafm_map_spec *s, double x_m, double y_m, int *mat
     return 0;
 }
 
-int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int iy, vafm_params *out,
-                   vafm_map_truth *truth, vafm_error *err)
+/* The scene and truth at (x, y) of the scan plane: vafm_map_pixel's rule, shared with vafm_map_point. */
+static void s_scene_at(const vafm_map_spec *s, const vafm_params *base, double x, double y, int ix, int iy,
+                       vafm_params *out, vafm_map_truth *truth)
 {
-    int r = s_check_spec_base(s, base, err);
-    if (r)
-        return r;
-    if (ix < 0 || ix >= s->nx || iy < 0 || iy >= s->ny) {
-        vafm_err_set(err, VAFM_EINVAL, ix < 0 || ix >= s->nx ? "ix" : "iy",
-                     "pixel (%d, %d) is outside the %d x %d grid", ix, iy, s->nx, s->ny);
-        return VAFM_EINVAL;
-    }
-    double x = s->center_x_m - 0.5 * s->size_x_m + ((double)ix + 0.5) * (s->size_x_m / (double)s->nx);
-    double y = s->center_y_m - 0.5 * s->size_y_m + ((double)iy + 0.5) * (s->size_y_m / (double)s->ny);
     int mat;
     double h;
     s_sample_at(s, x, y, &mat, &h);
@@ -367,7 +358,7 @@ int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int 
         memset(truth, 0, sizeof *truth);
         truth->ix = ix;
         truth->iy = iy;
-        truth->index = (uint64_t)iy * (uint64_t)s->nx + (uint64_t)ix;
+        truth->index = ix >= 0 && iy >= 0 ? (uint64_t)iy * (uint64_t)s->nx + (uint64_t)ix : UINT64_MAX;
         truth->x_m = x;
         truth->y_m = y;
         truth->material = mat;
@@ -376,6 +367,40 @@ int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int 
         truth->gamma_J_per_m2 = g;
         truth->surface_height_m = h;
     }
+}
+
+int vafm_map_pixel(const vafm_map_spec *s, const vafm_params *base, int ix, int iy, vafm_params *out,
+                   vafm_map_truth *truth, vafm_error *err)
+{
+    int r = s_check_spec_base(s, base, err);
+    if (r)
+        return r;
+    if (ix < 0 || ix >= s->nx || iy < 0 || iy >= s->ny) {
+        vafm_err_set(err, VAFM_EINVAL, ix < 0 || ix >= s->nx ? "ix" : "iy",
+                     "pixel (%d, %d) is outside the %d x %d grid", ix, iy, s->nx, s->ny);
+        return VAFM_EINVAL;
+    }
+    double x = s->center_x_m - 0.5 * s->size_x_m + ((double)ix + 0.5) * (s->size_x_m / (double)s->nx);
+    double y = s->center_y_m - 0.5 * s->size_y_m + ((double)iy + 0.5) * (s->size_y_m / (double)s->ny);
+    s_scene_at(s, base, x, y, ix, iy, out, truth);
+    return 0;
+}
+
+int vafm_map_point(const vafm_map_spec *s, const vafm_params *base, double x_m, double y_m, vafm_params *out,
+                   vafm_map_truth *truth, vafm_error *err)
+{
+    int r = s_check_spec_base(s, base, err);
+    if (r)
+        return r;
+    if (!isfinite(x_m) || !isfinite(y_m)) {
+        vafm_err_set(err, VAFM_EINVAL, isfinite(x_m) ? "y_m" : "x_m", "the point (%g, %g) m is not finite", x_m, y_m);
+        return VAFM_EINVAL;
+    }
+    /* the pixel that holds the point, or -1 outside the grid */
+    const double fx = (x_m - (s->center_x_m - 0.5 * s->size_x_m)) / (s->size_x_m / (double)s->nx);
+    const double fy = (y_m - (s->center_y_m - 0.5 * s->size_y_m)) / (s->size_y_m / (double)s->ny);
+    const int ix = fx >= 0 && fx < (double)s->nx ? (int)fx : -1, iy = fy >= 0 && fy < (double)s->ny ? (int)fy : -1;
+    s_scene_at(s, base, x_m, y_m, ix < 0 || iy < 0 ? -1 : ix, ix < 0 || iy < 0 ? -1 : iy, out, truth);
     return 0;
 }
 

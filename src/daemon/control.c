@@ -503,12 +503,16 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     if (kind == VAFMD_RUN_REPLAY)
         return s_start_replay(d, c, e);
     vafm_params p = d->scene;
+    json_t *at_tip = NULL; /* a curve from the live state over a sample: the point under the tip (live.c) */
+    if (kind == VAFMD_RUN_CURVE && vafmd_live_curve_scene(d, &p, &at_tip, e) < 0)
+        return NULL;
     if (c->has_duration) {
         char buf[64];
         snprintf(buf, sizeof buf, "%.17g", c->duration_s);
         vafm_error verr = { 0 };
         if (vafm_params_set(&p, "tune_duration_s", buf, &verr)) {
             vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s", "%s", verr.message);
+            json_decref(at_tip);
             return NULL;
         }
     }
@@ -519,17 +523,20 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     int rc = kind == VAFMD_RUN_TUNE ? vafm_sim_new_tune(&sim, &p, &verr) : vafm_sim_new(&sim, &p, &verr);
     if (rc && kind == VAFMD_RUN_TUNE && !strcmp(verr.field, "tune_duration_s")) {
         vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "duration_s", "%s", verr.message); /* the tune's own length */
+        json_decref(at_tip);
         return NULL;
     }
     if (rc) {
         vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "cannot build the simulation: %s",
                       verr.message[0] ? verr.message : vafm_strerror(rc));
+        json_decref(at_tip);
         return NULL;
     }
     if (kind == VAFMD_RUN_TUNE)
         p = *vafm_sim_params(sim); /* the tune's scene, at the tune's sample rate */
     if (kind == VAFMD_RUN_CURVE && s_log_fits(d, &p, "curve", e)) {
         vafm_sim_destroy(&sim);
+        json_decref(at_tip);
         return NULL;
     }
     uint64_t run_id = d->next_run_id;
@@ -542,6 +549,16 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     sc.index = c->has_index ? c->index : 0;
     sc.sim = sim;
     sc.start_json = vafmd_run_start_json(&p, &d->set, kind, run_id, sc.index, c->client_run_id, vafm_sim_dt(sim), NULL);
+    if (at_tip && sc.start_json) { /* run.start names the point: its scene (above) re-runs the curve exactly */
+        json_t *j = json_loads(sc.start_json, 0, NULL);
+        char *t = NULL;
+        if (j && !json_object_set(j, "sample", at_tip))
+            t = json_dumps(j, JSON_COMPACT);
+        json_decref(j);
+        free(sc.start_json);
+        sc.start_json = t;
+    }
+    json_decref(at_tip);
     sc.set = d->set;
     sc.log = kind == VAFMD_RUN_CURVE && atomic_load_explicit(&d->log.state, memory_order_acquire) == VAFMD_LOG_ON;
     snprintf(sc.client_run_id, sizeof sc.client_run_id, "%s", c->client_run_id);

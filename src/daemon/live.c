@@ -35,6 +35,7 @@
 #define S_MAX_PTS 1024
 #define S_PEND 32             /* commands held for their at_s */
 #define S_ACK_WAIT_NS 1000000000LL
+#define S_SAMPLE_MAX 1024   /* ctrl_sample: the longest spec text */
 
 /* The live channels, declared once: name, unit, the vafm_ctrl_samples array (state: uint8_t, the last). */
 typedef struct s_live_channel {
@@ -106,6 +107,7 @@ typedef struct s_snap {
 struct vafmd_live {
     /* ---- simulation thread ---- */
     vafm_ctrl *ctrl;
+    vafm_map_spec *map;    /* the sample the controller borrows (NULL: a flat uniform sample) */
     uint64_t generation;   /* controllers made so far (the first is 1) */
     char why[256];
     double fs, speed, rate;
@@ -136,6 +138,9 @@ struct vafmd_live {
     vafm_ctrl_params cp;   /* the settings the next controller is built with */
     double rate_ctl;
     uint64_t scene_hash;   /* FNV-1a of the scene's JSON the controller was built over */
+    vafm_map_spec sample;  /* ctrl_sample: the sample under the controller (has_sample 0: a flat uniform one) */
+    int has_sample;
+    char sample_text[S_SAMPLE_MAX + 1];
 };
 
 /* ================================== both sides ================================== */
@@ -159,12 +164,13 @@ static uint64_t s_scene_hash(const vafm_params *p)
 }
 
 /* Build a controller over the scene (control thread, or main before the threads). */
-static vafm_ctrl *s_build(const vafm_params *scene, const vafm_ctrl_params *cp, char *why, size_t whylen)
+static vafm_ctrl *s_build(const vafm_params *scene, const vafm_ctrl_params *cp, const vafm_map_spec *map, char *why,
+                          size_t whylen)
 {
     vafm_ctrl *c = NULL;
     vafm_error err;
     memset(&err, 0, sizeof err);
-    int rc = vafm_ctrl_new(&c, scene, cp, NULL, &err);
+    int rc = vafm_ctrl_new(&c, scene, cp, map, &err);
     if (rc) {
         snprintf(why, whylen, "the scene cannot host the controller: %.40s%s%.100s", err.field[0] ? err.field : "",
                  err.field[0] ? ": " : "", err.message[0] ? err.message : vafm_strerror(rc));
@@ -185,7 +191,7 @@ int vafmd_live_init(vafmd *d)
     L->rate_ctl = L->rate = 100.0;
     L->speed = d->set.speed;
     L->scene_hash = s_scene_hash(&d->scene);
-    L->ctrl = s_build(&d->scene, &L->cp, L->why, sizeof L->why);
+    L->ctrl = s_build(&d->scene, &L->cp, NULL, L->why, sizeof L->why);
     L->generation = 1;
     atomic_init(&L->ack, 0);
     d->live = L;
@@ -198,6 +204,7 @@ void vafmd_live_free(vafmd *d)
     if (!L)
         return;
     vafm_ctrl_destroy(&L->ctrl);
+    free(L->map);
     pthread_mutex_destroy(&L->mu);
     free(L);
     d->live = NULL;
@@ -505,7 +512,9 @@ void vafmd_live_apply(vafmd *d, const vafmd_live_op *op)
     if (op->op == VAFMD_LIVE_OP_NEW) {
         s_flush(L);
         vafm_ctrl_destroy(&L->ctrl); /* rare: a scene or settings change (the allocator may be used here) */
+        free(L->map);            /* after the controller that borrowed it */
         L->ctrl = op->ctrl;
+        L->map = op->map;
         snprintf(L->why, sizeof L->why, "%s", op->why);
         L->generation++;
         L->n_pend = 0;
@@ -829,6 +838,10 @@ static json_t *s_cset_info(const s_cset *f)
 static const char s_monitor_doc[] = "live topic: monitor points per second (block means of the controller's samples), "
                                     "[0, 1e5] Hz, 0: off";
 
+static const char s_sample_doc[] = "the sample under the controller and under a curve started from it: \"\" (a flat "
+                                   "uniform sample of the scene's material) or a map's fields as name=value pairs "
+                                   "(\"pattern=stripes,period_m=4e-6,b_E_star_Pa=5e9\"), at most 1024 characters";
+
 json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
     vafmd_live *L = d->live;
@@ -840,7 +853,8 @@ json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         json_t *n;
         json_array_foreach(c->names, i, n) {
             const char *s = json_string_value(n);
-            json_array_append(s_cset_find(s) || !strcmp(s, "monitor_rate_Hz") ? extra : names, n);
+            json_array_append(s_cset_find(s) || !strcmp(s, "monitor_rate_Hz") || !strcmp(s, "ctrl_sample") ? extra
+                              : names, n);
         }
         c2.names = names;
     } else {
@@ -850,6 +864,7 @@ json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             json_array_append_new(extra, json_string(nm));
         }
         json_array_append_new(extra, json_string("monitor_rate_Hz"));
+        json_array_append_new(extra, json_string("ctrl_sample"));
     }
     json_t *v = vafmd_get_values(&d->scene, &d->set, &c2, e);
     json_decref(names);
@@ -863,6 +878,13 @@ json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     json_array_foreach(extra, i, n) {
         const char *s = json_string_value(n);
         const s_cset *f = s_cset_find(s);
+        if (!strcmp(s, "ctrl_sample")) {
+            json_object_set_new(vals, s, json_string(L->sample_text));
+            if (info)
+                json_object_set_new(info, s, json_pack("{s:s,s:s,s:s}", "unit", "", "kind", "text", "doc",
+                                                       s_sample_doc));
+            continue;
+        }
         json_object_set_new(vals, s, f ? s_cset_value(&L->cp, f) : json_real(L->rate_ctl));
         if (info)
             json_object_set_new(info, s, f ? s_cset_info(f) : json_pack("{s:s,s:s,s:s}", "unit", "Hz", "kind", "real",
@@ -900,12 +922,62 @@ static int s_cset_apply(vafm_ctrl_params *cp, const char *name, const s_cset *f,
     return 0;
 }
 
+/* ctrl_sample: "" (a flat uniform sample of the scene's material) or the fields of a map's spec as
+ * "name=value" pairs separated by commas or spaces (vafm_map_set's names: "pattern=stripes,period_m=4e-6,
+ * b_E_star_Pa=5e9"), as `map` takes them. The text is kept for `get`. @return 0 or -1. */
+static int s_sample_parse(json_t *v, vafm_map_spec *sp, int *has, char *text, vafmd_err *e)
+{
+    const char *t = json_is_string(v) ? json_string_value(v) : NULL;
+    if (!t) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "ctrl_sample", "'ctrl_sample' must be a string: \"\" (a flat uniform "
+                      "sample) or the map's fields as name=value pairs, e.g. \"pattern=stripes,period_m=4e-6\"");
+        return -1;
+    }
+    size_t n = strlen(t);
+    if (n > S_SAMPLE_MAX) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "ctrl_sample", "ctrl_sample is %zu characters long; at most %d", n,
+                      S_SAMPLE_MAX);
+        return -1;
+    }
+    char buf[S_SAMPLE_MAX + 1];
+    memcpy(buf, t, n + 1);
+    vafm_map_spec s;
+    vafm_map_spec_default(&s);
+    int any = 0;
+    char *save = NULL;
+    for (char *tok = strtok_r(buf, ", \t", &save); tok; tok = strtok_r(NULL, ", \t", &save)) {
+        char *eq = strchr(tok, '=');
+        if (!eq || eq == tok || !eq[1]) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "ctrl_sample", "ctrl_sample: '%.60s' is not name=value (the map's "
+                          "fields, e.g. pattern=stripes)", tok);
+            return -1;
+        }
+        *eq = 0;
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        int r = vafm_map_set(&s, tok, eq + 1, &err);
+        if (r) {
+            vafmd_err_set(e, r == VAFM_ENOTFOUND ? VAFMD_E_UNKNOWN_FIELD : VAFMD_E_OUT_OF_RANGE, "ctrl_sample",
+                          "ctrl_sample: %.200s", err.message);
+            return -1;
+        }
+        any = 1;
+    }
+    *sp = s;
+    *has = any;
+    memcpy(text, t, n + 1);
+    return 0;
+}
+
 int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
     vafmd_live *L = d->live;
     vafm_ctrl_params cp = L->cp;
     double rate = L->rate_ctl;
-    int ctrl_given = 0, rate_given = 0;
+    int ctrl_given = 0, rate_given = 0, sample_given = 0, has_sample = L->has_sample;
+    vafm_map_spec sample = L->sample;
+    char sample_text[S_SAMPLE_MAX + 1];
+    snprintf(sample_text, sizeof sample_text, "%s", L->sample_text);
     json_t *rest = NULL;
     vafmd_cmd c2 = *c;
     if (c->values) {
@@ -914,7 +986,13 @@ int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         json_t *v;
         json_object_foreach(c->values, key, v) {
             const s_cset *f = s_cset_find(key);
-            if (f) {
+            if (!strcmp(key, "ctrl_sample")) {
+                if (s_sample_parse(v, &sample, &has_sample, sample_text, e)) {
+                    json_decref(rest);
+                    return -1;
+                }
+                sample_given = 1;
+            } else if (f) {
                 if (s_cset_apply(&cp, key, f, v, e)) {
                     json_decref(rest);
                     return -1;
@@ -952,6 +1030,15 @@ int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             return -1;
         }
     }
+    if (has_sample) { /* every point of the sample must host a curve of the (new) scene, as `map` checks it */
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        if (vafm_map_validate(&sample, &scene, &err)) {
+            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "ctrl_sample", "ctrl_sample: %.40s%s%.180s", err.field,
+                          err.field[0] ? ": " : "", err.message);
+            return -1;
+        }
+    }
     /* the settings first: a new controller then starts on the new decimation grid from its sample 0 */
     if (rate_given || set.speed != d->set.speed) {
         vafmd_live_op op;
@@ -963,21 +1050,63 @@ int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             return -1;
     }
     const uint64_t h = s_scene_hash(&scene);
-    if (ctrl_given || h != L->scene_hash) { /* a new controller over the new scene: it starts again */
+    if (ctrl_given || sample_given || h != L->scene_hash) { /* a new controller over the new scene: it starts again */
         vafmd_live_op op;
         memset(&op, 0, sizeof op);
         op.op = VAFMD_LIVE_OP_NEW;
-        op.ctrl = s_build(&scene, &cp, op.why, sizeof op.why);
+        if (has_sample && !(op.map = malloc(sizeof *op.map))) {
+            vafmd_err_set(e, VAFMD_E_BUSY, "", "out of memory for the controller's sample; retry");
+            return -1;
+        }
+        if (op.map)
+            *op.map = sample;
+        op.ctrl = s_build(&scene, &cp, op.map, op.why, sizeof op.why);
         if (s_request(d, &op, 1, e)) { /* answered: status shows the new controller from the reply on */
-            if (!strcmp(e->code, VAFMD_E_BUSY) && strstr(e->message, "not take"))
+            if (!strcmp(e->code, VAFMD_E_BUSY) && strstr(e->message, "not take")) {
                 vafm_ctrl_destroy(&op.ctrl); /* not handed over */
+                free(op.map);
+            }
             return -1;
         }
         L->scene_hash = h;
+        L->sample = sample;
+        L->has_sample = has_sample;
+        snprintf(L->sample_text, sizeof L->sample_text, "%s", sample_text);
     }
     d->scene = scene;
     d->set = set;
     L->cp = cp;
     L->rate_ctl = rate;
     return 0;
+}
+
+int vafmd_live_curve_scene(vafmd *d, vafm_params *p, json_t **info, vafmd_err *e)
+{
+    vafmd_live *L = d->live;
+    *info = NULL;
+    if (!L || !L->has_sample)
+        return 0; /* a curve as before: the scene as it is */
+    s_snap s;
+    pthread_mutex_lock(&L->mu);
+    s = L->snap;
+    pthread_mutex_unlock(&L->mu);
+    if (!s.have) {
+        vafmd_err_set(e, VAFMD_E_STATE, "ctrl_sample", "ctrl_sample is set but there is no controller (%s): the tip's "
+                      "position is unknown", s.why);
+        return -1;
+    }
+    vafm_map_truth t;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    if (vafm_map_point(&L->sample, &d->scene, s.st.x_m, s.st.y_m, p, &t, &err)) {
+        vafmd_err_set(e, VAFMD_E_INVALID_SCENE, "ctrl_sample", "the sample under the tip: %s", err.message);
+        return -1;
+    }
+    char buf[4096];
+    json_t *spec = vafm_map_to_json(&L->sample, buf, sizeof buf) > 0 ? json_loads(buf, 0, NULL) : NULL;
+    *info = json_pack("{s:f,s:f,s:i,s:i,s:i,s:s,s:f,s:f,s:f,s:s,s:o*}", "x_m", t.x_m, "y_m", t.y_m, "ix", t.ix, "iy",
+                      t.iy, "material", t.material, "contact", t.contact ? t.contact->name : "", "E_star_Pa",
+                      t.E_star_Pa, "gamma_J_per_m2", t.gamma_J_per_m2, "surface_height_m", t.surface_height_m,
+                      "ctrl_sample", L->sample_text, "map", spec);
+    return 1;
 }

@@ -53,6 +53,7 @@ typedef struct vafmd_live_op {
     double setpoint, p_m_per_N, i_m_per_N_s, tau_s;
     int unit, relative;
     vafm_ctrl *ctrl;                    /* NEW */
+    vafm_map_spec *map;                 /* NEW: the sample ctrl borrows (malloc'ed; ownership passes; NULL: flat) */
     char why[256];                      /* NEW with ctrl NULL: why there is no controller */
     double speed, monitor_rate_Hz;      /* SETTINGS */
     int free_run;
@@ -82,6 +83,11 @@ json_t *vafmd_live_hello_json(void);
 /* get/set with the controller's settings (ctrl_*) and monitor_rate_Hz: wrap vafmd_get_values/vafmd_apply_set */
 json_t *vafmd_live_get(struct vafmd *d, const struct vafmd_cmd *c, struct vafmd_err *e);
 int vafmd_live_set(struct vafmd *d, const struct vafmd_cmd *c, struct vafmd_err *e);
+/* A curve started from the live state: with a sample under the controller (ctrl_sample), *p becomes the scene at
+ * the tip's position (vafm_map_point over d->scene: the material, E*, gamma, contact model and surface height
+ * there, as a map pixel's) and *info (new reference) the point's ground truth and the sample, for run.start.
+ * @return 1 (p changed), 0 (no sample: p untouched, *info NULL) or -1 (e says why). */
+int vafmd_live_curve_scene(struct vafmd *d, vafm_params *p, json_t **info, struct vafmd_err *e);
 /* cmd_json.c: decode the controller commands' arguments (engage, withdraw, move, z, feedback) */
 int vafmd_live_decode(json_t *root, struct vafmd_cmd *c, struct vafmd_err *e);
 #endif
