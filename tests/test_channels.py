@@ -71,7 +71,7 @@ def test_samples_csv_header(tmp_path):
 def test_wire_md_channel_table():
     wire = read("protocol", "wire.md")
     for r in ROWS:
-        if r["flags"] in ("LIVE", "OPTIONAL", "REPLAY"):
+        if r["flags"] in ("LIVE", "OPTIONAL", "REPLAY", "OPTIN"):
             assert "`" + r["name"] + "`" in wire, r["name"]
 
 

@@ -2,6 +2,8 @@
 their errors, events and status, faults on them, and a scripted session reproduced bit for bit.
 protocol/wire.md §2.4, §3.7; docs/instrument.md "The daemon"."""
 import json
+import os
+import sys
 import time
 
 import numpy as np
@@ -9,6 +11,7 @@ import zmq
 
 from vafmd_harness import Daemon, TIMEOUT_MS, collect_run
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "clients", "python"))
 KB = 1.380649e-23
 
 
@@ -299,4 +302,42 @@ def test_curve_from_live_state_over_a_sample():
     again, data_again = curve_at(d, s, 5)
     assert "sample" not in again and again["scene"] == on["scene"]
     assert data_again == data_on
+    d.stop()
+
+
+def test_segment_channel_opt_in():
+    """segment_channel: a run streams each sample's segment as the last channel; it agrees with the header's
+    first segment and the segment events at every sample, and the other channels are the same bit for bit as
+    without it. Off (the default) the channel list is today's. The Python client's Run.segment takes it."""
+    from vafm_client.client import Run
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "get", "names": ["segment_channel"]})["values"]["segment_channel"] is False
+    off, data_off = curve_at(d, s, 2)
+    assert "segment" not in [c["name"] for c in off["channels"]]
+    err(d.cmd({"cmd": "set", "values": {"segment_channel": 1}}), "wrong_type", "segment_channel")
+    assert d.cmd({"cmd": "set", "values": {"segment_channel": True}})["status"] == "ok"
+    r = d.cmd({"cmd": "curve", "index": 2})
+    start, blocks, events, end = collect_run(s, r["run_id"])
+    names = [c["name"] for c in start["channels"]]
+    assert names[-1] == "segment" and names[:-1] == [c["name"] for c in off["channels"]]
+    k = len(names) - 1
+    assert b"".join(b"".join(p[:k]) for _, p in blocks) == data_off  # the other channels unchanged
+    seg = np.concatenate([np.frombuffer(p[k], "<f8") for _, p in blocks])
+    for h, p in blocks:  # the header's segment (field 9, wire.md §4) is the block's first sample's
+        assert np.frombuffer(p[k], "<f8")[0] == h[9]
+    changes = [e for e in events if e.get("kind") == "segment"]
+    assert changes and set(np.unique(seg)) == {0.0, 1.0}, np.unique(seg)
+    first_retract = int(np.argmax(seg == 1))
+    assert changes[0]["to"] == "retract" and changes[0]["sample"] == first_retract, (changes[0], first_retract)
+    assert np.all(seg[:first_retract] == 0) and np.all(seg[first_retract:] == 1)
+    # the client's Run takes the channel as its per-sample segment (no events needed)
+    from vafm_client.client import Header, Run
+    run = Run(r["run_id"])
+    run.start, run.end = start, end
+    run.headers = [Header(*h) for h, _ in blocks]
+    run._blocks = [[np.frombuffer(x, "<f8") for x in p] for _, p in blocks]
+    run._finish()
+    assert np.array_equal(run.segment, seg.astype(np.int64)) and np.array_equal(run["segment"], seg)
     d.stop()

@@ -12,17 +12,20 @@
  *   X(ID, "stream name", "unit", "file dataset" | NULL, kind, flags, csv, field)
  *     ID       VAFM_CH_<ID> is the row's index and its bit in a run's channel mask (streamed rows first)
  *     kind     VAFM_CHK_MEASURED (the detector chain's output: what an instrument records),
- *              VAFM_CHK_TRUTH (the simulation's, never seen by an instrument), VAFM_CHK_CLOCK (time base)
+ *              VAFM_CHK_TRUTH (the simulation's, never seen by an instrument), VAFM_CHK_CLOCK (time base),
+ *              VAFM_CHK_SEGMENT (the sample's segment, vafm_samples.segment, as a double)
  *     flags    VAFM_CHF_LIVE: every live run streams it; VAFM_CHF_REPLAY: only replays stream it (a file's
  *              time column); VAFM_CHF_OPTIONAL: a live run streams it when the scene has it (the measured
- *              height of a piezo model or a z sensor)
+ *              height of a piezo model or a z sensor); VAFM_CHF_OPTIN: a live run streams it when the
+ *              client asked for it (vafmd's setting segment_channel)
  *     csv      its column in the samples CSV, from 1 (0: not a column of it)
  *     field    its array in vafm_samples (sim.h); `n` for none (the detector's volts: the daemon
  *              computes them, vafm_channel_samples returns NULL)
  *
  * The order of the streamed rows is the wire's (protocol/wire.md §3.2) and must not change; a new channel
- * is appended (docs/architecture.md, "Recipe: a new output channel"). The segment is not a channel of the
- * stream (the header and the events carry it) but it is a column of files and CSVs: its row comes last.
+ * is appended (docs/architecture.md, "Recipe: a new output channel"). The segment is a column of files and
+ * CSVs (VAFM_CH_SEGMENT_FILE, _CSV: a uint8 array, not a row); on the stream it is the opt-in row SEGMENT (the
+ * block header holds only a block's first segment, the events the changes).
  */
 #ifndef VAFM_CORE_CHANNELS_H
 #define VAFM_CORE_CHANNELS_H
@@ -32,8 +35,8 @@
 #include <string.h>
 #include "vafm/sim.h"
 
-enum { VAFM_CHK_MEASURED, VAFM_CHK_TRUTH, VAFM_CHK_CLOCK };
-enum { VAFM_CHF_LIVE = 1, VAFM_CHF_REPLAY = 2, VAFM_CHF_OPTIONAL = 4 };
+enum { VAFM_CHK_MEASURED, VAFM_CHK_TRUTH, VAFM_CHK_CLOCK, VAFM_CHK_SEGMENT };
+enum { VAFM_CHF_LIVE = 1, VAFM_CHF_REPLAY = 2, VAFM_CHF_OPTIONAL = 4, VAFM_CHF_OPTIN = 8 };
 
 /* A test build may append rows (tests/test_channels.py builds one with a dummy channel). */
 #ifndef VAFM_CHANNELS_EXTRA
@@ -49,6 +52,7 @@ enum { VAFM_CHF_LIVE = 1, VAFM_CHF_REPLAY = 2, VAFM_CHF_OPTIONAL = 4 };
     X(TIP,             "tip_m",             "m", "tip position",      VAFM_CHK_TRUTH,    VAFM_CHF_LIVE,     5, tip_m)             \
     X(TIME,            "time_s",            "s", "time",              VAFM_CHK_CLOCK,    VAFM_CHF_REPLAY,   1, time_s)            \
     X(HEIGHT_MEASURED, "height_measured_m", "m", "height (measured)", VAFM_CHK_MEASURED, VAFM_CHF_OPTIONAL, 7, height_measured_m) \
+    X(SEGMENT,         "segment",           "",  NULL,                VAFM_CHK_SEGMENT,  VAFM_CHF_OPTIN,    0, n)                 \
     VAFM_CHANNELS_EXTRA(X)
 /* clang-format on */
 

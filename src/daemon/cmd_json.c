@@ -56,6 +56,8 @@ static const s_setting s_settings[] = {
       "SIMD lanes, the same curves bit for bit" },
     { "lookahead_s", S_SET_REAL, "s", 0, 10, 0,
       "compute ahead: seconds of samples computed before their release (0: none); at most 256 MiB per run" },
+    { "segment_channel", S_SET_BOOL, "", 0, 1, 0,
+      "true: runs from the next on stream the channel segment (each sample's segment, 0 approach, 1 retract, ...)" },
 };
 #define S_N_SETTINGS (sizeof s_settings / sizeof s_settings[0])
 
@@ -73,6 +75,8 @@ static json_t *s_setting_value(const vafmd_settings *s, const s_setting *f)
         return json_real(s->speed);
     if (!strcmp(f->name, "free_run"))
         return json_boolean(s->free_run);
+    if (!strcmp(f->name, "segment_channel"))
+        return json_boolean(s->segment_channel);
     if (!strcmp(f->name, "block_s"))
         return json_real(s->block_s);
     if (!strcmp(f->name, "lookahead_s"))
@@ -104,7 +108,10 @@ static int s_setting_apply(vafmd_settings *s, const s_setting *f, json_t *v, vaf
             vafmd_err_set(e, VAFMD_E_WRONG_TYPE, f->name, "'%s' must be true or false", f->name);
             return -1;
         }
-        s->free_run = json_is_true(v);
+        if (!strcmp(f->name, "segment_channel"))
+            s->segment_channel = json_is_true(v);
+        else
+            s->free_run = json_is_true(v);
         return 0;
     }
     if (!json_is_number(v)) {

@@ -41,6 +41,7 @@ typedef struct vafmd_settings {
     double lookahead_s;         /* compute ahead: samples computed before their release, as a duration of
                                    samples, [0, 10] s (0: each block is computed just before its deadline);
                                    memory at most VAFMD_LOOKAHEAD_MAX_BYTES per run (fewer blocks then) */
+    int segment_channel;        /* 1: runs stream the per-sample channel "segment" (core/channels.h), 0: not */
     /* The detector chain (sensitivity, noise, ADC, offset) is part of the scene (vafm_params, applied by
      * vafm/detector.h), so the CLI and the files have it too. */
 } vafmd_settings;

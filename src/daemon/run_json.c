@@ -7,10 +7,11 @@
 #include "vafm/detector.h"
 #include "vafm/wire.h"
 
-unsigned vafmd_live_channels(const vafm_params *p)
+unsigned vafmd_live_channels(const vafm_params *p, const vafmd_settings *set)
 {
     return vafm_channels_mask(VAFM_CHF_LIVE) |
-           (vafm_detector_height_differs(p) ? vafm_channels_mask(VAFM_CHF_OPTIONAL) : 0u);
+           (vafm_detector_height_differs(p) ? vafm_channels_mask(VAFM_CHF_OPTIONAL) : 0u) |
+           (set->segment_channel ? vafm_channels_mask(VAFM_CHF_OPTIN) : 0u);
 }
 
 json_t *vafmd_channels_json(unsigned mask)
@@ -32,7 +33,7 @@ char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int 
     if (scene && vafm_params_to_json(p, scene, 65536) > 0)
         scene_json = json_loads(scene, 0, NULL);
     free(scene);
-    json_t *ch = vafmd_channels_json(vafmd_live_channels(p));
+    json_t *ch = vafmd_channels_json(vafmd_live_channels(p, set));
     json_t *start = json_object();
     json_object_set_new(start, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));
     json_object_set_new(start, "run_id", json_integer((json_int_t)run_id));

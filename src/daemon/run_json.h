@@ -16,8 +16,9 @@
 json_t *vafmd_channels_json(unsigned mask);
 
 /** The channel bits a live run of scene p streams: the VAFM_CHF_LIVE rows, and the VAFM_CHF_OPTIONAL ones
- *  when the scene has a measured height of its own (a piezo model or a z sensor). */
-unsigned vafmd_live_channels(const vafm_params *p);
+ *  when the scene has a measured height of its own (a piezo model or a z sensor), the VAFM_CHF_OPTIN ones
+ *  (segment) when set->segment_channel asks for them. */
+unsigned vafmd_live_channels(const vafm_params *p, const vafmd_settings *set);
 
 /** The "run.start" JSON text of a run (malloc'd; NULL on no memory). camp: the run's "campaign" object
  *  (stolen) or NULL. */

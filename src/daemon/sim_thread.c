@@ -33,7 +33,9 @@ static int s_sink(void *user, const vafm_samples *b)
                              r->ch[VAFM_CH_HEIGHT_MEASURED] ? &m[VAFM_CH_HEIGHT_MEASURED] : NULL);
         for (int c = 0; c < VAFM_CH_COUNT; c++)
             if (r->ch[c])
-                r->ch[c][k] = vafm_channels[c].kind == VAFM_CHK_MEASURED ? m[c] : vafm_channel_samples(b, c)[i];
+                r->ch[c][k] = vafm_channels[c].kind == VAFM_CHK_MEASURED  ? m[c]
+                              : vafm_channels[c].kind == VAFM_CHK_SEGMENT ? (double)b->segment[i]
+                                                                          : vafm_channel_samples(b, c)[i];
         if (r->lt) { /* the log takes these and the table's file rows at release: the stream's doubles */
             r->lt[k] = b->time_s[i];
             r->lseg[k] = b->segment[i];
@@ -344,7 +346,7 @@ static void s_run_start(vafmd_st *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
     vafmd_live_run_start(x->d, &r->cmd.start_json); /* + "ctrl": the controller's state, held during the run */
     vafmd_st_send_text(x, "run.start", r->cmd.start_json);
-    unsigned chmask = c->replay ? vafmd_replay_channels(c->replay) : vafmd_live_channels(p);
+    unsigned chmask = c->replay ? vafmd_replay_channels(c->replay) : vafmd_live_channels(p, &c->set);
     r->src_rc = 1;
     vafmd_st_stream_bound(x, chmask, r->block_n, c->set.hwm);
     int rc = s_queue_alloc(x, chmask, p ? p->sample_rate_Hz : vafmd_replay_rate_Hz(c->replay));

@@ -312,6 +312,8 @@ class Run:
                 lim = next((h.first_sample + h.n_samples for h in self.headers
                             if h.first_sample <= e["sample"] < h.first_sample + h.n_samples), n)
                 seg[e["sample"]:lim] = SEGMENTS[e["to"]]
+        if "segment" in self.channels and len(self.channels["segment"]) == n:  # the per-sample channel (opt-in)
+            seg = self.channels["segment"].astype(np.int64)
         self.segment = seg
         # measured signals are recorded as they came: a detector dropout stays NaN, a saturation clipped
         meas = [self.channels[k] for k in ("vDeflection_V", "deflection_m", "force_N") if k in self.channels]
