@@ -12,6 +12,10 @@
  * - the scene's integrator at the step dt (a whole fraction of the interval) everywhere else. Contact
  * events end an integrator run early and are recorded here. Phase changes (trigger, dwell, end)
  * happen at sample boundaries, as an instrument that acts on its filtered output would.
+ *
+ * Files: this one holds the object, the curve's and the tune's phases, the live scene's boundary and the one
+ * sample loop; sim_segments.c the segment lists' boundaries and decimation (vafm/segments.h); sim_well.c the
+ * exact contact-well step; sim_impl.h the state they share.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -221,15 +225,6 @@ static inline double s_height(const vafm_sim *s, double above_contact_m, double 
     return s->surf0_m != 0.0 ? above_contact_m + s->surf0_m : above_contact_m;
 }
 
-/* The support's position in the piezo's own frame (the command): its position relative to the surface less
- * what the drifting surface added. Travel limits, height triggers and the fixed ramp's end are the piezo's. */
-static inline double s_ucmd(const vafm_sim *s)
-{
-    if (s->pz.on)
-        return s->ucmd_now;
-    return s->v_drift != 0.0 ? s->K.u_spr - s->v_drift * s->K.t : s->K.u_spr;
-}
-
 /* The piezo's next sample interval: the command goes on at v_cmd, the actuator (hysteresis, creep) decides
  * where the support gets to by the interval's end, and the support moves there at a constant speed (the
  * surface's drift added). Called at every sample boundary while the piezo model is on. */
@@ -244,15 +239,6 @@ static void s_piezo_next(vafm_sim *s)
     double target = vafm_scale_length_red(sc, ea) + s->v_drift * (K->t + Ts);
     s_kernel_phase(K, (target - K->u_spr) / Ts);
     s->need_prepare = 1;
-}
-
-/* The command's speed for the phase that starts now (reduced): the support follows it, with the sample's
- * drift, directly or through the piezo model (then at the next boundary's s_piezo_next). */
-static void s_set_speed(vafm_sim *s, double v)
-{
-    s->v_cmd = v;
-    if (!s->pz.on)
-        s_kernel_phase(&s->K, v + s->v_drift);
 }
 
 static void s_begin(vafm_sim *s, uint64_t index, int scene)
@@ -600,32 +586,16 @@ static void s_flush(vafm_sim *s, vafm_sample_fn fn, void *user, int *stop)
     s->nblk = 0;
 }
 
-static void s_start_retract_at(vafm_sim *s, double v_retract)
-{
-    vafm_kernel *K = &s->K;
-    s_set_speed(s, -v_retract);
-    s->need_prepare = 1; /* the drift term changed with v_spr */
-    s->t_retract0 = K->t;
-    s->uspr_turn = s_ucmd(s);
-    K->fs_min = INFINITY;
-    s->phase = S_PH_RETRACT;
-    double end = isfinite(s->nm.u_spr_star) ? s->nm.u_spr_star : fmin(0.0, K->contact.u_detach);
-    s->retract_travel_max = s->p.retract_max_m > 0 ? vafm_scale_length_red(&s->nm.sc, s->p.retract_max_m)
-                                                   : 4.0 * fmax(s->uspr_turn - end, 0.0) + s->margin + 1.0;
-}
-
 static void s_start_retract(vafm_sim *s)
 {
     s_start_retract_at(s, s->nm.r.v_retract);
 }
 
-static void s_list_logic(vafm_sim *s, double force);
-
 static void s_phase_logic(vafm_sim *s, double force)
 {
     vafm_kernel *K = &s->K;
     if (s->list) {
-        s_list_logic(s, force);
+        vafm_sim_list_logic(s, force);
         return;
     }
     switch (s->phase) {
@@ -699,199 +669,6 @@ static void s_phase_logic(vafm_sim *s, double force)
     }
 }
 
-/* ---- segment lists (vafm/segments.h) ------------------------------------------------------------ */
-
-/* The command at this sample boundary (with the piezo model: the one the actuator is driven to now). */
-static inline double s_ucmd_boundary(const vafm_sim *s)
-{
-    return s->pz.on ? s->ucmd_next : s_ucmd(s);
-}
-
-static inline int s_force_type(int ch)
-{
-    return ch == VAFM_SEGMENT_TRIGGER_FORCE || ch == VAFM_SEGMENT_TRIGGER_DEFLECTION_V;
-}
-
-/* A modulation's next interval: the command goes to h0 + A·sin(2π f τ) at the next boundary. */
-static void s_list_modulate(vafm_sim *s, const vafm_segment_spec *g)
-{
-    const vafm_scale *sc = &s->nm.sc;
-    const double Ts = s->nm.Ts;
-    const double tau_s = vafm_scale_time_si(sc, s->K.t + Ts - s->seg_t0);
-    const double target = s->seg_u0 - vafm_scale_length_red(sc, g->amplitude_m) * sin(2.0 * M_PI * g->frequency_Hz * tau_s);
-    s_set_speed(s, (target - s_ucmd_boundary(s)) / Ts);
-    s->need_prepare = 1;
-}
-
-/* Enter segment i of the list at this sample boundary (force: the sample's, reduced); pauses and
- * modulations of no whole sample are skipped; past the last segment the run is done. first: the run's
- * start (s_begin set the first phase's speed). */
-static void s_list_enter(vafm_sim *s, size_t i, double force, int first)
-{
-    vafm_kernel *K = &s->K;
-    const vafm_scale *sc = &s->nm.sc;
-    const double rate = s->p.sample_rate_Hz;
-    const int prev_force_trig = i > 0 && s->seg[i - 1].kind == VAFM_SEGMENT_EXTEND && s_force_type(s->seg[i - 1].trigger);
-    for (; i < s->nseg; i++, first = 0) {
-        const vafm_segment_spec *g = &s->seg[i];
-        s->iseg = i;
-        s->seg_label = g->label >= 0 ? g->label : (int)i;
-        s->seg_u0 = s_ucmd(s);
-        s->seg_t0 = K->t;
-        s->base_sum = 0.0;
-        s->base_n = 0;
-        s->dec = g->sample_rate_Hz > 0 ? lround(rate / g->sample_rate_Hz) : 1;
-        s->seg_ch = g->trigger;
-        s->seg_op = g->trigger_op;
-        switch (g->trigger) {
-        case VAFM_SEGMENT_TRIGGER_FORCE: s->seg_thr = vafm_scale_force_red(sc, g->trigger_value); break;
-        case VAFM_SEGMENT_TRIGGER_DEFLECTION_V:
-            s->seg_thr = vafm_scale_force_red(sc, (g->trigger_value - (g->trigger_relative ? 0.0 : s->p.baseline_offset_V)) *
-                                                      s->p.sensitivity_m_per_V * s->p.k_N_per_m);
-            break;
-        case VAFM_SEGMENT_TRIGGER_HEIGHT: s->seg_thr = vafm_scale_length_red(sc, -g->trigger_value); break;
-        case VAFM_SEGMENT_TRIGGER_TIME: s->seg_thr = vafm_scale_time_red(sc, g->trigger_value); break;
-        default: s->seg_thr = 0.0; break;
-        }
-        const double v = vafm_scale_speed_red(sc, g->speed_m_per_s);
-        switch (g->kind) {
-        case VAFM_SEGMENT_EXTEND:
-            if (!first) {
-                s_set_speed(s, v);
-                s->need_prepare = 1;
-            }
-            s->seg_ulim = g->distance_m > 0 ? s->seg_u0 + vafm_scale_length_red(sc, g->distance_m) : s->uspr_zlimit;
-            s->phase = S_PH_APPROACH;
-            return;
-        case VAFM_SEGMENT_RETRACT:
-            if (g->end != VAFM_SEGMENT_END_TRAVEL) {
-                s_start_retract_at(s, v);
-            } else {
-                s_set_speed(s, -v);
-                s->need_prepare = 1;
-                s->t_retract0 = K->t;
-                s->uspr_turn = s_ucmd(s);
-                K->fs_min = INFINITY;
-                s->phase = S_PH_RETRACT;
-                s->seg_ulim = s->seg_u0 - vafm_scale_length_red(sc, g->distance_m);
-            }
-            return;
-        case VAFM_SEGMENT_PAUSE: {
-            s->seg_left = lround(g->duration_s * rate);
-            if (s->seg_left <= 0)
-                continue;
-            const double tau = g->feedback_s > 0         ? g->feedback_s
-                               : s->p.dwell_feedback_s > 0 ? s->p.dwell_feedback_s
-                                                           : 10.0 / rate;
-            s->fb_gain = 1.0 / vafm_scale_time_red(sc, s->nm.r.k * tau);
-            if (!isnan(g->hold_force_N))
-                s->F_hold = vafm_scale_force_red(sc, g->hold_force_N);
-            else if (!prev_force_trig)
-                s->F_hold = force;
-            s_set_speed(s, g->pause_mode == VAFM_PAUSE_FORCE ? s->fb_gain * (s->F_hold - force) : 0.0);
-            s->need_prepare = 1;
-            s->phase = S_PH_DWELL;
-            return;
-        }
-        default: /* modulate */
-            s->seg_left = lround(g->duration_s * rate);
-            if (s->seg_left <= 0)
-                continue;
-            s->seg_u0 = s_ucmd_boundary(s);
-            s->phase = S_PH_DWELL;
-            s_list_modulate(s, g);
-            return;
-        }
-    }
-    s->iseg = s->nseg;
-    s->phase = S_PH_DONE;
-}
-
-/* A list's sample boundary: the running segment's trigger and end (force: the sample's, reduced). */
-static void s_list_logic(vafm_sim *s, double force)
-{
-    vafm_kernel *K = &s->K;
-    const vafm_segment_spec *g = &s->seg[s->iseg];
-    double base = 0.0;
-    int armed = 1;
-    if (g->trigger_relative) {
-        /* the baseline: the mean of the segment's first samples before this one (as the curve's relative setpoint) */
-        armed = s->base_n > 0;
-        base = armed ? s->base_sum / s->base_n : 0.0;
-        if (s->base_n < VAFM_BASELINE_SAMPLES) {
-            s->base_sum += force;
-            s->base_n++;
-        }
-    }
-    int trig = 0;
-    switch (s->seg_ch) {
-    case VAFM_SEGMENT_TRIGGER_FORCE:
-    case VAFM_SEGMENT_TRIGGER_DEFLECTION_V:
-        trig = armed && (s->seg_op == VAFM_SEGMENT_ABOVE ? force - base >= s->seg_thr : force - base <= s->seg_thr);
-        break;
-    case VAFM_SEGMENT_TRIGGER_HEIGHT: /* height falls as the command u rises */
-        trig = s->seg_op == VAFM_SEGMENT_BELOW ? s_ucmd(s) >= s->seg_thr : s_ucmd(s) <= s->seg_thr;
-        break;
-    case VAFM_SEGMENT_TRIGGER_TIME: trig = K->t - s->seg_t0 >= s->seg_thr; break;
-    default: break;
-    }
-    if (s->seg_ch != VAFM_SEGMENT_TRIGGER_TIME)
-        trig = trig && !s->trigger_off; /* fault injection: a trigger that never fires */
-    int done = 0;
-    switch (g->kind) {
-    case VAFM_SEGMENT_EXTEND:
-        s->F_hold = s_force_type(s->seg_ch) ? s->seg_thr + base : force;
-        if (!trig && s_ucmd(s) >= s->seg_ulim) {
-            if (s->seg_ch != VAFM_SEGMENT_TRIGGER_NONE)
-                s->flags |= VAFM_CURVE_NO_TRIGGER;
-            trig = 1;
-        }
-        done = trig;
-        break;
-    case VAFM_SEGMENT_RETRACT:
-        if (trig)
-            done = 1;
-        else if (g->end == VAFM_SEGMENT_END_START) {
-            /* back to the run's start height, whatever the tip did on the way (a fixed ramp) */
-            if (s_ucmd(s) <= s->uspr_start) {
-                if (K->in_contact)
-                    s->flags |= VAFM_CURVE_NO_DETACH;
-                done = 1;
-            }
-        } else if (g->end == VAFM_SEGMENT_END_DETACH) {
-            const double travel = s->uspr_turn - s_ucmd(s);
-            if (!K->in_contact && s->detached_in_retract && s->uspr_detach - K->u_spr >= s->margin)
-                done = 1;
-            else if (!K->in_contact && !s->detached_in_retract &&
-                     s_ucmd(s) <= fmin(s->uspr_start, s->uspr_turn) - s->margin)
-                done = 1;
-            else if (travel >= s->retract_travel_max) {
-                if (K->in_contact)
-                    s->flags |= VAFM_CURVE_NO_DETACH;
-                done = 1;
-            }
-        } else if (s_ucmd(s) <= s->seg_ulim)
-            done = 1;
-        break;
-    case VAFM_SEGMENT_PAUSE:
-        if (trig || --s->seg_left <= 0)
-            done = 1;
-        else if (g->pause_mode == VAFM_PAUSE_FORCE) {
-            s_set_speed(s, s->fb_gain * (s->F_hold - force));
-            s->need_prepare = 1;
-        }
-        break;
-    default: /* modulate */
-        if (trig || --s->seg_left <= 0)
-            done = 1;
-        else
-            s_list_modulate(s, g);
-        break;
-    }
-    if (done)
-        s_list_enter(s, s->iseg + 1, force, 0);
-}
-
 int vafm_sim_segments_begin(vafm_sim *s, uint64_t index, const vafm_segment_spec *segs, size_t n)
 {
     if (!s)
@@ -909,15 +686,8 @@ int vafm_sim_segments_begin(vafm_sim *s, uint64_t index, const vafm_segment_spec
     s->list = 1;
     s->dec_n = 0;
     s_begin(s, index, S_SCENE_CURVE);
-    s_list_enter(s, 0, s->K.f, 1);
+    vafm_sim_list_enter(s, 0, s->K.f, 1);
     return 0;
-}
-
-int vafm_sim_segment_current(const vafm_sim *s)
-{
-    if (!s || !s->list || s->scene != S_SCENE_CURVE || s->phase == S_PH_DONE)
-        return -1;
-    return (int)s->iseg;
 }
 
 /* The live scene's sample boundary: the commander sees sample j of the block and says where the support is
@@ -960,41 +730,6 @@ int vafm_sim_live_begin(vafm_sim *s, uint64_t stream, double height0_m, vafm_liv
 }
 
 static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sample_fn fn, void *user);
-/* Decimation of a list's segment: add the sample in block slot j (reduced force: force) to the running sums.
- * @return 1 once the output sample is complete (dec samples). */
-static int s_dec_add(vafm_sim *s, size_t j, double force)
-{
-    const double v[7] = { s->bt[j], s->bh[j], s->pz.on ? s->bha[j] : 0.0, s->bd[j], s->bf[j], s->btip[j], force };
-    const int mean = s->p.antialias == VAFM_ANTIALIAS_MEAN;
-    for (int c = 0; c < 7; c++)
-        s->dec_sum[c] = mean && s->dec_n > 0 ? s->dec_sum[c] + v[c] : v[c];
-    s->dec_n++;
-    return s->dec_n >= s->dec;
-}
-
-/* Write the gathered output sample (the mean of the dec_n samples, or the last of them with antialias
- * point) into block slot j, labelled seg. */
-static void s_dec_emit(vafm_sim *s, size_t j, int seg, int in_retract)
-{
-    const double w = s->p.antialias == VAFM_ANTIALIAS_MEAN ? 1.0 / (double)s->dec_n : 1.0;
-    s->bt[j] = s->dec_sum[0] * w;
-    s->bh[j] = s->dec_sum[1] * w;
-    if (s->pz.on)
-        s->bha[j] = s->dec_sum[2] * w;
-    s->bd[j] = s->dec_sum[3] * w;
-    s->bf[j] = s->dec_sum[4] * w;
-    s->btip[j] = s->dec_sum[5] * w;
-    s->bseg[j] = (uint8_t)seg;
-    const double force = s->dec_sum[6] * w;
-    s->dec_n = 0;
-    s->sample_index++;
-    if (in_retract) {
-        s->retract_samples++;
-        if (force < s->sample_min_force)
-            s->sample_min_force = force;
-    }
-}
-
 
 int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user)
 {
@@ -1073,8 +808,8 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         if (s->list && (s->dec > 1 || s->dec_n > 0)) {
             /* a segment at a lower rate: its output sample gathers dec samples of the scene's rate (the triggers
              * act on each of them, as a controller's fast loop) */
-            if (s_dec_add(s, j, force)) {
-                s_dec_emit(s, j, seg, in_retract);
+            if (vafm_sim_dec_add(s, j, force)) {
+                vafm_sim_dec_emit(s, j, seg, in_retract);
                 s->nblk++;
             }
         } else {
@@ -1093,7 +828,7 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
             s_phase_logic(s, force);
         if (s->list && s->dec_n > 0 && (s->iseg != iseg0 || s->phase == S_PH_DONE)) {
             /* the segment ended inside an output sample: the part gathered is its last sample */
-            s_dec_emit(s, s->nblk, seg, in_retract);
+            vafm_sim_dec_emit(s, s->nblk, seg, in_retract);
             s->nblk++;
         }
         if (s->pz.on && s->phase != S_PH_DONE)

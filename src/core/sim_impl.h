@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * The simulation object's private state, shared by the files of its scenes (not installed): sim.c (the
- * curve and the thermal tune, the sample loop) and sim_live.c (the live scene of vafm/ctrl.h).
+ * curve, the thermal tune and the live scene of vafm/ctrl.h, the sample loop), sim_segments.c (segment
+ * lists) and sim_well.c (the exact contact-well step).
  *
  * A scene is a state machine advanced one output sample at a time by sim.c's sample loop; its phase
  * decides the segment label and what happens at each sample boundary (s_phase_logic for the curve and
@@ -106,6 +107,47 @@ struct vafm_sim {
     double *bt, *bh, *bd, *bf, *btip, *bha;
     uint8_t *bseg;
 };
+
+/* The support's position in the piezo's own frame (the command): its position relative to the surface less
+ * what the drifting surface added. Travel limits, height triggers and the fixed ramp's end are the piezo's. */
+static inline double s_ucmd(const vafm_sim *s)
+{
+    if (s->pz.on)
+        return s->ucmd_now;
+    return s->v_drift != 0.0 ? s->K.u_spr - s->v_drift * s->K.t : s->K.u_spr;
+}
+
+/* The command's speed for the phase that starts now (reduced): the support follows it, with the sample's
+ * drift, directly or through the piezo model (then at the next boundary's s_piezo_next). */
+static inline void s_set_speed(vafm_sim *s, double v)
+{
+    s->v_cmd = v;
+    if (!s->pz.on)
+        s_kernel_phase(&s->K, v + s->v_drift);
+}
+
+/* The retract starts now at speed v_retract (reduced): the curve's phase and a list's retract segment. */
+static inline void s_start_retract_at(vafm_sim *s, double v_retract)
+{
+    vafm_kernel *K = &s->K;
+    s_set_speed(s, -v_retract);
+    s->need_prepare = 1; /* the drift term changed with v_spr */
+    s->t_retract0 = K->t;
+    s->uspr_turn = s_ucmd(s);
+    K->fs_min = INFINITY;
+    s->phase = S_PH_RETRACT;
+    double end = isfinite(s->nm.u_spr_star) ? s->nm.u_spr_star : fmin(0.0, K->contact.u_detach);
+    s->retract_travel_max = s->p.retract_max_m > 0 ? vafm_scale_length_red(&s->nm.sc, s->p.retract_max_m)
+                                                   : 4.0 * fmax(s->uspr_turn - end, 0.0) + s->margin + 1.0;
+}
+
+/* sim_segments.c: a list run's sample boundary (force: the sample's, reduced); a segment's decimation: add
+ * block slot j to the running sums (@return 1 once the output sample is complete), then write it to slot j. */
+void vafm_sim_list_logic(vafm_sim *s, double force);
+/* Enter segment i of the list at this boundary (first: the run's start, whose speed sim.c's s_begin set). */
+void vafm_sim_list_enter(vafm_sim *s, size_t i, double force, int first);
+int vafm_sim_dec_add(vafm_sim *s, size_t j, double force);
+void vafm_sim_dec_emit(vafm_sim *s, size_t j, int seg, int in_retract);
 
 /** The exact contact-well step over the current sample interval (sim_well.c), when it applies.
  *  @return 1 if the interval was done this way, 0 if it does not apply (nothing changed). */
