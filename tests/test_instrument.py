@@ -341,3 +341,44 @@ def test_segment_channel_opt_in():
     run._finish()
     assert np.array_equal(run.segment, seg.astype(np.int64)) and np.array_equal(run["segment"], seg)
     d.stop()
+
+
+def test_log_journal_of_controller(tmp_path):
+    """With logging on, the file's root attribute "vafm ctrl" (protocol/hdf5.md) lists every command that changed
+    the controller (set, engage, move, z, feedback, withdraw) with the controller's time, and each logged run's
+    controller state at its start (from the first curve group it applies to); it is durable when the command's
+    reply comes (a kill -9 right after loses nothing), and `vafm info` still finds the file conformant."""
+    import subprocess
+    import h5py
+    d = Daemon()
+    path = tmp_path / "log.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    assert d.cmd({"cmd": "set", "values": {"speed": 50}})["status"] == "ok"
+    s = live_sub(d)
+    sub = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    first, _ = curve_at(d, sub, 1)
+    assert d.cmd({"cmd": "move", "x_m": 1e-6, "y_m": 0, "speed_m_per_s": 1e-3})["status"] == "ok"
+    wait_event(s, ["moved"])
+    assert d.cmd({"cmd": "engage"})["status"] == "ok"
+    assert wait_event(s, ["engaged", "engage_failed", "crash"], 60)["kind"] == "engaged"
+    second, _ = curve_at(d, sub, 2)
+    assert d.cmd({"cmd": "withdraw"})["status"] == "ok"
+    wait_event(s, ["withdrawn"])
+    time.sleep(0.1)
+    d.proc.kill()  # kill -9: the withdraw's record must already be in the file
+    d.proc.wait(timeout=10)
+    with h5py.File(path, "r") as h:
+        j = json.loads(h.attrs["vafm ctrl"])
+    cmds = [c["cmd"] for c in j["commands"]]
+    assert cmds == ["set", "move", "engage", "withdraw"], cmds
+    assert j["commands"][1]["args"] == {"x_m": 1e-6, "y_m": 0, "speed_m_per_s": 1e-3}
+    t = [c["ctrl_time_s"] for c in j["commands"][1:]]
+    assert all(b > a for a, b in zip(t, t[1:])) and j["commands"][2]["state"] == "approaching", j["commands"]
+    runs = j["runs"]
+    assert [(r["from_group"], r["run_id"]) for r in runs] == [(0, first["run_id"]), (1, second["run_id"])], runs
+    assert runs[0]["ctrl"] == first["ctrl"] and runs[1]["ctrl"] == second["ctrl"]
+    assert runs[1]["ctrl"]["state"] == "engaged" and runs[1]["ctrl"]["x_m"] == 1e-6
+    assert not j["truncated"]
+    info = subprocess.run([os.environ["VAFM_CLI"], "info", str(path)], capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0 and "conformance  ok" in info.stdout, info.stdout + info.stderr

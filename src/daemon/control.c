@@ -756,11 +756,32 @@ static json_t *s_cmd_get(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
     return r;
 }
 
+/* A command that changed (set: may have changed) the controller's state: into the log's journal with the
+ * controller's time and generation after it (reply: its "ctrl"; else the status now) and the wall time. */
+static void s_journal(vafmd *d, const vafmd_cmd *c, json_t *reply)
+{
+    if (atomic_load_explicit(&d->log.state, memory_order_acquire) != VAFMD_LOG_ON)
+        return;
+    json_t *args = json_deep_copy(c->root);
+    json_object_del(args, "id");
+    const char *name = json_string_value(json_object_get(c->root, "cmd"));
+    json_object_del(args, "cmd");
+    json_t *st = reply ? json_incref(json_object_get(reply, "ctrl")) : vafmd_live_status_json(d);
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    json_t *rec = json_pack("{s:s,s:o,s:O*,s:O*,s:O*,s:f}", "cmd", name ? name : "?", "args", args, "ctrl_time_s",
+                            json_object_get(st, "time_s"), "generation", json_object_get(st, "generation"), "state",
+                            json_object_get(st, "state"), "unix_time_s", (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec);
+    json_decref(st);
+    vafmd_log_journal(d, rec);
+}
+
 static json_t *s_cmd_set(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
     (void)quit;
     if (vafmd_live_set(d, c, e)) /* vafmd_apply_set and the controller's settings (live.c) */
         return NULL;
+    s_journal(d, c, NULL);
     json_t *r = s_ok(c);
     json_object_set_new(r, "applies_to", json_string(s_busy(d) ? "next_run" : "now"));
     return r;
@@ -836,7 +857,10 @@ static json_t *s_cmd_faults(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *
 static json_t *s_cmd_ctrl(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
     (void)quit;
-    return vafmd_live_cmd(d, c, s_ok(c), e);
+    json_t *r = vafmd_live_cmd(d, c, s_ok(c), e);
+    if (r)
+        s_journal(d, c, r);
+    return r;
 }
 
 typedef json_t *s_handler(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e);

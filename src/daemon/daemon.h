@@ -135,6 +135,8 @@ typedef struct vafmd_log_pool {
     vafmd_log_block *blocks;     /* the n_blocks block headers (into this allocation) */
 } vafmd_log_pool;
 
+#define VAFMD_LOG_CTRL_MAX 4096
+#define VAFMD_LOG_JOURNAL_MAX 100000 /* entries of "vafm ctrl" (commands + run states) per file, then a mark */
 typedef struct vafmd_log_begin {
     vafm_params p;
     uint64_t run_id, index;
@@ -144,6 +146,8 @@ typedef struct vafmd_log_begin {
     int is_map;          /* a force map's pixel: the file gets afmformats' map attributes */
     vafm_map_spec map;
     vafm_map_truth pixel;
+    char ctrl[VAFMD_LOG_CTRL_MAX]; /* run.start's "ctrl" and "sample" as one JSON object ("" none): the
+                                      controller's state at the run's start, for the file's "vafm ctrl" */
 } vafmd_log_begin;
 
 typedef struct vafmd_log_end {
@@ -206,7 +210,18 @@ typedef struct vafmd_log {
     vafmd_ring fault_ring;                /* simulation thread → writer: faults injected while logging is on,
                                              kept in the file's root attribute "vafm faults" (faults.md) */
     vafmd_fault_rec fault_store[256];
+    pthread_mutex_t jmu;                  /* guards jpend (control thread ↔ writer thread; held briefly) */
+    json_t *jpend;                        /* state-changing commands not yet taken by the writer (JSON array) */
+    /* writer thread: the open file's root attribute "vafm ctrl" (protocol/hdf5.md) */
+    json_t *jnote;
+    const void *jnote_of;                 /* the recorder it belongs to (a new log starts a new journal) */
+    char jlast[VAFMD_LOG_CTRL_MAX];       /* the last run state written into it */
+    int jdirty;
 } vafmd_log;
+
+/* Control thread: a command that changed the controller's state (or may have: set) was applied; with
+ * logging on, the writer adds it to the file's "vafm ctrl" journal (steals rec). */
+void vafmd_log_journal(struct vafmd *d, json_t *rec);
 
 #define VAFMD_LOOKAHEAD_MAX_BYTES (256u << 20) /* memory of a run's compute-ahead FIFO (sim_thread.c) */
 #define VAFMD_STREAM_MAX_BYTES (256u << 20)   /* samples queued for one subscriber (sim_publish.c) */

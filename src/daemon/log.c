@@ -102,6 +102,66 @@ static void s_notice(vafmd_log *L, uint64_t run_id, uint64_t group, int ok)
     }
 }
 
+/* "vafm ctrl" (protocol/hdf5.md): {"commands": [...], "runs": [...]} of the open file, as a root attribute
+ * rewritten when it grows and made durable by the next flush (a curve's append, or at once for commands).
+ * Bounded: past VAFMD_LOG_JOURNAL_MAX entries it records no more and says so ("truncated": true). */
+static json_t *s_journal(vafmd_log *L)
+{
+    if (L->jnote_of != L->w || !L->jnote) {
+        json_decref(L->jnote);
+        L->jnote = json_pack("{s:[],s:[],s:b}", "commands", "runs", "truncated", 0);
+        L->jnote_of = L->w;
+        L->jlast[0] = 0;
+    }
+    return L->jnote;
+}
+
+static int s_journal_add(vafmd_log *L, const char *list, json_t *rec)
+{
+    json_t *j = s_journal(L);
+    if (!j || json_array_size(json_object_get(j, "commands")) + json_array_size(json_object_get(j, "runs")) >=
+                  VAFMD_LOG_JOURNAL_MAX) {
+        if (j)
+            json_object_set_new(j, "truncated", json_true());
+        json_decref(rec);
+        return -1;
+    }
+    json_array_append_new(json_object_get(j, list), rec);
+    L->jdirty = 1;
+    return 0;
+}
+
+static void s_journal_note(vafmd_log *L)
+{
+    if (!L->jdirty || !L->w)
+        return;
+    L->jdirty = 0;
+    char *text = json_dumps(L->jnote, JSON_COMPACT);
+    vafm_error e;
+    memset(&e, 0, sizeof e);
+    if (!text || vafm_recorder_set_note(L->w, "vafm ctrl", text, &e))
+        s_set_err(L, "the controller journal: %s%s", text ? e.message : "out of memory", "");
+    free(text);
+}
+
+void vafmd_log_journal(vafmd *d, json_t *rec)
+{
+    vafmd_log *L = &d->log;
+    if (!rec)
+        return;
+    if (atomic_load_explicit(&L->state, memory_order_acquire) != VAFMD_LOG_ON) {
+        json_decref(rec); /* no file: nothing to record it in */
+        return;
+    }
+    pthread_mutex_lock(&L->jmu);
+    if (!L->jpend)
+        L->jpend = json_array();
+    if (json_array_size(L->jpend) < 4096)
+        json_array_append(L->jpend, rec);
+    pthread_mutex_unlock(&L->jmu);
+    json_decref(rec);
+}
+
 /* Append the finished curve; the recorder makes it durable before it returns (flush interval 0). */
 static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
 {
@@ -122,6 +182,18 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
     if (c->begin->is_map) {
         rc.map = &c->begin->map;
         rc.pixel = &c->begin->pixel;
+    }
+    /* the controller's state at the run's start, when it differs from the last one recorded (a campaign's
+     * curves share the held state): noted before the append, whose flush makes it durable with the curve */
+    if (c->begin->ctrl[0] && strcmp(c->begin->ctrl, L->jlast)) {
+        json_t *st = json_loads(c->begin->ctrl, 0, NULL);
+        if (st) {
+            json_object_set_new(st, "from_group", json_integer((json_int_t)vafm_recorder_count(L->w)));
+            json_object_set_new(st, "run_id", json_integer((json_int_t)c->begin->run_id));
+            if (!s_journal_add(L, "runs", st))
+                snprintf(L->jlast, sizeof L->jlast, "%s", c->begin->ctrl);
+            s_journal_note(L);
+        }
     }
     vafm_error e;
     memset(&e, 0, sizeof e);
@@ -237,6 +309,24 @@ void *vafmd_log_main(void *arg)
                 s_set_err(L, "the fault record: %s%s", text ? e.message : "out of memory", "");
             free(text);
         }
+        json_t *cmds = NULL; /* state-changing commands from the control thread */
+        pthread_mutex_lock(&L->jmu);
+        if (L->jpend && json_array_size(L->jpend)) {
+            cmds = L->jpend;
+            L->jpend = NULL;
+        }
+        pthread_mutex_unlock(&L->jmu);
+        if (cmds && st == VAFMD_LOG_ON && L->w) {
+            size_t i;
+            json_t *v;
+            json_array_foreach(cmds, i, v) s_journal_add(L, "commands", json_incref(v));
+            s_journal_note(L);
+            vafm_error e; /* durable now: commands are rare, and a kill must not lose one */
+            memset(&e, 0, sizeof e);
+            if (vafm_recorder_flush(L->w, &e))
+                s_set_err(L, "the controller journal: %s%s", e.message, "");
+        }
+        json_decref(cmds);
         while (vafmd_ring_pop(&L->ring, &it)) {
             got = 1;
             s_handle(L, &c, &it, st != VAFMD_LOG_OFF);

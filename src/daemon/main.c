@@ -440,6 +440,7 @@ int main(int argc, char **argv)
     vafmd_ring_init(&d.log.fault_ring, d.log.fault_store, sizeof(vafmd_fault_rec),
                     sizeof d.log.fault_store / sizeof d.log.fault_store[0]);
     pthread_mutex_init(&d.log.err_mu, NULL);
+    pthread_mutex_init(&d.log.jmu, NULL);
     d.next_run_id = 1;
     d.stop = &s_stop;
     vafmd_ring_init(&d.fault_ring, d.fault_store, sizeof(vafmd_fault_rec), sizeof d.fault_store / sizeof d.fault_store[0]);
@@ -519,6 +520,9 @@ int main(int argc, char **argv)
     pthread_join(lth, NULL);
     free(d.log.ring_store);
     pthread_mutex_destroy(&d.log.err_mu);
+    pthread_mutex_destroy(&d.log.jmu);
+    json_decref(d.log.jpend);
+    json_decref(d.log.jnote);
     /* Commands still in the ring after QUIT cannot exist (QUIT is pushed last), so nothing leaks.
      * The last run.end is still queued: give it a bounded time to leave (a stalled subscriber must
      * not hold up the exit). pthread_join is the barrier that lets this thread use the socket. */

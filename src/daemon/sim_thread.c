@@ -299,6 +299,25 @@ static void s_camp_end(vafmd_st *x, const char *status, const char *message, int
     free(cp);
 }
 
+/* run.start's "ctrl" and "sample" (a curve taken over ctrl_sample) as one compact JSON object into buf ("" if
+ * neither, or {"truncated": true} if it does not fit), for the log's "vafm ctrl" (log.c). */
+static void s_log_ctrl(char *buf, size_t len, const char *start_json)
+{
+    buf[0] = 0;
+    json_t *j = start_json ? json_loads(start_json, 0, NULL) : NULL, *o = json_object();
+    json_t *ctrl = j ? json_object_get(j, "ctrl") : NULL, *smp = j ? json_object_get(j, "sample") : NULL;
+    if (ctrl && !json_is_null(ctrl))
+        json_object_set(o, "ctrl", ctrl);
+    if (smp)
+        json_object_set(o, "sample", smp);
+    char *t = json_object_size(o) ? json_dumps(o, JSON_COMPACT) : NULL;
+    if (t)
+        snprintf(buf, len, "%s", strlen(t) < len ? t : "{\"truncated\":true}");
+    free(t);
+    json_decref(o);
+    json_decref(j);
+}
+
 static void s_run_start(vafmd_st *x, const vafmd_sim_cmd *c)
 {
     vafmd_st_run *r = &x->run;
@@ -316,6 +335,7 @@ static void s_run_start(vafmd_st *x, const vafmd_sim_cmd *c)
     r->dropped_at_start = atomic_load(&sh->dropped);
     r->active = 1;
     vafmd_st_pool_prepare(x, c->log && c->kind == VAFMD_RUN_CURVE, r->block_n);
+    vafmd_live_run_start(x->d, &r->cmd.start_json); /* + "ctrl": the controller's state, held during the run */
     if (p) /* replays stream the recorded signals: no detector */
         vafm_detector_begin(&r->det, p, c->index);
     else
@@ -330,6 +350,7 @@ static void s_run_start(vafmd_st *x, const vafmd_sim_cmd *c)
             lb->point = c->camp ? c->camp->sim_point : 0;
             lb->detector = r->det.on;
             memcpy(lb->client_run_id, c->client_run_id, sizeof lb->client_run_id);
+            s_log_ctrl(lb->ctrl, sizeof lb->ctrl, r->cmd.start_json);
             if (c->camp && c->camp->is_map) { /* the file gets the pixel's map attributes */
                 lb->is_map = 1;
                 lb->map = c->camp->map;
@@ -344,7 +365,6 @@ static void s_run_start(vafmd_st *x, const vafmd_sim_cmd *c)
     atomic_store_explicit(&sh->run_id, c->run_id, memory_order_relaxed);
     atomic_store_explicit(&sh->run_samples, 0, memory_order_relaxed);
     atomic_store_explicit(&sh->state, VAFMD_RUNNING, memory_order_relaxed);
-    vafmd_live_run_start(x->d, &r->cmd.start_json); /* + "ctrl": the controller's state, held during the run */
     vafmd_st_send_text(x, "run.start", r->cmd.start_json);
     unsigned chmask = c->replay ? vafmd_replay_channels(c->replay) : vafmd_live_channels(p, &c->set);
     r->src_rc = 1;
