@@ -382,3 +382,28 @@ def test_log_journal_of_controller(tmp_path):
     assert not j["truncated"]
     info = subprocess.run([os.environ["VAFM_CLI"], "info", str(path)], capture_output=True, text=True, timeout=60)
     assert info.returncode == 0 and "conformance  ok" in info.stdout, info.stdout + info.stderr
+
+
+def test_controller_settings_from_config(tmp_path):
+    """A config file's "values" reach the controller (ctrl_*, ctrl_sample, monitor_rate_Hz) beside the scene's,
+    checked over the final scene: the first controller is built with them; a bad one exits 2 naming it."""
+    import subprocess
+    cfg = tmp_path / "c.json"
+    cfg.write_text(json.dumps({"values": {"ctrl_motor_z0_m": 100e-6, "ctrl_setpoint": 3e-9, "monitor_rate_Hz": 50,
+                                          "ctrl_sample": "pattern=dome,height_m=20e-9", "T_K": 310}}))
+    d = Daemon("--config", str(cfg))
+    v = d.cmd({"cmd": "get", "names": ["ctrl_motor_z0_m", "ctrl_setpoint", "monitor_rate_Hz", "ctrl_sample",
+                                       "T_K"]})["values"]
+    assert v == {"ctrl_motor_z0_m": 100e-6, "ctrl_setpoint": 3e-9, "monitor_rate_Hz": 50,
+                 "ctrl_sample": "pattern=dome,height_m=20e-9", "T_K": 310}, v
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["generation"] == 1 and st["motor_z_m"] == 100e-6, st
+    assert abs(st["surface_m"] - 20e-9) < 1e-18 and st["live"]["monitor_rate_Hz"] == 50, st
+    d.stop()
+    for values, field in (({"ctrl_motor_step_m": 1}, "ctrl_motor_step_m"), ({"ctrl_sample": "colour=red"},
+                                                                           "ctrl_sample"),
+                          ({"monitor_rate_Hz": -1}, "monitor_rate_Hz")):
+        cfg.write_text(json.dumps({"values": values}))
+        r = subprocess.run([os.environ["VAFMD"], "--config", str(cfg), "--rep", f"ipc://{tmp_path}/r", "--pub",
+                            f"ipc://{tmp_path}/p"], capture_output=True, text=True, timeout=20)
+        assert r.returncode == 2 and f"(field {field})" in r.stderr, (r.returncode, r.stderr)

@@ -180,18 +180,35 @@ static vafm_ctrl *s_build(const vafm_params *scene, const vafm_ctrl_params *cp, 
     return c;
 }
 
-int vafmd_live_init(vafmd *d)
+int vafmd_live_init(vafmd *d, const vafmd_live_config *c)
 {
+    vafmd_live_config def;
+    if (!c) {
+        vafmd_live_config_default(&def);
+        c = &def;
+    }
     vafmd_live *L = calloc(1, sizeof *L);
     if (!L)
         return -1;
     L->d = d;
     pthread_mutex_init(&L->mu, NULL);
-    vafm_ctrl_params_default(&L->cp);
-    L->rate_ctl = L->rate = 100.0;
+    L->cp = c->cp;
+    L->rate_ctl = L->rate = c->monitor_rate_Hz;
     L->speed = d->set.speed;
     L->scene_hash = s_scene_hash(&d->scene);
-    L->ctrl = s_build(&d->scene, &L->cp, NULL, L->why, sizeof L->why);
+    if (c->has_sample) {
+        L->map = malloc(sizeof *L->map);
+        if (!L->map) {
+            pthread_mutex_destroy(&L->mu);
+            free(L);
+            return -1;
+        }
+        *L->map = c->sample;
+        L->sample = c->sample;
+        L->has_sample = 1;
+        snprintf(L->sample_text, sizeof L->sample_text, "%s", c->sample_text);
+    }
+    L->ctrl = s_build(&d->scene, &L->cp, L->map, L->why, sizeof L->why);
     L->generation = 1;
     atomic_init(&L->ack, 0);
     d->live = L;
@@ -1109,4 +1126,62 @@ int vafmd_live_curve_scene(vafmd *d, vafm_params *p, json_t **info, vafmd_err *e
                       t.E_star_Pa, "gamma_J_per_m2", t.gamma_J_per_m2, "surface_height_m", t.surface_height_m,
                       "ctrl_sample", L->sample_text, "map", spec);
     return 1;
+}
+
+void vafmd_live_config_default(vafmd_live_config *c)
+{
+    memset(c, 0, sizeof *c);
+    vafm_ctrl_params_default(&c->cp);
+    c->monitor_rate_Hz = 100.0;
+    vafm_map_spec_default(&c->sample);
+}
+
+int vafmd_live_config_key(const char *name)
+{
+    return s_cset_find(name) || !strcmp(name, "ctrl_sample") || !strcmp(name, "monitor_rate_Hz");
+}
+
+int vafmd_live_config_parse(const vafmd *d, json_t *values, vafmd_live_config *c, vafmd_err *e)
+{
+    const char *key;
+    json_t *v;
+    void *tmp;
+    int ctrl_given = 0;
+    json_object_foreach_safe(values, tmp, key, v) {
+        if (!vafmd_live_config_key(key))
+            continue;
+        const s_cset *f = s_cset_find(key);
+        if (!strcmp(key, "ctrl_sample")) {
+            if (s_sample_parse(v, &c->sample, &c->has_sample, c->sample_text, e))
+                return -1;
+        } else if (f) {
+            if (s_cset_apply(&c->cp, key, f, v, e))
+                return -1;
+            ctrl_given = 1;
+        } else {
+            double x = json_is_number(v) ? json_number_value(v) : NAN;
+            if (!(x >= 0 && x <= S_MONITOR_MAX)) {
+                vafmd_err_set(e, json_is_number(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, key,
+                              "monitor_rate_Hz = %.17g is outside [0, %g] Hz (0: off)", x, S_MONITOR_MAX);
+                return -1;
+            }
+            c->monitor_rate_Hz = x;
+        }
+        json_object_del(values, key);
+    }
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    if (ctrl_given && vafm_ctrl_params_validate(&c->cp, &d->scene, &err)) {
+        char fld[80];
+        snprintf(fld, sizeof fld, "ctrl_%.60s", err.field);
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, err.field[0] ? fld : "", "%s (the setting is ctrl_%s)", err.message,
+                      err.field);
+        return -1;
+    }
+    if (c->has_sample && vafm_map_validate(&c->sample, &d->scene, &err)) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "ctrl_sample", "ctrl_sample: %.40s%s%.180s", err.field,
+                      err.field[0] ? ": " : "", err.message);
+        return -1;
+    }
+    return 0;
 }

@@ -59,8 +59,25 @@ typedef struct vafmd_live_op {
     int free_run;
 } vafmd_live_op;
 
-/* main.c: create the live state and the first controller (before the threads start), free it after. */
-int vafmd_live_init(struct vafmd *d);
+/* The controller's settings of a config file's "values" (ctrl_*, ctrl_sample, monitor_rate_Hz): main.c checks
+ * them with the scene and daemon settings in force (vafmd_live_config_parse: 0, or -1 with e naming the field,
+ * as `set` would), then vafmd_live_init builds the first controller with them. */
+typedef struct vafmd_live_config {
+    vafm_ctrl_params cp;
+    double monitor_rate_Hz;
+    vafm_map_spec sample;
+    int has_sample;
+    char sample_text[1025];
+} vafmd_live_config;
+void vafmd_live_config_default(vafmd_live_config *c);
+/* Take the controller's keys out of values (they are deleted from it) into c. */
+int vafmd_live_config_parse(const struct vafmd *d, json_t *values, vafmd_live_config *c, struct vafmd_err *e);
+/* True for a key of `values` that vafmd_live_config_parse takes. */
+int vafmd_live_config_key(const char *name);
+
+/* main.c: create the live state and the first controller (before the threads start; c NULL: defaults), free
+ * it after. */
+int vafmd_live_init(struct vafmd *d, const vafmd_live_config *c);
 void vafmd_live_free(struct vafmd *d);
 
 /* simulation thread */

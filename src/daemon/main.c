@@ -35,7 +35,8 @@ static const char s_usage[] =
     "                     tcp:// on a loopback address (127.x.x.x, localhost, [::1]) or ipc://PATH;\n"
     "                     any other address needs CURVE security (config keys below)\n"
     "  --config FILE      JSON object: {\"rep\": EP, \"pub\": EP, \"hwm\": N, \"preset\": NAME,\n"
-    "                     \"values\": {PARAMETER-OR-SETTING: value, ...},\n"
+    "                     \"values\": {PARAMETER-OR-SETTING: value, ...} (ctrl_*, ctrl_sample and\n"
+    "                     monitor_rate_Hz too: the first controller is built with them),\n"
     "                     \"curve_secret_key\": Z85, \"curve_public_key\": Z85 (optional, checked),\n"
     "                     \"curve_clients\": [Z85, ...], \"curve_required\": BOOL} (all keys optional)\n"
     "                     With curve_secret_key, both sockets require CURVE (40-character Z85 keys as from\n"
@@ -165,6 +166,7 @@ int main(int argc, char **argv)
 {
     static vafmd d;
     json_t *cfg_faults = NULL; /* the config file's fault plan, installed once the rings exist */
+    json_t *live_vals = NULL;  /* the config's controller settings (ctrl_*, ctrl_sample, monitor_rate_Hz) */
     const char *rep_ep = VAFMD_DEFAULT_REP, *pub_ep = VAFMD_DEFAULT_PUB, *config = NULL, *preset = NULL;
     const char *speed = NULL, *sens = NULL, *hwm = NULL, *nanonis = NULL;
     int free_run = 0, curve_required = 0, nanonis_remote = 0, nanonis_curve = 0;
@@ -290,6 +292,23 @@ int main(int argc, char **argv)
             if (!strcmp(key, "rep") || !strcmp(key, "pub") || !strcmp(key, "hwm") || !strncmp(key, "curve_", 6) ||
                 !strcmp(key, "faults") || !strncmp(key, "nanonis", 7))
                 continue;
+            if (!strcmp(key, "values") && json_is_object(v)) { /* the controller's keys wait for the scene */
+                json_t *rest = json_deep_copy(v), *x;
+                const char *k2;
+                void *tmp;
+                json_object_foreach_safe(rest, tmp, k2, x) {
+                    if (vafmd_live_config_key(k2)) {
+                        if (!live_vals)
+                            live_vals = json_object();
+                        json_object_set(live_vals, k2, x);
+                        json_object_del(rest, k2);
+                    }
+                }
+                if (json_object_size(rest))
+                    json_object_set(set, key, rest);
+                json_decref(rest);
+                continue;
+            }
             json_object_set(set, key, v);
         }
         if ((v = json_object_get(cfg, "faults")) != NULL) { /* a fault plan (protocol/faults.md): checked now */
@@ -301,6 +320,7 @@ int main(int argc, char **argv)
                 free(fp);
                 json_decref(set);
                 json_decref(cfg);
+                json_decref(live_vals);
                 return 2;
             }
             free(fp);
@@ -311,28 +331,36 @@ int main(int argc, char **argv)
         int bad = json_object_size(set) && s_apply_set_json(&d, set, config);
         json_decref(set);
         json_decref(cfg);
-        if (bad)
+        if (bad) {
+            json_decref(live_vals);
             return 2;
+        }
     } else if (preset) {
         json_t *set = json_pack("{s:s}", "preset", preset);
         int bad = s_apply_set_json(&d, set, "--preset");
         json_decref(set);
-        if (bad)
+        if (bad) {
+            json_decref(live_vals);
             return 2;
+        }
     }
     json_t *vals = json_object();
     if (speed) {
         char *end;
         double x = strtod(speed, &end);
-        if (*end || end == speed)
+        if (*end || end == speed) {
+            json_decref(live_vals);
             return s_usage_error("--speed '%s' is not a number", speed);
+        }
         json_object_set_new(vals, "speed", json_real(x));
     }
     if (sens) {
         char *end;
         double x = strtod(sens, &end);
-        if (*end || end == sens)
+        if (*end || end == sens) {
+            json_decref(live_vals);
             return s_usage_error("--sensitivity '%s' is not a number", sens);
+        }
         json_object_set_new(vals, "sensitivity_m_per_V", json_real(x));
     }
     if (free_run)
@@ -343,10 +371,23 @@ int main(int argc, char **argv)
         json_decref(set);
         if (bad) {
             json_decref(vals);
+            json_decref(live_vals);
             return 2;
         }
     }
     json_decref(vals);
+    vafmd_live_config live_cfg; /* the config's controller settings, checked over the final scene */
+    vafmd_live_config_default(&live_cfg);
+    if (live_vals) {
+        vafmd_err e = { 0 };
+        int bad = vafmd_live_config_parse(&d, live_vals, &live_cfg, &e);
+        json_decref(live_vals);
+        if (bad) {
+            fprintf(stderr, "vafmd: config '%s': %s: %s%s%s%s\n", config, e.code, e.message,
+                    e.field[0] ? " (field " : "", e.field, e.field[0] ? ")" : "");
+            return 2;
+        }
+    }
     if (hwm) {
         char *end;
         long x = strtol(hwm, &end, 10);
@@ -471,7 +512,7 @@ int main(int argc, char **argv)
     /* a file-size limit is a log write error (EFBIG, status.log.error), not a kill (SIGXFSZ) */
     signal(SIGXFSZ, SIG_IGN);
     pthread_t th, lth, ath;
-    if (vafmd_live_init(&d)) { /* the always-on controller (live.c), owned by the simulation thread from here */
+    if (vafmd_live_init(&d, &live_cfg)) { /* the always-on controller (live.c), owned by the simulation thread from here */
         fprintf(stderr, "vafmd: out of memory\n");
         return 1;
     }
