@@ -407,3 +407,45 @@ def test_controller_settings_from_config(tmp_path):
         r = subprocess.run([os.environ["VAFMD"], "--config", str(cfg), "--rep", f"ipc://{tmp_path}/r", "--pub",
                             f"ipc://{tmp_path}/p"], capture_output=True, text=True, timeout=20)
         assert r.returncode == 2 and f"(field {field})" in r.stderr, (r.returncode, r.stderr)
+
+
+SEG4 = [{"kind": "pause", "duration_s": 0.005},
+        {"kind": "extend", "speed_m_per_s": 1e-6, "trigger": {"channel": "force", "op": ">", "value": 3e-9}},
+        {"kind": "pause", "mode": "force", "duration_s": 0.01, "sample_rate_Hz": 2500},
+        {"kind": "retract", "speed_m_per_s": 1e-6, "end": "detach"}]
+
+
+def test_curve_segment_list_over_the_wire(tmp_path):
+    """`curve` with "segments" runs the list: the stream's samples are `vafm samples --segments` of the same list
+    and index bit for bit (height, force, each sample's segment through the segment channel), run.start names
+    the list, the events carry the positions; errors name the field; with logging on it is refused, naming why."""
+    import subprocess
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "set", "values": {"segment_channel": True}})["status"] == "ok"
+    err(d.cmd({"cmd": "curve", "segments": 3}), "wrong_type", "segments")
+    err(d.cmd({"cmd": "curve", "segments": [{"kind": "extend", "sped": 1}]}), "out_of_range", "segments[0].sped")
+    r = d.cmd({"cmd": "curve", "index": 3, "segments": SEG4})
+    assert r["status"] == "ok", r
+    start, blocks, events, end = collect_run(s, r["run_id"])
+    assert end["status"] == "ok" and len(start["segment_list"]) == 4 and start["segment_list"][2]["mode"] == "force"
+    names = [c["name"] for c in start["channels"]]
+    ch = {n: np.concatenate([np.frombuffer(p[k], "<f8") for _, p in blocks]) for k, n in enumerate(names)}
+    seg_file = tmp_path / "seg4.json"
+    seg_file.write_text(json.dumps({"segments": SEG4}))
+    out = subprocess.run([os.environ["VAFM_CLI"], "samples", "--segments", str(seg_file), "--index", "3", "--csv",
+                          "-"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    rows = [ln.split(",") for ln in out.stdout.splitlines()]
+    col = {n: i for i, n in enumerate(rows[0])}
+    ref = {n: np.array([float(x[col[n]]) for x in rows[1:]]) for n in ("height_m", "force_N", "segment")}
+    assert len(ch["force_N"]) == len(ref["force_N"]) == end["samples"]
+    for n in ("height_m", "force_N", "segment"):
+        assert np.array_equal(ch[n], ref[n]), n
+    assert [int(x) for x in np.unique(ch["segment"])] == [0, 1, 2, 3]
+    moves = [(e["from_segment"], e["to_segment"]) for e in events if e.get("kind") == "segment"]
+    assert moves == [(0, 1), (1, 2), (2, 3)], moves
+    assert d.cmd({"cmd": "log", "path": str(tmp_path / "l.h5")})["status"] == "ok"
+    assert "vafm segments" in err(d.cmd({"cmd": "curve", "segments": SEG4}), "state", "segments")
+    d.stop()

@@ -6,6 +6,8 @@
 #include "daemon/cmd_json.h"
 #include "record/scene_value.h"
 #include "record/scene.h"
+#include "record/record.h"
+#include "vafm/segments.h"
 #include <inttypes.h>
 #include <float.h>
 #include <math.h>
@@ -582,6 +584,28 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         memcpy(c->client_run_id, json_string_value(v), n + 1);
     }
+    if ((v = json_object_get(root, "segments")) != NULL) { /* curve: a segment list (vafm/segments.h) */
+        if (!json_is_array(v) && !json_is_object(v)) {
+            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "segments", "\"segments\" must be an array of segments (or "
+                          "{\"segments\": [...]}), as `vafm run --segments` reads them");
+            return -1;
+        }
+        json_t *w = json_is_array(v) ? json_pack("{s:O}", "segments", v) : json_incref(v);
+        char *text = w ? json_dumps(w, JSON_COMPACT) : NULL;
+        json_decref(w);
+        c->segs = malloc(VAFM_SEGMENTS_MAX * sizeof *c->segs);
+        vafm_error verr;
+        memset(&verr, 0, sizeof verr);
+        int r = text && c->segs ? vafm_segments_from_json(text, c->segs, VAFM_SEGMENTS_MAX, &c->nseg, &verr)
+                                : VAFM_ENOMEM;
+        free(text);
+        if (r) {
+            vafmd_err_set(e, r == VAFM_ENOMEM ? VAFMD_E_BUSY : VAFMD_E_OUT_OF_RANGE,
+                          verr.field[0] ? verr.field : "segments", "%s",
+                          r == VAFM_ENOMEM ? "out of memory; retry" : verr.message);
+            return -1;
+        }
+    }
     if ((v = json_object_get(root, "duration_s")) != NULL) {
         if (!json_is_number(v)) {
             vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "duration_s", "\"duration_s\" must be a number (s)");
@@ -731,6 +755,7 @@ void vafmd_cmd_free(vafmd_cmd *c)
 {
     if (c->root)
         json_decref(c->root);
+    free(c->segs);
     memset(c, 0, sizeof *c);
 }
 

@@ -65,6 +65,8 @@ typedef struct vafmd_cmd {
     int has_index;
     uint64_t index;        /* curve/tune: RNG stream index */
     char client_run_id[VAFMD_CLIENT_RUN_ID_MAX + 1]; /* "" if none */
+    struct vafm_segment_spec *segs; /* curve: owned (vafmd_cmd_free), the "segments" list, or NULL */
+    size_t nseg;
     int has_duration;
     double duration_s;     /* tune: overrides tune_duration_s */
     const char *log_path;  /* log: borrowed file name, or NULL */

@@ -502,6 +502,13 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     }
     if (kind == VAFMD_RUN_REPLAY)
         return s_start_replay(d, c, e);
+    if (c->segs && atomic_load_explicit(&d->log.state, memory_order_acquire) != VAFMD_LOG_OFF) {
+        vafmd_err_set(e, VAFMD_E_STATE, "segments", "a segment list's curve cannot go into the log: a log file "
+                      "holds plain curves (format 1.1, segment count 2), and a format-1.2 file's curves all run the "
+                      "one list of its root attribute 'vafm segments' (protocol/hdf5.md V6); stop the log (or run "
+                      "the list with vafm run --segments --out)");
+        return NULL;
+    }
     vafm_params p = d->scene;
     json_t *at_tip = NULL; /* a curve from the live state over a sample: the point under the tip (live.c) */
     if (kind == VAFMD_RUN_CURVE && vafmd_live_curve_scene(d, &p, &at_tip, e) < 0)
@@ -534,8 +541,23 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     }
     if (kind == VAFMD_RUN_TUNE)
         p = *vafm_sim_params(sim); /* the tune's scene, at the tune's sample rate */
+    vafm_segment_spec *segs = NULL;
+    if (kind == VAFMD_RUN_CURVE && c->segs) { /* checked against the scene now, where the error can be answered */
+        memset(&verr, 0, sizeof verr);
+        rc = vafm_segments_validate(c->segs, c->nseg, &p, &verr);
+        segs = rc ? NULL : malloc(c->nseg * sizeof *segs);
+        if (rc || !segs) {
+            vafmd_err_set(e, rc ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_BUSY, verr.field[0] ? verr.field : "segments",
+                          "%s", rc ? verr.message : "out of memory; retry");
+            vafm_sim_destroy(&sim);
+            json_decref(at_tip);
+            return NULL;
+        }
+        memcpy(segs, c->segs, c->nseg * sizeof *segs);
+    }
     if (kind == VAFMD_RUN_CURVE && s_log_fits(d, &p, "curve", e)) {
         vafm_sim_destroy(&sim);
+        free(segs);
         json_decref(at_tip);
         return NULL;
     }
@@ -548,6 +570,8 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     sc.run_id = run_id;
     sc.index = c->has_index ? c->index : 0;
     sc.sim = sim;
+    sc.segs = segs;
+    sc.nseg = segs ? c->nseg : 0;
     sc.start_json = vafmd_run_start_json(&p, &d->set, kind, run_id, sc.index, c->client_run_id, vafm_sim_dt(sim), NULL);
     if (at_tip && sc.start_json) { /* run.start names the point: its scene (above) re-runs the curve exactly */
         json_t *j = json_loads(sc.start_json, 0, NULL);
@@ -559,11 +583,25 @@ static json_t *s_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         sc.start_json = t;
     }
     json_decref(at_tip);
+    if (segs && sc.start_json) { /* run.start names the list: a block's segment is its position in it */
+        json_t *j = json_loads(sc.start_json, 0, NULL);
+        char *lt = vafm_segments_to_json(segs, sc.nseg);
+        json_t *l = lt ? json_loads(lt, 0, NULL) : NULL;
+        char *t = NULL;
+        if (j && l && !json_object_set(j, "segment_list", json_object_get(l, "segments")))
+            t = json_dumps(j, JSON_COMPACT);
+        free(lt);
+        json_decref(l);
+        json_decref(j);
+        free(sc.start_json);
+        sc.start_json = t;
+    }
     sc.set = d->set;
     sc.log = kind == VAFMD_RUN_CURVE && atomic_load_explicit(&d->log.state, memory_order_acquire) == VAFMD_LOG_ON;
     snprintf(sc.client_run_id, sizeof sc.client_run_id, "%s", c->client_run_id);
     if (!sc.start_json || !vafmd_ring_push(&d->ring, &sc)) {
         free(sc.start_json);
+        free(segs);
         vafm_sim_destroy(&sim);
         vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
         return NULL;

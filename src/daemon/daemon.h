@@ -101,6 +101,8 @@ typedef struct vafmd_sim_cmd {
     vafmd_fault_rec fault;  /* FAULT_NOTE */
     struct vafmd_feed_curve *feed; /* START of a fed campaign curve: its samples (ownership passes; sim: metadata) */
     vafmd_live_op live;     /* CTRL (live.h) */
+    struct vafm_segment_spec *segs; /* START of a curve that runs a segment list (ownership passes), or NULL */
+    size_t nseg;
 } vafmd_sim_cmd;
 
 /* ---- HDF5 logging (log.c) ------------------------------------------------------------------------

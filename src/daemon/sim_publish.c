@@ -211,10 +211,16 @@ void vafmd_st_release(vafmd_st *x, int64_t now)
      * further block of the curve is queued (the writer drops it whole) */
     if (r->log && !r->log_broken)
         vafmd_st_log_block(x, b);
-    for (int i = 0; i < b->n_ev; i++)
-        vafmd_st_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:s,s:s}", "run_id", (json_int_t)r->cmd.run_id, "kind",
-                                          "segment", "sample", (json_int_t)b->ev[i].sample, "from",
-                                          s_seg_name(b->ev[i].from), "to", s_seg_name(b->ev[i].to)));
+    for (int i = 0; i < b->n_ev; i++) {
+        json_t *ev = json_pack("{s:I,s:s,s:I,s:s,s:s}", "run_id", (json_int_t)r->cmd.run_id, "kind", "segment",
+                               "sample", (json_int_t)b->ev[i].sample, "from", s_seg_name(b->ev[i].from), "to",
+                               s_seg_name(b->ev[i].to));
+        if (r->cmd.segs && ev) { /* a list's segments are its labels (positions), not the curve's phases */
+            json_object_set_new(ev, "from_segment", json_integer(b->ev[i].from));
+            json_object_set_new(ev, "to_segment", json_integer(b->ev[i].to));
+        }
+        vafmd_st_send_json(x, "event", ev);
+    }
     for (int i = 0; i < b->n_rev; i++)
         vafmd_st_send_json(x, "event", json_pack("{s:I,s:s,s:I,s:I,s:I,s:I,s:I}", "run_id", (json_int_t)r->cmd.run_id,
                                           "kind", "curve", "sample", (json_int_t)b->rev[i].sample, "curve",

@@ -4,6 +4,7 @@
  * computation of blocks into the compute-ahead FIFO in pieces, and a campaign's curves one after the other.
  */
 #include "daemon/sim_thread.h"
+#include "vafm/segments.h"
 #ifdef __linux__
 #include <sys/prctl.h>
 #endif
@@ -118,6 +119,8 @@ static void s_run_free(vafmd_st_run *r, vafmd_shared *sh)
         vafm_sim_destroy(&r->cmd.sim);
     free(r->cmd.start_json);
     r->cmd.start_json = NULL;
+    free(r->cmd.segs);
+    r->cmd.segs = NULL;
     vafmd_replay_free(&r->cmd.replay);
     vafmd_feed_curve_free(&r->cmd.feed); /* between curves, as the campaign's simulations are built */
     for (int i = 0; i < VAFM_CH_COUNT; i++)
@@ -374,7 +377,9 @@ static void s_run_start(vafmd_st *x, const vafmd_sim_cmd *c)
     {
         if (!rc && !c->replay && c->kind == VAFMD_RUN_CURVE) /* a trigger that never fires: decided per curve */
             vafm_sim_set_trigger(c->sim, !vafmd_st_no_trigger_due(x));
-        rc = c->kind == VAFMD_RUN_TUNE ? vafm_sim_tune_begin(c->sim, c->index) : vafm_sim_curve_begin(c->sim, c->index);
+        rc = c->kind == VAFMD_RUN_TUNE ? vafm_sim_tune_begin(c->sim, c->index)
+             : c->segs                 ? vafm_sim_segments_begin(c->sim, c->index, c->segs, c->nseg)
+                                       : vafm_sim_curve_begin(c->sim, c->index);
     }
     /* the clock of the run starts when its first sample can be computed: setting up the scene (tables,
      * first contact solve) is not acquisition time */

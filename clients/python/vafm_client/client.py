@@ -188,8 +188,11 @@ class Client:
             req["values"] = vals
         return self.request(req)["applies_to"]
 
-    def curve(self, index=0, client_run_id=None):
+    def curve(self, index=0, client_run_id=None, segments=None):
+        """One force curve; `segments` (a list of segment dicts, wire.md "curve") runs a segment list instead."""
         req = {"cmd": "curve", "index": index, "client_run_id": client_run_id or self.new_client_run_id()}
+        if segments is not None:
+            req["segments"] = segments
         return self.request(req)
 
     def tune(self, duration_s=None, index=0, client_run_id=None):
