@@ -2,14 +2,15 @@
 /*
  * The Nanonis TCP programming interface on vafmd (docs/nanonis.md; the vendor's TCPProtocol_SPM).
  *
- * Two files, one responsibility each:
+ * The transport and the command modules, one responsibility each:
  *   nanonis.c       the transport: a TCP listener, up to four connection threads (the spec's four
  *                   ports' worth), framing (40-byte big-endian headers), bounds; the bridge that turns a
  *                   Nanonis command into the daemon's own JSON commands, sent to the control loop over
  *                   inproc as any client's (so the fault plan applies and the request shows as one); the
  *                   stream reader that keeps the live signal values and collects a Z spectroscopy's run.
- *   nanonis_cmds.c  the command table: each Nanonis command's argument and return layout, and what it
- *                   does in vafm (module state: bias, the Z spectroscopy's properties).
+ *   nanonis_cmds.c  the dispatcher and the helpers of the command modules (nanonis_cmds.h lists them:
+ *                   nanonis_signals.c, nanonis_zspectr.c, nanonis_ctrl.c): each Nanonis command's argument
+ *                   and return layout, and what it does in vafm.
  *
  * The Nanonis threads never touch the daemon's state (struct vafmd): they only talk to it as a client.
  */

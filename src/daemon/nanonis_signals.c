@@ -1,0 +1,204 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Nanonis Signals and Bias (nanonis_cmds.h; docs/nanonis.md).
+ *
+ * The signal table: Nanonis numbers its signals 0-127 and names them "Name (unit)". vafm's come from the
+ * stream (the last sample of the last run, or the scene's start before any run) or from a module's value
+ * (Bias). Signals.ValGet/ValsGet read them; CalibrGet and RangeGet derive from the scene (the detector's
+ * sensitivity, the spring constant, the ADC range, the curve's travel). Bias is a value kept for scripts
+ * that set it: vafm has no tunnelling current, so it changes no physics.
+ */
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include "daemon/nanonis_cmds.h"
+
+/* ---- the signal table ------------------------------------------------------------------------------ */
+const nnc_signal nnc_signals[NNC_NSIG] = {
+    { "Z (m)", SRC_STREAM, NN_CH_HEIGHT, KIND_Z },             /* the piezo height (command) */
+    { "Deflection (V)", SRC_STREAM, NN_CH_DEFL_V, KIND_DEFL_V }, /* the detector signal */
+    { "Deflection (m)", SRC_STREAM, NN_CH_DEFL_M, KIND_DEFL_M },
+    { "Force (N)", SRC_STREAM, NN_CH_FORCE, KIND_FORCE },
+    { "Z sensor (m)", SRC_STREAM, NN_CH_HMEAS, KIND_Z },        /* the height sensor (= Z without a model) */
+    { "Tip height (m)", SRC_STREAM, NN_CH_TIP, KIND_Z },        /* ground truth: the true tip height */
+    { "Bias (V)", SRC_BIAS, 0, KIND_OTHER },
+};
+const char *nnc_signal_names[NNC_NSIG];
+
+/* ---- Signals ------------------------------------------------------------------------------------------ */
+
+static const char *const s_scene_names[] = { "start_height_m", "k_N_per_m", "sensitivity_m_per_V", "adc_range_V",
+                                             "ramp_size_m", "z_range_m", "baseline_offset_V" };
+enum { SC_START, SC_K, SC_SENS, SC_ADC, SC_RAMP, SC_ZRANGE, SC_OFFSET, SC_N };
+
+static int s_scene(nnc_ctx *x, double sc[SC_N])
+{
+    int rc;
+    json_t *v = nnc_get(x, s_scene_names, SC_N, &rc);
+    if (!v)
+        return rc;
+    for (int i = 0; i < SC_N; i++)
+        sc[i] = nnc_num(v, s_scene_names[i]);
+    json_decref(v);
+    return NNC_OK;
+}
+
+/* The current value of signal i: the stream's last sample; before any, the scene's start (at rest). */
+static double s_value(int i, const double sc[SC_N])
+{
+    const nnc_signal *g = &nnc_signals[i];
+    if (g->src == SRC_BIAS) {
+        pthread_mutex_lock(&nnc_mu);
+        double b = nnc_m.bias_V;
+        pthread_mutex_unlock(&nnc_mu);
+        return b;
+    }
+    double v[NN_CH_N];
+    int hm = 0;
+    if (nn_live(v, &hm))
+        return g->ch == NN_CH_HMEAS && !hm ? v[NN_CH_HEIGHT] : v[g->ch];
+    switch (g->ch) {
+    case NN_CH_HEIGHT:
+    case NN_CH_HMEAS:
+    case NN_CH_TIP: return sc[SC_START];
+    case NN_CH_DEFL_V: return sc[SC_OFFSET];
+    default: return 0;
+    }
+}
+
+static int h_names(nnc_ctx *x)
+{
+    int rc = nnc_ping(x);
+    if (rc)
+        return rc;
+    nn_put_i32(x->o, (int32_t)nn_strings_bytes(nnc_signal_names, NNC_NSIG));
+    nn_put_i32(x->o, NNC_NSIG);
+    nn_put_strings(x->o, nnc_signal_names, NNC_NSIG);
+    return NNC_OK;
+}
+
+static int h_valget(nnc_ctx *x)
+{
+    int32_t i = nn_get_i32(&x->r, "Signal index");
+    (void)nn_get_u32(&x->r, "Wait for newest data");
+    double sc[SC_N];
+    int rc = nnc_args_done(x) || nnc_signal_index(x, i, "Signal index") ? NNC_FAIL : s_scene(x, sc);
+    if (rc)
+        return rc;
+    nn_put_f32(x->o, (float)s_value(i, sc));
+    return NNC_OK;
+}
+
+static int h_valsget(nnc_ctx *x)
+{
+    int32_t n = nn_get_i32(&x->r, "Signals indexes size");
+    if (!x->r.bad && (n < 0 || n > 128)) {
+        snprintf(x->err, sizeof x->err, "Signals indexes size %d: must be in [0, 128]", (int)n);
+        return NNC_FAIL;
+    }
+    int32_t idx[128];
+    for (int32_t k = 0; k < n && !x->r.bad; k++)
+        idx[k] = nn_get_i32(&x->r, "Signals indexes");
+    (void)nn_get_u32(&x->r, "Wait for newest data");
+    if (nnc_args_done(x))
+        return NNC_FAIL;
+    for (int32_t k = 0; k < n; k++)
+        if (nnc_signal_index(x, idx[k], "Signals indexes: index"))
+            return NNC_FAIL;
+    double sc[SC_N];
+    int rc = s_scene(x, sc);
+    if (rc)
+        return rc;
+    nn_put_i32(x->o, n);
+    for (int32_t k = 0; k < n; k++)
+        nn_put_f32(x->o, (float)s_value(idx[k], sc));
+    return NNC_OK;
+}
+
+static int h_calibr(nnc_ctx *x)
+{
+    int32_t i = nn_get_i32(&x->r, "Signal index");
+    double sc[SC_N];
+    int rc = nnc_args_done(x) || nnc_signal_index(x, i, "Signal index") ? NNC_FAIL : s_scene(x, sc);
+    if (rc)
+        return rc;
+    /* physical units per volt of the detector signal, and the offset in physical units */
+    int kind = nnc_signals[i].kind;
+    double cal = kind == KIND_DEFL_M ? sc[SC_SENS] : kind == KIND_FORCE ? sc[SC_SENS] * sc[SC_K] : 1.0;
+    double off = kind == KIND_DEFL_M ? -sc[SC_OFFSET] * sc[SC_SENS]
+                 : kind == KIND_FORCE ? -sc[SC_OFFSET] * sc[SC_SENS] * sc[SC_K]
+                                      : 0.0;
+    nn_put_f32(x->o, (float)cal);
+    nn_put_f32(x->o, (float)off);
+    return NNC_OK;
+}
+
+static int h_range(nnc_ctx *x)
+{
+    int32_t i = nn_get_i32(&x->r, "Signal index");
+    double sc[SC_N];
+    int rc = nnc_args_done(x) || nnc_signal_index(x, i, "Signal index") ? NNC_FAIL : s_scene(x, sc);
+    if (rc)
+        return rc;
+    double hi, lo, half = sc[SC_ADC] / 2;
+    switch (nnc_signals[i].kind) {
+    case KIND_Z: { /* the travel of a curve: from the start height down by the ramp (or the travel limit) */
+        double travel = sc[SC_RAMP] > 0 ? sc[SC_RAMP] : sc[SC_ZRANGE] > 0 ? sc[SC_ZRANGE] : sc[SC_START];
+        hi = sc[SC_START];
+        lo = sc[SC_START] - travel;
+        break;
+    }
+    case KIND_DEFL_V: hi = half, lo = -half; break;
+    case KIND_DEFL_M: hi = half * sc[SC_SENS], lo = -hi; break;
+    case KIND_FORCE: hi = half * sc[SC_SENS] * sc[SC_K], lo = -hi; break;
+    default: hi = 10, lo = -10; break; /* bias: the ±10 V of a controller's output */
+    }
+    nn_put_f32(x->o, (float)hi);
+    nn_put_f32(x->o, (float)lo);
+    return NNC_OK;
+}
+
+/* ---- Bias: a value (no physics) ------------------------------------------------------------------- */
+
+static int h_bias_set(nnc_ctx *x)
+{
+    float v = nn_get_f32(&x->r, "Bias value (V)");
+    if (nnc_args_done(x))
+        return NNC_FAIL;
+    if (!isfinite(v) || fabsf(v) > 10.f) {
+        snprintf(x->err, sizeof x->err, "Bias value (V) %g: must be in [-10, 10] V", (double)v);
+        return NNC_FAIL;
+    }
+    int rc = nnc_ping(x);
+    if (rc)
+        return rc;
+    pthread_mutex_lock(&nnc_mu);
+    nnc_m.bias_V = v;
+    pthread_mutex_unlock(&nnc_mu);
+    return NNC_OK;
+}
+
+static int h_bias_get(nnc_ctx *x)
+{
+    int rc = nnc_ping(x);
+    if (rc)
+        return rc;
+    pthread_mutex_lock(&nnc_mu);
+    nn_put_f32(x->o, nnc_m.bias_V);
+    pthread_mutex_unlock(&nnc_mu);
+    return NNC_OK;
+}
+
+const nnc_cmd nnc_signals_cmds[] = {
+    { "Signals.NamesGet", h_names, "ii" },
+    { "Signals.ValGet", h_valget, "f" },
+    { "Signals.ValsGet", h_valsget, "i" },
+    { "Signals.CalibrGet", h_calibr, "ff" },
+    { "Signals.RangeGet", h_range, "ff" },
+    { "Signals.MeasNamesGet", h_names, "ii" },
+    { "Bias.Set", h_bias_set, "" },
+    { "Bias.Get", h_bias_get, "f" },
+};
+const size_t nnc_signals_ncmds = sizeof nnc_signals_cmds / sizeof nnc_signals_cmds[0];
