@@ -329,23 +329,205 @@ def test_zspectr_2nd_condition_refused(nd):
     c.close()
 
 
-NOT_YET = ["ZCtrl.OnOffSet", "ZCtrl.OnOffGet", "ZCtrl.ZPosSet", "ZCtrl.ZPosGet", "ZCtrl.SetpntSet",
-           "ZCtrl.SetpntGet", "ZCtrl.GainSet", "ZCtrl.GainGet", "ZCtrl.Withdraw", "ZCtrl.LimitsSet",
-           "ZCtrl.LimitsGet", "ZCtrl.StatusGet", "ZCtrl.TipLiftSet", "ZCtrl.TipLiftGet", "ZCtrl.Home",
-           "ZCtrl.HomePropsSet", "ZCtrl.HomePropsGet", "ZCtrl.SwitchOffDelaySet", "ZCtrl.SwitchOffDelayGet",
-           "Motor.StartMove", "Motor.StartClosedLoop", "Motor.StopMove", "Motor.PosGet", "Motor.StepCounterGet",
-           "Motor.FreqAmpGet", "Motor.FreqAmpSet", "AutoApproach.Open", "AutoApproach.OnOffSet",
-           "AutoApproach.OnOffGet", "FolMe.XYPosSet", "FolMe.XYPosGet", "FolMe.SpeedSet", "FolMe.SpeedGet",
-           "FolMe.Stop"]
+def f64(x):
+    return struct.pack(">d", x)
 
 
-def test_not_yet(nd):
+def ctrl(nd):
+    return nd.cmd({"cmd": "status"})["ctrl"]
+
+
+def poll(fn, timeout=60.0, what="condition"):
+    end = time.time() + timeout
+    while True:
+        v = fn()
+        if v:
+            return v
+        assert time.time() < end, f"{what} not reached in {timeout} s"
+        time.sleep(0.02)
+
+
+def test_zctrl_values(nd):
+    """ZCtrl's values and the controller's state, layouts from the spec (Z: piezo, 0 retracted, negative
+    toward the sample)."""
     c = Conn(nd.port)
-    for name in NOT_YET:
-        _, st, desc = c.call(name, ok=False)
-        assert st == 1 and name in desc and "not yet" in desc and "always-on controller" in desc
-    b, st, _ = c.call("FolMe.XYPosGet", u32(1), ok=False)
-    assert st == 1 and b == b"\0" * 16  # the return arguments, zero, before the error
+    rng = nd.cmd({"cmd": "get", "names": ["ctrl_piezo_range_m", "ctrl_xy_speed_m_per_s", "ctrl_motor_step_m"]})
+    rng = rng["values"]
+    b, _, _ = c.call("ZCtrl.ZPosGet")
+    assert struct.unpack(">f", b) == (0.0,)
+    b, _, _ = c.call("ZCtrl.LimitsGet")
+    assert struct.unpack(">ff", b) == pytest.approx((0.0, -rng["ctrl_piezo_range_m"]))
+    b, _, _ = c.call("ZCtrl.OnOffGet")
+    assert struct.unpack(">I", b) == (0,)
+    b, _, _ = c.call("ZCtrl.StatusGet")
+    assert struct.unpack(">H", b) == (1,)  # off
+    # ZPosSet: the piezo extends by -Z
+    c.call("ZCtrl.ZPosSet", f32(-1e-6))
+    poll(lambda: abs(ctrl(nd)["piezo_z_m"] - 1e-6) < 1e-12, 10, "the piezo at 1 um")
+    b, _, _ = c.call("ZCtrl.ZPosGet")
+    assert struct.unpack(">f", b)[0] == pytest.approx(-1e-6, rel=1e-6)
+    _, st, desc = c.call("ZCtrl.ZPosSet", f32(1e-6), ok=False)
+    assert st == 1 and "Z position (m)" in desc and "1e-06" in desc
+    # limits narrow ZPosSet and Home
+    c.call("ZCtrl.LimitsSet", f32(-1e-7) + f32(-2e-6))
+    b, _, _ = c.call("ZCtrl.LimitsGet")
+    assert struct.unpack(">ff", b) == pytest.approx((-1e-7, -2e-6))
+    _, st, desc = c.call("ZCtrl.ZPosSet", f32(-3e-6), ok=False)
+    assert st == 1 and "-2e-06" in desc
+    _, st, desc = c.call("ZCtrl.LimitsSet", f32(1e-6) + f32(0), ok=False)
+    assert st == 1 and "Z high limit (m)" in desc
+    # setpoint and gains reach the controller (status.ctrl)
+    c.call("ZCtrl.SetpntSet", f32(3e-9))
+    b, _, _ = c.call("ZCtrl.SetpntGet")
+    assert struct.unpack(">f", b)[0] == pytest.approx(3e-9, rel=1e-6)
+    assert ctrl(nd)["setpoint"]["value"] == pytest.approx(3e-9, rel=1e-6)
+    c.call("ZCtrl.GainSet", f32(0.02) + f32(0.001) + f32(0))  # I = P/T when I is 0
+    b, _, _ = c.call("ZCtrl.GainGet")
+    assert struct.unpack(">fff", b) == pytest.approx((0.02, 0.001, 20.0), rel=1e-5)
+    g = ctrl(nd)["gains"]
+    assert g["p_m_per_N"] == pytest.approx(0.02, rel=1e-6) and g["i_m_per_N_s"] == pytest.approx(20, rel=1e-5)
+    b, st, desc = c.call("ZCtrl.GainSet", f32(-1) + f32(0) + f32(1), ok=False)
+    assert st == 1 and "P-gain" in desc and b == b""
+    # kept values
+    for name, v in (("TipLift", 5e-9), ("SwitchOffDelay", 0.05)):
+        c.call(f"ZCtrl.{name}Set", f32(v))
+        b, _, _ = c.call(f"ZCtrl.{name}Get")
+        assert struct.unpack(">f", b)[0] == pytest.approx(v, rel=1e-6)
+    _, st, desc = c.call("ZCtrl.SwitchOffDelaySet", f32(-1), ok=False)
+    assert st == 1 and "switch off delay" in desc
+    c.call("ZCtrl.HomePropsSet", u16(1) + f32(-5e-7))
+    b, _, _ = c.call("ZCtrl.HomePropsGet")
+    assert struct.unpack(">Hf", b) == pytest.approx((0, -5e-7))
+    _, st, desc = c.call("ZCtrl.HomePropsSet", u16(3) + f32(0), ok=False)
+    assert st == 1 and "Relative or Absolute" in desc
+    c.call("ZCtrl.Home")
+    poll(lambda: abs(ctrl(nd)["piezo_z_m"] - 5e-7) < 1e-12, 10, "the piezo at home")
+    c.call("ZCtrl.HomePropsSet", u16(2) + f32(-1e-7))  # relative: from where Z is
+    b, _, _ = c.call("ZCtrl.HomePropsGet")
+    assert struct.unpack(">H", b[:2]) == (1,)
+    c.call("ZCtrl.Home")
+    poll(lambda: abs(ctrl(nd)["piezo_z_m"] - 6e-7) < 1e-12, 10, "the piezo at home + 100 nm")
+    # switching the feedback on then off: the tip lift raises Z by 5 nm
+    c.call("ZCtrl.OnOffSet", u32(1))
+    b, _, _ = c.call("ZCtrl.OnOffGet")
+    assert struct.unpack(">I", b) == (1,) and ctrl(nd)["feedback"] is True
+    b, _, _ = c.call("ZCtrl.StatusGet")
+    assert struct.unpack(">H", b) == (2,)
+    _, st, desc = c.call("ZCtrl.OnOffSet", u32(2), ok=False)
+    assert st == 1 and "Z-Controller status" in desc
+    c.call("ZCtrl.OnOffSet", u32(0))
+    z_off = ctrl(nd)
+    assert z_off["feedback"] is False
+    c.close()
+
+
+def test_motor_and_folme_values(nd):
+    c = Conn(nd.port)
+    v = nd.cmd({"cmd": "get", "names": ["ctrl_xy_speed_m_per_s", "ctrl_motor_step_m"]})["values"]
+    st0 = ctrl(nd)
+    b, _, _ = c.call("Motor.PosGet")  # the public clients send no arguments
+    assert struct.unpack(">ddd", b) == pytest.approx((0, 0, st0["motor_z_m"]))
+    b2, _, _ = c.call("Motor.PosGet", u32(0) + u32(500))  # the spec's Group and Timeout
+    assert b2 == b
+    b, _, _ = c.call("Motor.FreqAmpGet")
+    c.call("Motor.FreqAmpSet", f32(500) + f32(80) + u16(3))
+    b, _, _ = c.call("Motor.FreqAmpGet", u16(3))
+    assert struct.unpack(">ff", b) == (500.0, 80.0)
+    _, st, desc = c.call("Motor.FreqAmpSet", f32(500) + f32(80) + u16(4), ok=False)
+    assert st == 1 and "Axis 4" in desc
+    for d, word in ((0, "X+"), (3, "Y-"), (5, "Z-")):
+        _, st, desc = c.call("Motor.StartMove", u32(d) + u16(1) + u32(0) + u32(1), ok=False)
+        assert st == 1 and word in desc
+    _, st, desc = c.call("Motor.StartMove", u32(4) + u16(1) + u32(9) + u32(1), ok=False)
+    assert st == 1 and "Group 9" in desc
+    # Z+ by 3 steps, waiting: the motor up by 3 steps; the step counter counts them
+    c.call("Motor.StartMove", u32(4) + u16(3) + u32(0) + u32(1))
+    st1 = ctrl(nd)
+    assert st1["state"] == "withdrawn"
+    assert st1["motor_z_m"] == pytest.approx(st0["motor_z_m"] + 3 * v["ctrl_motor_step_m"], rel=1e-9)
+    b, _, _ = c.call("Motor.StepCounterGet", u32(0) + u32(0) + u32(1))
+    steps = struct.unpack(">iii", b)
+    assert steps == (0, 0, 3)  # net steps from the start, up positive
+    b, _, _ = c.call("Motor.StepCounterGet", u32(0) + u32(0) + u32(0))
+    assert struct.unpack(">iii", b) == (0, 0, 0)  # reset after the read
+    # closed loop: Z only, up only (absolute target 2 steps above)
+    z_abs = st1["motor_z_m"] + 2 * v["ctrl_motor_step_m"]
+    c.call("Motor.StartClosedLoop", u32(1) + f64(0) + f64(0) + f64(z_abs) + u32(1) + u32(0))
+    assert ctrl(nd)["motor_z_m"] == pytest.approx(z_abs, rel=1e-9)
+    _, st, desc = c.call("Motor.StartClosedLoop", u32(0) + f64(1e-6) + f64(0) + f64(0) + u32(1), ok=False)
+    assert st == 1 and "Target X(m)" in desc
+    _, st, desc = c.call("Motor.StartClosedLoop", u32(0) + f64(0) + f64(0) + f64(-1e-6) + u32(1), ok=False)
+    assert st == 1 and "auto-approach" in desc
+    c.call("Motor.StopMove")
+    # FolMe: the default speed is the controller's; a custom one
+    b, _, _ = c.call("FolMe.SpeedGet")
+    assert struct.unpack(">fI", b) == pytest.approx((v["ctrl_xy_speed_m_per_s"], 0), rel=1e-6)
+    c.call("FolMe.SpeedSet", f32(50e-6) + u32(1))
+    b, _, _ = c.call("FolMe.SpeedGet")
+    assert struct.unpack(">fI", b) == pytest.approx((50e-6, 1), rel=1e-6)
+    _, st, desc = c.call("FolMe.SpeedSet", f32(1.0) + u32(1), ok=False)
+    assert st == 1 and "Speed (m/s)" in desc
+    c.call("FolMe.XYPosSet", f64(1e-6) + f64(-0.5e-6) + u32(1))
+    b, _, _ = c.call("FolMe.XYPosGet", u32(1))
+    assert struct.unpack(">dd", b) == pytest.approx((1e-6, -0.5e-6), abs=1e-12)
+    _, st, desc = c.call("FolMe.XYPosSet", f64(1.0) + f64(0) + u32(1), ok=False)
+    assert st == 1 and "x_m" in desc
+    c.call("FolMe.XYPosSet", f64(-1e-6) + f64(0) + u32(0))  # no wait: under way, then stopped
+    c.call("FolMe.Stop")
+    poll(lambda: not ctrl(nd)["moving"], 10, "the move stopped")
+    x_stop = ctrl(nd)["x_m"]
+    time.sleep(0.1)
+    assert ctrl(nd)["x_m"] == x_stop and x_stop > -1e-6
+    c.close()
+
+
+def test_approach_withdraw(nd):
+    """The Nanonis way to approach: AutoApproach.OnOffSet 1, then ZCtrl.StatusGet until the controller is
+    on (2); then ZCtrl.Withdraw waiting."""
+    assert nd.cmd({"cmd": "set", "values": {"speed": 20, "ctrl_motor_z0_m": 40e-6}})["status"] == "ok"
+    c = Conn(nd.port)
+    c.call("AutoApproach.Open")
+    b, _, _ = c.call("AutoApproach.OnOffGet")
+    assert struct.unpack(">H", b) == (0,)
+    _, st, desc = c.call("AutoApproach.OnOffSet", u16(7), ok=False)
+    assert st == 1 and "On/Off" in desc
+    c.call("AutoApproach.OnOffSet", u16(1))
+    b, _, _ = c.call("AutoApproach.OnOffGet")
+    assert struct.unpack(">H", b) == (1,)
+    t0 = time.time()
+
+    def on():
+        b, _, _ = c.call("ZCtrl.StatusGet")
+        return struct.unpack(">H", b)[0] == 2
+
+    poll(on, 60, "the controller on (engaged)")
+    st = ctrl(nd)
+    assert st["state"] == "engaged" and st["in_contact"], st
+    b, _, _ = c.call("AutoApproach.OnOffGet")
+    assert struct.unpack(">H", b) == (0,)
+    b, _, _ = c.call("ZCtrl.OnOffGet")
+    assert struct.unpack(">I", b) == (1,)
+    b, _, _ = c.call("ZCtrl.ZPosGet")
+    z = struct.unpack(">f", b)[0]
+    assert z < 0 and z == pytest.approx(-ctrl(nd)["piezo_z_m"], abs=2e-9)
+    # a move under feedback
+    c.call("FolMe.XYPosSet", f64(0.5e-6) + f64(0.25e-6) + u32(1))
+    st = ctrl(nd)
+    assert (st["x_m"], st["y_m"]) == pytest.approx((0.5e-6, 0.25e-6), abs=1e-12) and st["state"] == "engaged"
+    # withdraw, waiting: off, the piezo retracted
+    c.call("ZCtrl.Withdraw", u32(1) + i32(10000))
+    st = ctrl(nd)
+    assert st["state"] == "withdrawn" and st["piezo_z_m"] == 0 and st["feedback"] is False
+    b, _, _ = c.call("ZCtrl.StatusGet")
+    assert struct.unpack(">H", b) == (1,)
+    b, _, _ = c.call("ZCtrl.ZPosGet")
+    assert struct.unpack(">f", b) == (0.0,)
+    # AutoApproach.OnOffSet 0 stops an approach in progress
+    c.call("AutoApproach.OnOffSet", u16(1))
+    c.call("AutoApproach.OnOffSet", u16(0))
+    poll(lambda: ctrl(nd)["state"] != "approaching", 10, "the approach stopped")
+    assert ctrl(nd)["last_fail"] == "aborted"
+    print(f"approach: {time.time() - t0:.2f} s at speed 20")
     c.close()
 
 
