@@ -125,6 +125,21 @@ def test_signals(nd):
     names = names_get(c)
     assert names[:4] == ["Z (m)", "Deflection (V)", "Deflection (m)", "Force (N)"]
     assert "Tip height (m)" in names and "Bias (V)" in names
+    ctrl_rows = ["Z piezo (m)", "Motor Z (m)", "X (m)", "Y (m)", "Z ctrl setpoint (N)", "Z ctrl error (N)",
+                 "Live force (N)", "Live deflection (V)", "Sum (V)", "Gap (m)", "Surface (m)"]
+    assert names[7:] == ctrl_rows
+    st = nd.cmd({"cmd": "status"})["ctrl"]
+    cv = nd.cmd({"cmd": "get", "names": ["ctrl_piezo_range_m", "ctrl_xy_range_m"]})["values"]
+    b, _, _ = c.call("Signals.ValGet", i32(8) + u32(0))
+    assert struct.unpack(">f", b)[0] == pytest.approx(st["motor_z_m"], rel=1e-6)
+    b, _, _ = c.call("Signals.RangeGet", i32(7))
+    assert struct.unpack(">ff", b) == pytest.approx((0, -cv["ctrl_piezo_range_m"]))
+    b, _, _ = c.call("Signals.RangeGet", i32(9))
+    assert struct.unpack(">ff", b) == pytest.approx((cv["ctrl_xy_range_m"] / 2, -cv["ctrl_xy_range_m"] / 2))
+    b, _, _ = c.call("Signals.CalibrGet", i32(7))
+    assert struct.unpack(">ff", b) == (1.0, 0.0)
+    _, st_, desc = c.call("ZSpectr.ChsSet", i32(1) + i32(9), ok=False)
+    assert st_ == 1 and "X (m)" in desc and "controller signal" in desc
     assert names_get(c, "Signals.MeasNamesGet") == names
     # before any run: the scene at rest, Z = start height
     start = nd.cmd({"cmd": "get", "names": ["start_height_m"]})["values"]["start_height_m"]
@@ -514,6 +529,28 @@ def test_approach_withdraw(nd):
     c.call("FolMe.XYPosSet", f64(0.5e-6) + f64(0.25e-6) + u32(1))
     st = ctrl(nd)
     assert (st["x_m"], st["y_m"]) == pytest.approx((0.5e-6, 0.25e-6), abs=1e-12) and st["state"] == "engaged"
+    # the controller's signals, from its live state
+    names = names_get(c)
+    ix = {n: i for i, n in enumerate(names)}
+    keys = [("Z piezo (m)", "piezo_z_m", -1), ("Motor Z (m)", "motor_z_m", 1), ("X (m)", "x_m", 1),
+            ("Y (m)", "y_m", 1), ("Z ctrl setpoint (N)", "setpoint_N", 1), ("Sum (V)", "sum_V", 1),
+            ("Gap (m)", "gap_m", 1), ("Surface (m)", "surface_m", 1)]
+    body = i32(len(keys)) + b"".join(i32(ix[k]) for k, _, _ in keys) + u32(0)
+    st = ctrl(nd)
+    b, _, _ = c.call("Signals.ValsGet", body)
+    vals = struct.unpack(f">i{len(keys)}f", b)[1:]
+    for (name, key, sc), v in zip(keys, vals):
+        tol = 3e-9 if key in ("piezo_z_m", "gap_m") else 1e-12  # Z moves under feedback between the reads
+        assert v == pytest.approx(sc * st[key], rel=1e-5, abs=tol), name
+    b, _, _ = c.call("Signals.ValGet", i32(ix["X (m)"]) + u32(0))
+    assert struct.unpack(">f", b)[0] == pytest.approx(0.5e-6, rel=1e-6)
+    # ZSpectr starts from the current Z: engaged, the controller's gap plus the Z offset
+    gap = ctrl(nd)["gap_m"]
+    setup_sweep(c, points=20, dist=100e-9, bwd=0, retract=(2, 5e-9, 3, 0))
+    c.call("ZSpectr.RangeSet", f32(50e-9) + f32(100e-9))
+    chans, data, params = zspectr_start(c)
+    assert chans[0] == "Z (m)"
+    assert data[0][0] == pytest.approx(gap + 50e-9, abs=6e-9)  # within one point's travel (5 nm)
     # withdraw, waiting: off, the piezo retracted
     c.call("ZCtrl.Withdraw", u32(1) + i32(10000))
     st = ctrl(nd)

@@ -61,15 +61,20 @@ int nnc_flag(nnc_ctx *x, unsigned v, const char *arg, int *dst);
 int nnc_time(nnc_ctx *x, float v, const char *arg); /* a time in [0, 1000] s */
 
 /* ---- the signal table (nanonis_signals.c) -------------------------------------------------------------- */
-enum nnc_src { SRC_STREAM = 0, SRC_BIAS = 1 };
+enum nnc_src { SRC_STREAM = 0, SRC_BIAS = 1, SRC_CTRL = 2 };
 enum nnc_kind { KIND_Z = 0, KIND_DEFL_V, KIND_DEFL_M, KIND_FORCE, KIND_OTHER };
+/* SRC_CTRL rows' ranges (Signals.RangeGet) */
+enum nnc_range { RNG_NONE = 0, RNG_PIEZO, RNG_MOTOR, RNG_XY, RNG_FORCE, RNG_VOLT, RNG_GAP };
 typedef struct nnc_signal {
     const char *name; /* Nanonis style: "Name (unit)" */
     int src;
     int ch;           /* SRC_STREAM: the stream channel (nanonis.h NN_CH_*) */
-    int kind;
+    int kind;         /* SRC_CTRL: KIND_OTHER (not a Z spectroscopy channel, nor an auto-retract signal) */
+    const char *key;  /* SRC_CTRL: the field of status.ctrl */
+    double scale;     /* SRC_CTRL: the value is scale * status.ctrl[key] */
+    int range;        /* SRC_CTRL: enum nnc_range */
 } nnc_signal;
-#define NNC_NSIG 7
+#define NNC_NSIG 18
 extern const nnc_signal nnc_signals[NNC_NSIG];
 extern const char *nnc_signal_names[NNC_NSIG];
 

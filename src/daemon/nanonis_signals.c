@@ -17,21 +17,63 @@
 
 /* ---- the signal table ------------------------------------------------------------------------------ */
 const nnc_signal nnc_signals[NNC_NSIG] = {
-    { "Z (m)", SRC_STREAM, NN_CH_HEIGHT, KIND_Z },             /* the piezo height (command) */
-    { "Deflection (V)", SRC_STREAM, NN_CH_DEFL_V, KIND_DEFL_V }, /* the detector signal */
-    { "Deflection (m)", SRC_STREAM, NN_CH_DEFL_M, KIND_DEFL_M },
-    { "Force (N)", SRC_STREAM, NN_CH_FORCE, KIND_FORCE },
-    { "Z sensor (m)", SRC_STREAM, NN_CH_HMEAS, KIND_Z },        /* the height sensor (= Z without a model) */
-    { "Tip height (m)", SRC_STREAM, NN_CH_TIP, KIND_Z },        /* ground truth: the true tip height */
-    { "Bias (V)", SRC_BIAS, 0, KIND_OTHER },
+    /* the stream: the last run's last sample (the curve's piezo height command, the detector signal...) */
+    { "Z (m)", SRC_STREAM, NN_CH_HEIGHT, KIND_Z, NULL, 0, RNG_NONE },
+    { "Deflection (V)", SRC_STREAM, NN_CH_DEFL_V, KIND_DEFL_V, NULL, 0, RNG_NONE },
+    { "Deflection (m)", SRC_STREAM, NN_CH_DEFL_M, KIND_DEFL_M, NULL, 0, RNG_NONE },
+    { "Force (N)", SRC_STREAM, NN_CH_FORCE, KIND_FORCE, NULL, 0, RNG_NONE },
+    { "Z sensor (m)", SRC_STREAM, NN_CH_HMEAS, KIND_Z, NULL, 0, RNG_NONE },   /* = Z without a sensor model */
+    { "Tip height (m)", SRC_STREAM, NN_CH_TIP, KIND_Z, NULL, 0, RNG_NONE },   /* ground truth */
+    { "Bias (V)", SRC_BIAS, 0, KIND_OTHER, NULL, 0, RNG_NONE },
+    /* the always-on controller's live state (status.ctrl), whatever runs did */
+    { "Z piezo (m)", SRC_CTRL, 0, KIND_OTHER, "piezo_z_m", -1, RNG_PIEZO }, /* ZCtrl's Z: 0 retracted */
+    { "Motor Z (m)", SRC_CTRL, 0, KIND_OTHER, "motor_z_m", 1, RNG_MOTOR },  /* the coarse motor's height */
+    { "X (m)", SRC_CTRL, 0, KIND_OTHER, "x_m", 1, RNG_XY },
+    { "Y (m)", SRC_CTRL, 0, KIND_OTHER, "y_m", 1, RNG_XY },
+    { "Z ctrl setpoint (N)", SRC_CTRL, 0, KIND_OTHER, "setpoint_N", 1, RNG_FORCE },
+    { "Z ctrl error (N)", SRC_CTRL, 0, KIND_OTHER, "error_N", 1, RNG_FORCE }, /* setpoint - force */
+    { "Live force (N)", SRC_CTRL, 0, KIND_OTHER, "force_N", 1, RNG_FORCE },
+    { "Live deflection (V)", SRC_CTRL, 0, KIND_OTHER, "signal_V", 1, RNG_VOLT },
+    { "Sum (V)", SRC_CTRL, 0, KIND_OTHER, "sum_V", 1, RNG_VOLT },
+    { "Gap (m)", SRC_CTRL, 0, KIND_OTHER, "gap_m", 1, RNG_GAP },         /* ground truth */
+    { "Surface (m)", SRC_CTRL, 0, KIND_OTHER, "surface_m", 1, RNG_GAP }, /* ground truth */
 };
 const char *nnc_signal_names[NNC_NSIG];
 
 /* ---- Signals ------------------------------------------------------------------------------------------ */
 
 static const char *const s_scene_names[] = { "start_height_m", "k_N_per_m", "sensitivity_m_per_V", "adc_range_V",
-                                             "ramp_size_m", "z_range_m", "baseline_offset_V" };
-enum { SC_START, SC_K, SC_SENS, SC_ADC, SC_RAMP, SC_ZRANGE, SC_OFFSET, SC_N };
+                                             "ramp_size_m", "z_range_m", "baseline_offset_V",
+                                             "ctrl_piezo_range_m", "ctrl_motor_min_m", "ctrl_motor_max_m",
+                                             "ctrl_xy_range_m", "ctrl_force_limit_N" };
+enum { SC_START, SC_K, SC_SENS, SC_ADC, SC_RAMP, SC_ZRANGE, SC_OFFSET, SC_PIEZO, SC_MOTOR_MIN, SC_MOTOR_MAX,
+       SC_XY, SC_FLIMIT, SC_N };
+
+/* status.ctrl when one of the n signals idx[] is the controller's (else *c = NULL): NNC_OK or an error. */
+static int s_ctrl(nnc_ctx *x, const int32_t *idx, int32_t n, json_t **c)
+{
+    *c = NULL;
+    int need = 0;
+    for (int32_t k = 0; k < n; k++)
+        need |= nnc_signals[idx[k]].src == SRC_CTRL;
+    if (!need)
+        return NNC_OK;
+    json_t *reply = NULL;
+    int rc = nnc_call(x, json_pack("{s:s}", "cmd", "status"), &reply);
+    if (rc)
+        return rc;
+    *c = json_incref(json_object_get(reply, "ctrl"));
+    json_decref(reply);
+    if (!json_is_true(json_object_get(*c, "available"))) {
+        json_t *why = json_object_get(*c, "error");
+        snprintf(x->err, sizeof x->err, "a controller signal: the controller is not available: %s",
+                 json_is_string(why) ? json_string_value(why) : "no status");
+        json_decref(*c);
+        *c = NULL;
+        return NNC_FAIL;
+    }
+    return NNC_OK;
+}
 
 static int s_scene(nnc_ctx *x, double sc[SC_N])
 {
@@ -45,10 +87,13 @@ static int s_scene(nnc_ctx *x, double sc[SC_N])
     return NNC_OK;
 }
 
-/* The current value of signal i: the stream's last sample; before any, the scene's start (at rest). */
-static double s_value(int i, const double sc[SC_N])
+/* The current value of signal i: the stream's last sample; before any, the scene's start (at rest); the
+ * controller's rows from its status (ctrl). */
+static double s_value(int i, const double sc[SC_N], json_t *ctrl)
 {
     const nnc_signal *g = &nnc_signals[i];
+    if (g->src == SRC_CTRL)
+        return g->scale * nnc_num(ctrl, g->key);
     if (g->src == SRC_BIAS) {
         pthread_mutex_lock(&nnc_mu);
         double b = nnc_m.bias_V;
@@ -84,10 +129,12 @@ static int h_valget(nnc_ctx *x)
     int32_t i = nn_get_i32(&x->r, "Signal index");
     (void)nn_get_u32(&x->r, "Wait for newest data");
     double sc[SC_N];
+    json_t *c = NULL;
     int rc = nnc_args_done(x) || nnc_signal_index(x, i, "Signal index") ? NNC_FAIL : s_scene(x, sc);
-    if (rc)
+    if (rc || (rc = s_ctrl(x, &i, 1, &c)))
         return rc;
-    nn_put_f32(x->o, (float)s_value(i, sc));
+    nn_put_f32(x->o, (float)s_value(i, sc, c));
+    json_decref(c);
     return NNC_OK;
 }
 
@@ -108,12 +155,14 @@ static int h_valsget(nnc_ctx *x)
         if (nnc_signal_index(x, idx[k], "Signals indexes: index"))
             return NNC_FAIL;
     double sc[SC_N];
+    json_t *c = NULL;
     int rc = s_scene(x, sc);
-    if (rc)
+    if (rc || (rc = s_ctrl(x, idx, n, &c)))
         return rc;
     nn_put_i32(x->o, n);
     for (int32_t k = 0; k < n; k++)
-        nn_put_f32(x->o, (float)s_value(idx[k], sc));
+        nn_put_f32(x->o, (float)s_value(idx[k], sc, c));
+    json_decref(c);
     return NNC_OK;
 }
 
@@ -143,6 +192,15 @@ static int h_range(nnc_ctx *x)
     if (rc)
         return rc;
     double hi, lo, half = sc[SC_ADC] / 2;
+    switch (nnc_signals[i].range) { /* the controller's rows */
+    case RNG_PIEZO: hi = 0, lo = -sc[SC_PIEZO]; goto put;
+    case RNG_MOTOR: hi = sc[SC_MOTOR_MAX], lo = sc[SC_MOTOR_MIN]; goto put;
+    case RNG_XY: hi = sc[SC_XY] / 2, lo = -hi; goto put;
+    case RNG_FORCE: hi = sc[SC_FLIMIT], lo = -hi; goto put;
+    case RNG_VOLT: hi = half, lo = -half; goto put;
+    case RNG_GAP: hi = sc[SC_MOTOR_MAX], lo = -sc[SC_PIEZO]; goto put;
+    default: break;
+    }
     switch (nnc_signals[i].kind) {
     case KIND_Z: { /* the travel of a curve: from the start height down by the ramp (or the travel limit) */
         double travel = sc[SC_RAMP] > 0 ? sc[SC_RAMP] : sc[SC_ZRANGE] > 0 ? sc[SC_ZRANGE] : sc[SC_START];
@@ -155,6 +213,7 @@ static int h_range(nnc_ctx *x)
     case KIND_FORCE: hi = half * sc[SC_SENS] * sc[SC_K], lo = -hi; break;
     default: hi = 10, lo = -10; break; /* bias: the ±10 V of a controller's output */
     }
+put:
     nn_put_f32(x->o, (float)hi);
     nn_put_f32(x->o, (float)lo);
     return NNC_OK;

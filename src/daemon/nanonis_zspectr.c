@@ -43,6 +43,11 @@ static int h_zs_chs_set(nnc_ctx *x)
     for (int32_t k = 0; k < n; k++)
         if (nnc_signal_index(x, idx[k], "Channel indexes: index"))
             return NNC_FAIL;
+        else if (nnc_signals[idx[k]].src == SRC_CTRL) {
+            snprintf(x->err, sizeof x->err, "Channel indexes: index %d (%s): a controller signal, not recorded "
+                     "by a sweep (the controller is held during runs)", (int)idx[k], nnc_signals[idx[k]].name);
+            return NNC_FAIL;
+        }
     int rc = nnc_ping(x);
     if (rc)
         return rc;
@@ -493,6 +498,17 @@ static int h_zs_start(nnc_ctx *x)
         goto out;
     }
     double fs = nnc_num(saved, "sample_rate_Hz"), start = nnc_num(saved, "start_height_m") + (double)p.z_offset_m;
+    {   /* the current Z: where the controller is engaged, its gap (the tip above the surface under it) */
+        json_t *st = NULL;
+        if ((rc = nnc_call(x, json_pack("{s:s}", "cmd", "status"), &st)))
+            goto out;
+        json_t *c = json_object_get(st, "ctrl");
+        json_t *state = json_object_get(c, "state");
+        double gap = nnc_num(c, "gap_m");
+        if (json_is_string(state) && !strcmp(json_string_value(state), "engaged") && isfinite(gap))
+            start = gap + (double)p.z_offset_m;
+        json_decref(st);
+    }
     double k_N = nnc_num(saved, "k_N_per_m"), sens = nnc_num(saved, "sensitivity_m_per_V");
     double speed = nnc_num(saved, "speed");
     int free_run = json_is_true(json_object_get(saved, "free_run"));
