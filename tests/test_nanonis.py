@@ -396,6 +396,10 @@ def test_zctrl_values(nd):
     b, _, _ = c.call("ZCtrl.SetpntGet")
     assert struct.unpack(">f", b)[0] == pytest.approx(3e-9, rel=1e-6)
     assert ctrl(nd)["setpoint"]["value"] == pytest.approx(3e-9, rel=1e-6)
+    # vafm's default: P 0, I from the time constant (10 samples): 1/(k·τ)
+    kv = nd.cmd({"cmd": "get", "names": ["k_N_per_m", "sample_rate_Hz"]})["values"]
+    b, _, _ = c.call("ZCtrl.GainGet")
+    assert struct.unpack(">fff", b) == pytest.approx((0, 0, kv["sample_rate_Hz"] / (10 * kv["k_N_per_m"])))
     c.call("ZCtrl.GainSet", f32(0.02) + f32(0.001) + f32(0))  # I = P/T when I is 0
     b, _, _ = c.call("ZCtrl.GainGet")
     assert struct.unpack(">fff", b) == pytest.approx((0.02, 0.001, 20.0), rel=1e-5)

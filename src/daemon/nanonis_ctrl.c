@@ -245,8 +245,18 @@ static int h_zc_gain_get(nnc_ctx *x)
     if (!c)
         return rc;
     json_t *g = json_object_get(c, "gains");
-    double p = nnc_num(g, "p_m_per_N"), i = nnc_num(g, "i_m_per_N_s");
+    double p = nnc_num(g, "p_m_per_N"), i = nnc_num(g, "i_m_per_N_s"), tau = nnc_num(g, "tau_s");
+    double fs = nnc_num(c, "sample_rate_Hz");
     json_decref(c);
+    if (!(i > 0)) { /* vafm's default: the integral gain from the time constant, 1/(k·τ), τ = 10 samples */
+        static const char *const names[] = { "k_N_per_m" };
+        json_t *v = nnc_get(x, names, 1, &rc);
+        if (!v)
+            return rc;
+        double k = nnc_num(v, "k_N_per_m");
+        json_decref(v);
+        i = 1.0 / (k * (tau > 0 ? tau : 10.0 / fs));
+    }
     nn_put_f32(x->o, (float)p);
     nn_put_f32(x->o, (float)(i > 0 ? p / i : 0.0));
     nn_put_f32(x->o, (float)i);
