@@ -795,3 +795,17 @@ def test_force_map_example(nd, tmp_path):
     assert 0.5 < ratio < 1.0, ratio
     r = subprocess.run(args[:-2] + ["--require-contrast"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 3, r.stdout + r.stderr
+    # a two-material sample under the controller (stripes 1 um wide): each ZSpectr curve takes the material
+    # under the tip, so the 4 x 1 points over 2 um alternate; the recovered adhesion contrast against the
+    # truth (N = 2 curves a material; measured 0.189 against 0.25: the weaker contact's pull-off comes
+    # early at 300 K)
+    spec = "pattern=stripes,period_m=2e-6,b_E_star_Pa=5e9,b_gamma_J_per_m2=0.2"
+    assert nd.cmd({"cmd": "set", "values": {"ctrl_sample": spec}})["status"] == "ok"
+    args = [sys.executable, ex, "--nanonis", f"127.0.0.1:{nd.port}", "--pub", nd.pub, "--nx", "4", "--ny", "1",
+            "--size", "2e-6", "--json", str(out), "--require-contrast"]
+    r = subprocess.run(args, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    res = json.loads(out.read_text())
+    assert [m["points"] for m in res["materials"]] == [2, 2]
+    c = res["contrast"]
+    assert c["true"] == pytest.approx(0.25) and 0.6 < c["recovered"] / c["true"] < 1.15, c

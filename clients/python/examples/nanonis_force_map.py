@@ -15,10 +15,12 @@ of the backward sweep. The truth is the JKR pull-off 3/2 pi gamma R of the curve
 grouped by the material the ground truth reports; the recovered contrast (the ratio of the two materials'
 mean adhesion) is printed beside the true one.
 
-Honesty: vafm's daemon does not yet run a curve over the material under the tip (docs/nanonis.md,
-"ZSpectr and the controller"): every curve is of the scene's one material. The example then reports one
-material, says so, and claims no contrast (exit status 0; 3 with --require-contrast). It never labels points
-by where they are: the material of a point is only what the daemon says it simulated there.
+The sample: vafmd's `ctrl_sample` setting (wire.md §2.4) puts a map's sample under the controller, e.g.
+    vafm ctl set ctrl_sample=pattern=stripes,period_m=2e-6,b_E_star_Pa=5e9,b_gamma_J_per_m2=0.2
+(two materials in stripes); each ZSpectr curve then takes the material under the tip. Without it the sample
+is the scene's one material: the example then reports one material, says so, and claims no contrast (exit
+status 0; 3 with --require-contrast). It never labels points by where they are: the material of a point is
+only what the daemon says it simulated there.
 """
 import argparse
 import json
@@ -177,8 +179,8 @@ def main(argv=None):
         print(f"adhesion contrast: recovered {c_rec:.4f}, true {c_true:.4f}")
     else:
         result["contrast"] = None
-        print("one material under every point: this vafmd does not yet run a curve over the material under "
-              "the tip (docs/nanonis.md), so there is no contrast to recover; none is claimed")
+        print("one material under every point (no two-material ctrl_sample set on vafmd, docs/nanonis.md): "
+              "no contrast to recover; none is claimed")
         status = 3 if a.require_contrast else 0
     if a.json:
         with open(a.json, "w") as fh:
