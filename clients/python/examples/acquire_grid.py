@@ -21,9 +21,13 @@ of each run: run.end's pull-off (`pulloff_sampled_N`) equals the streamed retrac
 for bit, and run.start's controller position (`ctrl.x_m`, `y_m`) is the grid point. Exit status 0 when all
 holds, 1 otherwise (the reason on stderr).
 
-The sample is the daemon's flat uniform one: the sample under the tip is not wired into vafmd's runs yet
-(docs/instrument.md "The daemon"); over a patterned sample the same script would see its topography in the
-controller's piezo Z at each point.
+The sample (`ctrl_sample`, protocol/wire.md) is by default stripes along y of two JKR materials of clearly
+different adhesion, one grid column per stripe: material a (gamma 0.05 J/m^2) under the even columns, b
+(0.2 J/m^2) under the odd ones. Each curve is taken over the material under the tip, and run.start's
+`sample` names it: the material the script infers from its own pull-off at each point (the nearer, on a log
+scale, of the two materials' quasi-static JKR pull-offs 3 pi gamma R / 2) must be that one, and each
+material's mean recorded pull-off must agree with run.end's within its statistical error. `--sample ""` is
+the flat uniform sample of the scene (no material checks).
 """
 import argparse
 import math
@@ -136,6 +140,63 @@ class Acquisition:
         self._ctrl_event(("withdrawn",))
 
 
+def stripes(n, pitch):
+    """Stripes along y, one grid column each (x = (ix - (n-1)/2) pitch sits mid-stripe: material ix % 2)."""
+    return (f"pattern=stripes,size_x_m={n * pitch!r},center_x_m=0,period_m={2 * pitch!r},"
+            f"a_contact=jkr,a_E_star_Pa=1e9,a_gamma_J_per_m2=0.05,b_contact=jkr,b_E_star_Pa=1e9,"
+            f"b_gamma_J_per_m2=0.2")
+
+
+def infer_material(pulloff_N, run):
+    """The material (0: a, 1: b) whose quasi-static JKR pull-off 3 pi gamma R / 2 is the nearer on a log
+    scale (thermal escape only lowers a pull-off; the two differ fourfold); None without a two-material map."""
+    m = (run.start.get("sample") or {}).get("map") or {}
+    ga, gb = m.get("a_gamma_J_per_m2"), m.get("b_gamma_J_per_m2")
+    if not (ga and gb and ga != gb):
+        return None
+    R = run.start["scene"]["R_m"]
+    fa, fb = 1.5 * math.pi * ga * R, 1.5 * math.pi * gb * R
+    lo = 0 if fa < fb else 1
+    return lo if pulloff_N < math.sqrt(fa * fb) else 1 - lo
+
+
+def check_materials(saved):
+    """Per grid point the material inferred from the recorded pull-off against run.start's sample material;
+    per material the mean recorded pull-off against run.end's within its statistical error."""
+    bad, rec, true = [], {}, {}
+    for idx, ((x, y), run) in sorted(saved.items()):
+        sample = run.start.get("sample")
+        if sample is None:
+            continue
+        retract = run.segment == 1
+        f = float(-run["force_N"][retract].min()) if retract.any() else math.nan
+        inferred = infer_material(f, run)
+        if inferred is None:
+            continue
+        if inferred != sample["material"]:
+            bad.append(f"curve {idx}: pull-off {f * 1e9:.3f} nN says material {inferred}, run.start's sample "
+                       f"is material {sample['material']}")
+        rec.setdefault(inferred, []).append(f)
+        true.setdefault(sample["material"], []).append(run.end["result"]["pulloff_sampled_N"])
+    # N = the material's grid points (3x3 grid: 6 of a, 3 of b); sigma = the sample standard deviation of
+    # their recorded pull-offs (thermal escape: ~0.02 nN on a at 2.3 nN, ~0.01 nN on b at 9.4 nN); the means
+    # must agree within 3 sigma / sqrt(N), and exactly for a single point
+    for mat in sorted(set(rec) | set(true)):
+        r, t = rec.get(mat, []), true.get(mat, [])
+        if len(r) != len(t):
+            bad.append(f"material {mat}: {len(r)} points inferred, {len(t)} under the tip")
+            continue
+        n = len(r)
+        mean_r, mean_t = sum(r) / n, sum(t) / n
+        sigma = math.sqrt(sum((v - mean_r) ** 2 for v in r) / (n - 1)) if n > 1 else 0.0
+        print(f"material {mat}: N = {n}, mean pull-off {mean_r * 1e9:.4f} nN (sigma {sigma * 1e9:.4f} nN), "
+              f"run.end's {mean_t * 1e9:.4f} nN")
+        if abs(mean_r - mean_t) > 3 * sigma / math.sqrt(n):
+            bad.append(f"material {mat}: mean recorded pull-off {mean_r!r} N, run.end's {mean_t!r} N "
+                       f"(N = {n}, sigma = {sigma!r} N)")
+    return bad
+
+
 def check_truth(saved):
     """What was recorded against each run's ground truth: a list of problems."""
     bad = []
@@ -161,6 +222,8 @@ def main(argv=None):
     ap.add_argument("--pitch", type=float, default=1e-6, help="grid pitch, m")
     ap.add_argument("--speed", type=float, default=1000.0,
                     help="the daemon's pacing factor while the script runs (engage and moves; restored after)")
+    ap.add_argument("--sample", help="the controller's sample (ctrl_sample; \"\": flat uniform); default: "
+                    "stripes of two materials, one grid column each")
     ap.add_argument("--faults", action="store_true", help="inject one fault of each kind first and check "
                     "that each was noticed")
     a = ap.parse_args(argv)
@@ -183,6 +246,9 @@ def main(argv=None):
         c = acq.c
         speed = c.get("speed")["speed"]
         c.set({"speed": a.speed})
+        sample = c.get("ctrl_sample")["ctrl_sample"]
+        c.set({"ctrl_sample": stripes(a.n, a.pitch) if a.sample is None else a.sample})  # before engaging:
+        # a new sample rebuilds the controller
         if a.faults:
             c.faults(FAULT_PLAN)
         acq.engage()
@@ -197,8 +263,9 @@ def main(argv=None):
                 acq.say(f"curve {idx} at ({x * 1e6:+.2f}, {y * 1e6:+.2f}) um: run {run.run_id}, "
                         f"pull-off {run.end['result']['pulloff_sampled_N'] * 1e9:.3f} nN")
         acq.withdraw()
-        c.set({"speed": speed})
+        c.set({"speed": speed, "ctrl_sample": sample})
         problems += check_truth(acq.saved)
+        problems += check_materials(acq.saved)
         if len(acq.saved) != a.n * a.n:
             problems.append(f"{len(acq.saved)} of {a.n * a.n} grid points recorded")
         if a.faults:
