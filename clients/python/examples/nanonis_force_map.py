@@ -7,13 +7,20 @@
 
 Speaks to vafmd's Nanonis port exactly as a script for a Nanonis controller would (plain sockets and
 struct, from TCPProtocol_SPM: FolMe.XYPosSet, ZSpectr.ChsSet/PropsSet/RangeSet/TimingSet/RetractSet,
-ZSpectr.Start with data), and listens on vafmd's stream for each curve's ground truth (run.start's `scene`:
-the material the daemon simulated under the tip for that curve).
+ZSpectr.Start with data), and listens on vafmd's stream for each curve's ground truth, found by the Run ID
+the sweep returns (docs/nanonis.md): run.start's `scene` (the material the daemon simulated under the tip
+for that curve) and run.end's `result` (wire.md §3.3: `pulloff_sampled_N`, the curve's own pull-off).
 
 From each point's measured data alone it recovers the adhesion: the pull-off force, the most tensile force
-of the backward sweep. The truth is the JKR pull-off 3/2 pi gamma R of the curve's own scene. Points are
-grouped by the material the ground truth reports; the recovered contrast (the ratio of the two materials'
-mean adhesion) is printed beside the true one.
+of the backward sweep. The truth is the same curve's `pulloff_sampled_N` (at a finite temperature the
+contact pulls off early, thermally activated, so the athermal JKR pull-off 3/2 pi gamma R of the scene is
+not what the curve did; it is printed as an extra line). Points are grouped by the material the ground
+truth reports; the recovered contrast (the ratio of the two materials' mean adhesion) is printed beside
+the true one of the same curves with sigma, the standard error of their difference: the sems of the
+materials' means (recovered and true, N curves each) and the sweep's resolution (the backward sweep reads
+the force every distance/points in Z, so its most tensile point falls short of the pull-off by up to one
+step k dZ of the spring force, uncorrected: k dZ/sqrt(3) on each recovered mean), in quadrature. The check
+(exit 4 when it fails) is agreement within 3 sigma.
 
 The sample: vafmd's `ctrl_sample` setting (wire.md §2.4) puts a map's sample under the controller, e.g.
     vafm ctl set ctrl_sample=pattern=stripes,period_m=2e-6,b_E_star_Pa=5e9,b_gamma_J_per_m2=0.2
@@ -110,6 +117,7 @@ def main(argv=None):
 
     sub = zmq.Context.instance().socket(zmq.SUB)
     sub.setsockopt(zmq.SUBSCRIBE, b"run.start")
+    sub.setsockopt(zmq.SUBSCRIBE, b"run.end")
     sub.connect(a.pub)
     time.sleep(0.3)  # the subscription reaches the daemon
 
@@ -132,6 +140,22 @@ def main(argv=None):
     xs = (np.arange(a.nx) + 0.5) / a.nx * a.size - a.size / 2
     ys = (np.arange(a.ny) + 0.5) / a.ny * a.size - a.size / 2
     pts = []
+    seen = {}  # run id -> {"run.start": header, "run.end": header}, from the stream
+
+    def truth(run_id):
+        deadline = time.time() + 10
+        while len(seen.get(run_id, {})) < 2 and time.time() < deadline:  # this curve's run.start and run.end
+            if sub.poll(500):
+                frames = sub.recv_multipart()
+                h = json.loads(frames[1])
+                if "run_id" in h:
+                    seen.setdefault(h["run_id"], {})[frames[0].decode()] = h
+        got = seen.pop(run_id, {})
+        for topic in ("run.start", "run.end"):
+            if topic not in got:
+                sys.exit(f"no {topic} for run {run_id} on {a.pub}: is --pub vafmd's stream?")
+        return got["run.start"], got["run.end"]
+
     t0 = time.time()
     for iy, y in enumerate(ys):
         for ix, x in enumerate(xs):
@@ -140,20 +164,15 @@ def main(argv=None):
             run_id = int(params[5])  # Run ID (docs/nanonis.md: after the fixed parameters)
             bwd = data[chans.index("Force [bwd] (N)")]
             adhesion = max(0.0, -float(np.nanmin(bwd))) if np.isfinite(bwd).any() else math.nan
-            scene = None
-            deadline = time.time() + 10
-            while scene is None and time.time() < deadline:  # this curve's run.start
-                if sub.poll(500):
-                    frames = sub.recv_multipart()
-                    h = json.loads(frames[1])
-                    if h.get("run_id") == run_id:
-                        scene = h["scene"]
-            if scene is None:
-                sys.exit(f"no run.start for run {run_id} on {a.pub}: is --pub vafmd's stream?")
+            start, end = truth(run_id)
+            scene, res = start["scene"], end.get("result") or {}
+            if end.get("status") != "ok" or res.get("pulloff_sampled_N") is None:
+                sys.exit(f"run {run_id} ended {end.get('status')} without a pull-off: {end.get('error')}")
             R, gamma, E = scene["R_m"], scene["gamma_J_per_m2"], scene["E_star_Pa"]
             pts.append({"ix": ix, "iy": iy, "x_m": float(x), "y_m": float(y), "run_id": run_id,
                         "adhesion_N": adhesion, "E_star_Pa": E, "gamma_J_per_m2": gamma,
-                        "adhesion_true_N": 1.5 * math.pi * gamma * R})
+                        "adhesion_true_N": res["pulloff_sampled_N"],
+                        "adhesion_jkr_N": 1.5 * math.pi * gamma * R, "k_N_per_m": scene["k_N_per_m"]})
     dt = time.time() - t0
 
     mats = {}
@@ -161,22 +180,50 @@ def main(argv=None):
         mats.setdefault((p["E_star_Pa"], p["gamma_J_per_m2"]), []).append(p)
     summary = []
     print(f"{len(pts)} points ({a.nx} x {a.ny} over {a.size * 1e6:g} um) in {dt:.1f} s")
+
+    def sem(v):
+        return float(v.std(ddof=1) / math.sqrt(len(v))) if len(v) > 1 else math.nan
+
     for (E, g), ps in sorted(mats.items()):
         rec = np.array([p["adhesion_N"] for p in ps])
-        true = ps[0]["adhesion_true_N"]
-        sem = float(rec.std(ddof=1) / math.sqrt(len(rec))) if len(rec) > 1 else math.nan
-        summary.append({"E_star_Pa": E, "gamma_J_per_m2": g, "points": len(ps), "adhesion_true_N": true,
-                        "adhesion_recovered_N": float(np.nanmean(rec)), "adhesion_recovered_sem_N": sem})
+        tru = np.array([p["adhesion_true_N"] for p in ps])
+        jkr = ps[0]["adhesion_jkr_N"]
+        m = {"E_star_Pa": E, "gamma_J_per_m2": g, "points": len(ps),
+             "adhesion_true_N": float(tru.mean()), "adhesion_true_sem_N": sem(tru),
+             "adhesion_recovered_N": float(np.nanmean(rec)), "adhesion_recovered_sem_N": sem(rec),
+             "adhesion_jkr_N": jkr}
+        summary.append(m)
         print(f"material E* = {E:.4g} Pa, gamma = {g:.4g} J/m^2: {len(ps)} points, adhesion recovered "
-              f"{np.nanmean(rec) * 1e9:.3f} +- {sem * 1e9:.3f} nN, true (JKR) {true * 1e9:.3f} nN")
+              f"{m['adhesion_recovered_N'] * 1e9:.3f} +- {m['adhesion_recovered_sem_N'] * 1e9:.3f} nN, "
+              f"true (the same curves' pull-off) {m['adhesion_true_N'] * 1e9:.3f} "
+              f"+- {m['adhesion_true_sem_N'] * 1e9:.3f} nN")
+        print(f"  athermal JKR pull-off 3/2 pi gamma R {jkr * 1e9:.3f} nN (not the truth at a finite T)")
     result = {"points": pts, "materials": summary}
     status = 0
     if len(summary) >= 2:
         lo, hi = summary[0], summary[-1]
         c_true = hi["adhesion_true_N"] / lo["adhesion_true_N"]
         c_rec = hi["adhesion_recovered_N"] / lo["adhesion_recovered_N"]
-        result["contrast"] = {"true": c_true, "recovered": c_rec}
-        print(f"adhesion contrast: recovered {c_rec:.4f}, true {c_true:.4f}")
+        c_jkr = hi["adhesion_jkr_N"] / lo["adhesion_jkr_N"]
+        # the standard error of c_rec - c_true: each material's means, recovered and true, as independent
+        # estimates (their sems), and the sweep's resolution k dZ / sqrt(3) (the recovered pull-off falls
+        # short by 0 to one Z step k dZ of the spring force, not corrected for: the standard deviation of a
+        # uniform error of half-width k dZ), in quadrature; relative errors of numerator and denominator
+        res = pts[0]["k_N_per_m"] * abs(a.distance) / a.points / math.sqrt(3)
+        rel = [(m["adhesion_recovered_sem_N"] ** 2 + res ** 2) / m["adhesion_recovered_N"] ** 2
+               + (m["adhesion_true_sem_N"] / m["adhesion_true_N"]) ** 2 for m in (lo, hi)]
+        sigma = c_true * math.sqrt(sum(rel))
+        z = (c_rec - c_true) / sigma if sigma > 0 else math.inf if sigma == 0 else math.nan
+        agree = bool(abs(z) <= 3) if math.isfinite(sigma) else None  # None: a material of one curve, no sem
+        result["contrast"] = {"true": c_true, "recovered": c_rec, "sigma": sigma, "z": z, "resolution_N": res,
+                              "points": [lo["points"], hi["points"]], "agree": agree, "jkr": c_jkr}
+        print(f"adhesion contrast: recovered {c_rec:.4f}, true {c_true:.4f} (the same curves' pull-off; "
+              f"N = {lo['points']} + {hi['points']} curves), sigma {sigma:.4f}: "
+              f"{z:+.2f} sigma, " + ("no check (a material of one curve has no sem)" if agree is None else
+                                     "agree within 3 sigma" if agree else "DISAGREE: not within 3 sigma"))
+        print(f"athermal JKR contrast {c_jkr:.4f} (an extra line: the weaker contact pulls off early at a "
+              f"finite T)")
+        status = 4 if agree is False else 0
     else:
         result["contrast"] = None
         print("one material under every point (no two-material ctrl_sample set on vafmd, docs/nanonis.md): "
