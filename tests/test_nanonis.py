@@ -813,4 +813,4 @@ def test_force_map_example(nd, tmp_path):
     assert [m["points"] for m in res["materials"]] == [2, 2]
     c = res["contrast"]
     assert c["points"] == [2, 2] and c["agree"] and abs(c["recovered"] - c["true"]) <= 3 * c["sigma"], c
-    assert 0 < c["sigma"] < 0.05 and c["jkr"] == pytest.approx(0.25), c
+    assert 0 < c["sigma"] < 0.05 and c["jkr"] == pytest.approx(0.25) and 0.6 < c["recovered"] / c["true"] < 1.15, c
