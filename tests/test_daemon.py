@@ -1391,7 +1391,8 @@ def test_log_kill9_resume_map_first_index(tmp_path):
     restarted, `log` with resume, the map again from first_index 10: campaign.end comes (6 curves), each
     pending is logged, the file keeps what the killed daemon made durable and gains the 6, and the daemon
     exits 0. Under ThreadSanitizer a loop of this found the control thread reading the campaign after
-    handing it over (control.c, s_campaign); that race is not reproduced here deterministically."""
+    handing it over (control_runs.c, vafmd_control_campaign); that race is not reproduced here
+    deterministically."""
     h5py = pytest.importorskip("h5py")
     spec = {"nx": 4, "ny": 4, "size_x_m": 6e-6, "size_y_m": 6e-6, "pattern": "dome"}
     path = tmp_path / "resume.h5"

@@ -14,7 +14,7 @@
  *   set (scene or ctrl_* changed) ──ring──▶     OP_NEW: a controller built here replaces the old one
  *   status ◀── snapshot under a mutex that the simulation thread only ever TRY-locks (never waits)
  *
- * The live channel list is declared once, in live.c (s_live_channels).
+ * The live channel list is declared once, in live_int.h (s_live_channels).
  */
 #ifndef VAFMD_LIVE_H
 #define VAFMD_LIVE_H

@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* The arguments of the controller commands (engage, withdraw, move, z, feedback; protocol/wire.md §2.3):
  * types and the ranges that need no state; the controller's own ranges (piezo, scanner) are checked by the
- * control thread against its settings (live.c), the state by the controller itself. */
+ * control thread against its settings (live_cmd.c), the state by the controller itself. */
 #include <math.h>
 #include <string.h>
 #include "daemon/cmd_json.h"
