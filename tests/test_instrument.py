@@ -449,3 +449,65 @@ def test_curve_segment_list_over_the_wire(tmp_path):
     assert d.cmd({"cmd": "log", "path": str(tmp_path / "l.h5")})["status"] == "ok"
     assert "vafm segments" in err(d.cmd({"cmd": "curve", "segments": SEG4}), "state", "segments")
     d.stop()
+
+
+# Issue #26: tune, campaign and map from the live state. Two-material stripes (period 4 um from the default
+# 10 um grid's left edge at -5 um): the tip at x = 0 is over material a (the scene's own), at x = 1.5 um over
+# material b (E* 5 GPa, gamma 0.5 J/m^2).
+STRIPES = "pattern=stripes,period_m=4e-6,b_E_star_Pa=5e9,b_gamma_J_per_m2=0.5"
+DERIVED = ("E_star_Pa", "gamma_J_per_m2", "contact", "surface_height_m", "start_height_m")
+
+
+def move_to(d, x_m):
+    assert d.cmd({"cmd": "move", "x_m": x_m, "y_m": 0, "speed_m_per_s": 1e-3})["status"] == "ok"
+    for _ in range(200):
+        st = d.cmd({"cmd": "status"})["ctrl"]
+        if not st["moving"]:
+            assert st["x_m"] == x_m, st
+            return
+        time.sleep(0.05)
+    raise AssertionError("the controller did not reach x_m")
+
+
+def run_of(d, s, req):
+    """run.start and the samples (every channel, bytes) of one tune or curve request."""
+    r = d.cmd(req)
+    assert r["status"] == "ok", r
+    start, blocks, _, end = collect_run(s, r["run_id"])
+    assert end["status"] == "ok", end
+    return start, b"".join(b"".join(p) for _, p in blocks)
+
+
+def rerun_scene(d, scene):
+    """Re-run from the record: no sample, the scene's derived values set."""
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": ""}})["status"] == "ok"
+    assert d.cmd({"cmd": "set", "values": {k: scene[k] for k in DERIVED}})["status"] == "ok"
+
+
+def test_tune_from_live_state_over_a_sample():
+    """A `tune` started with ctrl_sample set runs over the material under the tip, as a curve does: run.start
+    names the point ("sample") and holds the derived scene; that scene with no sample re-runs the tune bit for
+    bit (same index). Over material a (the scene's own) the tune is the plain one; without ctrl_sample it is
+    today's."""
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    tune = {"cmd": "tune", "duration_s": 0.05, "index": 4}
+    plain, data0 = run_of(d, s, tune)
+    assert "sample" not in plain
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": STRIPES}})["status"] == "ok"
+    on_a, data_a = run_of(d, s, tune)
+    assert on_a["sample"]["material"] == 0 and on_a["sample"]["ctrl_sample"] == STRIPES, on_a["sample"]
+    assert on_a["scene"] == plain["scene"] and data_a == data0
+    move_to(d, 1.5e-6)
+    on_b, data_b = run_of(d, s, tune)
+    t = on_b["sample"]
+    assert t["material"] == 1 and t["x_m"] == 1.5e-6 and t["E_star_Pa"] == 5e9, t
+    assert on_b["kind"] == "tune" and on_b["scene"]["E_star_Pa"] == 5e9 and on_b["scene"]["gamma_J_per_m2"] == 0.5
+    assert on_b["scene"] != plain["scene"] and data_b != data_a, "the tune did not feel material b"
+    rerun_scene(d, on_b["scene"])
+    again, data_again = run_of(d, s, tune)
+    assert "sample" not in again and again["scene"] == on_b["scene"]
+    assert data_again == data_b
+    d.stop()
+

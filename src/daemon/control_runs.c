@@ -170,8 +170,9 @@ json_t *vafmd_control_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         return NULL;
     }
     vafm_params p = d->scene;
-    json_t *at_tip = NULL; /* a curve from the live state over a sample: the point under the tip (live.c) */
-    if (kind == VAFMD_RUN_CURVE && vafmd_live_curve_scene(d, &p, &at_tip, e) < 0)
+    /* a curve or tune from the live state over a sample: the scene and the point under the tip (live_cmd.c) */
+    json_t *at_tip = NULL;
+    if (vafmd_live_curve_scene(d, &p, &at_tip, e) < 0)
         return NULL;
     if (c->has_duration) {
         char buf[64];
