@@ -478,6 +478,18 @@ def run_of(d, s, req):
     return start, b"".join(b"".join(p) for _, p in blocks)
 
 
+def campaign_of(d, s, req):
+    """Each curve's (run.start, samples) of a campaign or map request, in order."""
+    r = d.cmd(req)
+    assert r["status"] == "ok", r
+    out = []
+    for k in range(r["curves"]):
+        start, blocks, _, end = collect_run(s, r["run_id"] + k)
+        assert end["status"] == "ok", end
+        out.append((start, b"".join(b"".join(p) for _, p in blocks)))
+    return out
+
+
 def rerun_scene(d, scene):
     """Re-run from the record: no sample, the scene's derived values set."""
     assert d.cmd({"cmd": "set", "values": {"ctrl_sample": ""}})["status"] == "ok"
@@ -509,5 +521,45 @@ def test_tune_from_live_state_over_a_sample():
     again, data_again = run_of(d, s, tune)
     assert "sample" not in again and again["scene"] == on_b["scene"]
     assert data_again == data_b
+    d.stop()
+
+
+def test_campaign_from_live_state_over_a_sample(tmp_path):
+    """A `campaign` started with ctrl_sample set runs all its curves over the material under the tip: each
+    run.start names the point ("sample") and holds the derived scene, and so does the log (each curve's E*, the
+    run's "sample" in "vafm ctrl"); the derived scene with no sample re-runs every curve bit for bit. Over
+    material a the curves are the plain campaign's; without ctrl_sample it is today's."""
+    import h5py
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "set", "values": {"speed": 50}})["status"] == "ok"
+    camp = {"cmd": "campaign", "n": 2, "T_K": [300.0], "first_index": 0}
+    plain = campaign_of(d, s, camp)
+    assert all("sample" not in st for st, _ in plain)
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": STRIPES}})["status"] == "ok"
+    on_a = campaign_of(d, s, camp)
+    assert [st["sample"]["material"] for st, _ in on_a] == [0, 0]
+    assert [x for _, x in on_a] == [x for _, x in plain]
+    move_to(d, 1.5e-6)
+    log = tmp_path / "camp.h5"
+    assert d.cmd({"cmd": "log", "path": str(log)})["status"] == "ok"
+    on_b = campaign_of(d, s, camp)
+    assert d.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 2
+    for (st, x), (st_a, x_a) in zip(on_b, on_a):
+        t = st["sample"]
+        assert t["material"] == 1 and t["x_m"] == 1.5e-6 and t["ctrl_sample"] == STRIPES, t
+        assert st["scene"]["E_star_Pa"] == 5e9 and st["scene"]["gamma_J_per_m2"] == 0.5, st["scene"]
+        assert st["campaign"]["T_K"] == 300.0 and x != x_a  # the same index over material b: another curve
+    with h5py.File(log, "r") as h:
+        j = json.loads(h.attrs["vafm ctrl"])
+        assert j["runs"][0]["sample"]["material"] == 1, j["runs"]
+        truth = h.attrs["vafm ground truth"]  # each logged curve's scene: the derived one
+        assert list(truth["E_star_Pa"]) == [5e9, 5e9] and list(truth["gamma_J_per_m2"]) == [0.5, 0.5], truth
+    rerun_scene(d, on_b[0][0]["scene"])
+    again = campaign_of(d, s, camp)
+    assert all("sample" not in st for st, _ in again)
+    assert [st["scene"] for st, _ in again] == [st["scene"] for st, _ in on_b]
+    assert [x for _, x in again] == [x for _, x in on_b]
     d.stop()
 

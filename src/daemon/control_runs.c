@@ -270,6 +270,14 @@ json_t *vafmd_control_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     return s_run_accepted(d, c, run_id, kind, block_n);
 }
 
+/* A campaign not handed over: free it (its simulation and feeder are the caller's). */
+static void s_camp_free(vafmd_campaign *cp)
+{
+    json_decref(cp->sample);
+    free(cp->lists);
+    free(cp);
+}
+
 /* `campaign`: check the whole grid here (every point's scene, the first point's simulation), where an
  * error can still be answered; the simulation thread then runs the curves one after the other. */
 json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
@@ -314,6 +322,12 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             *lp++ = json_number_value(json_array_get(c->camp_list[l], i));
     }
     cp->base = d->scene;
+    /* a campaign from the live state over a sample: all its curves over the material under the tip (as a
+     * curve's), each run.start naming the point */
+    if (c->kind != VAFMD_CMD_MAP && vafmd_live_curve_scene(d, &cp->base, &cp->sample, e) < 0) {
+        s_camp_free(cp);
+        return NULL;
+    }
     if (c->kind == VAFMD_CMD_MAP) {
         /* a force map: a campaign whose grid is the pixels, each curve the pixel's scene (vafm_map_pixel) */
         cp->is_map = 1;
@@ -326,8 +340,7 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         if (mrc) {
             vafmd_err_set(e, VAFMD_E_INVALID_SCENE, merr.field, "%s",
                           merr.message[0] ? merr.message : vafm_strerror(mrc));
-            free(cp->lists);
-            free(cp);
+            s_camp_free(cp);
             return NULL;
         }
     }
@@ -349,8 +362,7 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
                                                                         : cverr.field;
         vafmd_err_set(e, n[0] + n[1] + n[2] ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_INVALID_SCENE, field, "%s",
                       cverr.message[0] ? cverr.message : vafm_strerror(crc));
-        free(cp->lists);
-        free(cp);
+        s_camp_free(cp);
         return NULL;
     }
     for (size_t pt = 0; pt < points; pt++) {
@@ -359,8 +371,7 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         vafm_campaign_point_params(&cp->base, &cp->spec, pt, &pp);
         snprintf(where, sizeof where, "grid point %zu", pt);
         if (s_log_fits(d, &pp, where, e)) {
-            free(cp->lists);
-            free(cp);
+            s_camp_free(cp);
             return NULL;
         }
     }
@@ -373,8 +384,7 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     if (rc) {
         vafmd_err_set(e, VAFMD_E_INVALID_SCENE, verr.field, "grid point %zu: cannot build the simulation: %s", pt0,
                       verr.message[0] ? verr.message : vafm_strerror(rc));
-        free(cp->lists);
-        free(cp);
+        s_camp_free(cp);
         return NULL;
     }
     cp->sim_point = pt0;
@@ -389,8 +399,7 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         (rc = vafmd_feed_start(&cp->feed, &cp->base, &cp->spec)) != 0) {
         vafmd_err_set(e, VAFMD_E_INTERNAL, "kernel", "cannot start the batch kernel's feeder: %s", vafm_strerror(rc));
         vafm_sim_destroy(&cp->sim);
-        free(cp->lists);
-        free(cp);
+        s_camp_free(cp);
         return NULL;
     }
     snprintf(cp->client_run_id, sizeof cp->client_run_id, "%s", c->client_run_id);
@@ -406,8 +415,7 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     if (!vafmd_ring_push(&d->ring, &sc)) {
         vafmd_feed_release(&cp->feed);
         vafm_sim_destroy(&cp->sim);
-        free(cp->lists);
-        free(cp);
+        s_camp_free(cp);
         vafmd_err_set(e, VAFMD_E_BUSY, "", "the simulation thread does not take commands now; retry");
         return NULL;
     }

@@ -82,6 +82,7 @@ typedef struct vafmd_campaign {
     vafm_map_spec map;             /* spec.point_user points here */
     double lateral_speed_m_per_s;  /* the lateral move between pixels takes distance / this (paced runs) */
     int64_t move_until_ns;         /* the move to the next pixel ends then (0: none under way) */
+    json_t *sample;                /* from the live state (ctrl_sample set): each run.start's "sample", or NULL */
 } vafmd_campaign;
 
 /* One command for the simulation thread (copied through the ring). */
