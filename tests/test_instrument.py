@@ -563,3 +563,49 @@ def test_campaign_from_live_state_over_a_sample(tmp_path):
     assert [x for _, x in again] == [x for _, x in on_b]
     d.stop()
 
+
+def test_map_from_live_state_over_a_sample():
+    """A `map` whose spec names no field of the sample (only the grid: nx, ny, size, centre, start) maps the
+    controller's sample (ctrl_sample), in the sample's frame (the grid centred where its spec says, not at the
+    tip), and run.start's "sample" records the spec mapped; the controller's x, y are the same after it. That
+    spec given as the map's own, with no sample, maps the same curves bit for bit; a map that gives its own
+    spec is unchanged by ctrl_sample, and without ctrl_sample a grid-only map is today's uniform one."""
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "set", "values": {"speed": 50}})["status"] == "ok"
+    grid = {"nx": 4, "ny": 1, "size_x_m": 8e-6}  # pixel centres -3, -1, 1, 3 um; stripes from -4 um: a b a b
+    plain = campaign_of(d, s, {"cmd": "map", "map": grid})
+    assert all("sample" not in st and st["campaign"]["map"]["material"] == 0 for st, _ in plain)
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": STRIPES}})["status"] == "ok"
+    move_to(d, 1.5e-6)
+    err(d.cmd({"cmd": "map", "map": {"nx": 2, "ny": 1}, "first_index": 2}), "out_of_range", "first_index")
+    live = campaign_of(d, s, {"cmd": "map", "map": grid})
+    assert [st["campaign"]["map"]["material"] for st, _ in live] == [0, 1, 0, 1]
+    m = live[0][0]["sample"]["map"]
+    assert live[0][0]["sample"]["ctrl_sample"] == STRIPES and all(st["sample"] == live[0][0]["sample"] for st, _ in live)
+    assert (m["pattern"], m["nx"], m["ny"], m["size_x_m"], m["center_x_m"], m["b_E_star_Pa"]) == \
+        ("stripes", 4, 1, 8e-6, 0, 5e9), m
+    for k in (0, 1, 2, 3):  # over material a the plain map's curves, over b others
+        assert (live[k][1] == plain[k][1]) == (k % 2 == 0), k
+        assert live[k][0]["scene"]["E_star_Pa"] == (5e9 if k % 2 else plain[k][0]["scene"]["E_star_Pa"])
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["x_m"] == 1.5e-6 and st["y_m"] == 0, st  # the map leaves the controller where it was
+    own = {k: v for k, v in m.items() if v is not None}  # the record as the map's own spec
+    mine = campaign_of(d, s, {"cmd": "map", "map": own})  # its own spec: ctrl_sample plays no part
+    assert all("sample" not in st for st, _ in mine) and [x for _, x in mine] == [x for _, x in live]
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": ""}})["status"] == "ok"
+    again = campaign_of(d, s, {"cmd": "map", "map": own})
+    assert [(st["scene"], st["campaign"]["map"]) for st, _ in again] == \
+        [(st["scene"], st["campaign"]["map"]) for st, _ in live]
+    assert [x for _, x in again] == [x for _, x in live]
+    flat = campaign_of(d, s, {"cmd": "map", "map": grid})
+    assert [x for _, x in flat] == [x for _, x in plain]
+    # first_index is checked against the grid mapped: ctrl_sample's 64 x 32, not the request's default 32 x 32
+    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": STRIPES + ",nx=64,ny=32"}})["status"] == "ok"
+    err(d.cmd({"cmd": "map", "map": {}, "first_index": 2048}), "out_of_range", "first_index")
+    r = d.cmd({"cmd": "map", "map": {}, "first_index": 2047})
+    assert r["status"] == "ok" and r["curves"] == 2048, r
+    start, _, _, end = collect_run(s, r["run_id"])
+    assert end["status"] == "ok" and start["campaign"]["map"]["ix"] == 63 and start["campaign"]["map"]["iy"] == 31
+    d.stop()

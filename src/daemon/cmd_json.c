@@ -12,6 +12,7 @@
 #include <float.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -181,6 +182,25 @@ static int s_param_apply(vafm_params *p, const vafm_param_info *f, json_t *v, va
 
 /* ---- decoding ------------------------------------------------------------------------------------ */
 
+/* The map spec's fields that say where and how finely to scan and how each curve starts, not what the sample
+ * is: a `map` that gives only these maps the controller's sample (ctrl_sample), if one is set. */
+#define S_GRID_FIELD(f) { #f, offsetof(vafm_map_spec, f), sizeof(((vafm_map_spec *)0)->f) }
+static const struct {
+    const char *name;
+    size_t offset, size;
+} s_map_grid_keys[] = { S_GRID_FIELD(nx), S_GRID_FIELD(ny), S_GRID_FIELD(size_x_m), S_GRID_FIELD(size_y_m),
+                        S_GRID_FIELD(center_x_m), S_GRID_FIELD(center_y_m), S_GRID_FIELD(start) };
+#undef S_GRID_FIELD
+#define S_MAP_GRID_KEYS (sizeof s_map_grid_keys / sizeof s_map_grid_keys[0])
+
+void vafmd_map_grid_merge(vafm_map_spec *dst, const vafm_map_spec *req, unsigned given)
+{
+    for (unsigned i = 0; i < S_MAP_GRID_KEYS; i++)
+        if (given & 1u << i)
+            memcpy((char *)dst + s_map_grid_keys[i].offset, (const char *)req + s_map_grid_keys[i].offset,
+                   s_map_grid_keys[i].size);
+}
+
 /* `map`: the spec's fields by vafm_map_set's names (numbers for numbers, strings for the pattern, the start
  * mode and the materials' contact models), first_index below the pixel count, the lateral speed. */
 static int s_decode_map(json_t *root, vafmd_cmd *c, vafmd_err *e)
@@ -216,8 +236,17 @@ static int s_decode_map(json_t *root, vafmd_cmd *c, vafmd_err *e)
                           verr.message);
             return -1;
         }
+        unsigned g = 0;
+        while (g < S_MAP_GRID_KEYS && strcmp(key, s_map_grid_keys[g].name))
+            g++;
+        if (g < S_MAP_GRID_KEYS)
+            c->map_grid_given |= 1u << g;
+        else
+            c->map_own_sample = 1;
     }
-    size_t pixels = vafm_map_pixels(&c->map);
+    /* a map of the grid only may map the controller's sample, whose grid may be larger: its first_index is
+     * checked against the grid mapped, by the control thread (control_runs.c) */
+    size_t pixels = c->map_own_sample ? vafm_map_pixels(&c->map) : (size_t)VAFM_MAP_MAX_PIXELS;
     c->camp_n = 1;
     if ((v = json_object_get(root, "first_index")) != NULL) {
         if (!json_is_integer(v) || json_integer_value(v) < 0 || (uint64_t)json_integer_value(v) >= pixels) {

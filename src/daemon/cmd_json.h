@@ -83,6 +83,8 @@ typedef struct vafmd_cmd {
     uint64_t camp_first;   /* campaign, map: first_index (0 if absent) */
     vafm_map_spec map;     /* map: the spec (vafm_map_set of each key of "map") */
     double map_lateral_speed; /* map: lateral_speed_m_per_s */
+    unsigned map_grid_given;  /* map: the grid's keys given (bit i: vafmd_map_grid_merge's i-th name) */
+    int map_own_sample;       /* map: 1 if "map" names a field of the sample (pattern, its geometry, a material) */
     json_t *fault_plan;    /* faults: borrowed plan object (set/replace), or NULL */
     int fault_clear;       /* faults: 1 = "clear": true */
     vafmd_live_op ctrl;    /* engage, withdraw, move, z, feedback (live_json.c) */
@@ -90,6 +92,10 @@ typedef struct vafmd_cmd {
 
 #define VAFMD_CAMPAIGN_LIST_MAX 1000      /* values per campaign list */
 #define VAFMD_CAMPAIGN_POINTS_MAX 100000  /* grid points of a campaign */
+
+/** A map from the live state (wire.md "map"): into dst (the controller's sample), the grid's fields the request
+ *  gave (c->map_grid_given: nx, ny, size_x_m, size_y_m, center_x_m, center_y_m, start) from its spec req. */
+void vafmd_map_grid_merge(vafm_map_spec *dst, const vafm_map_spec *req, unsigned given);
 
 /** Decode one request. @return 0 (free c with vafmd_cmd_free) or -1 with e filled (c holds nothing). */
 int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e);

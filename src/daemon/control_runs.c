@@ -278,6 +278,33 @@ static void s_camp_free(vafmd_campaign *cp)
     free(cp);
 }
 
+/* A map from the live state: a `map` whose spec names no field of the sample maps the controller's
+ * (ctrl_sample), its grid's fields given by the request over ctrl_sample's; run.start's "sample" says so.
+ * @return 0 (cp->map set, cp->sample set or NULL) or -1 with e filled. */
+static int s_camp_map_spec(vafmd *d, const vafmd_cmd *c, vafmd_campaign *cp, vafmd_err *e)
+{
+    const char *text = NULL;
+    cp->map = c->map;
+    int live = !c->map_own_sample && vafmd_live_sample(d, &cp->map, &text);
+    if (live)
+        vafmd_map_grid_merge(&cp->map, &c->map, c->map_grid_given);
+    size_t pixels = vafm_map_pixels(&cp->map); /* the decoder checked first_index only against an own spec's */
+    if (c->camp_first >= pixels) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "first_index", "\"first_index\" must be an integer in [0, %zu] (the "
+                      "map's pixels, iy*nx + ix%s)", pixels ? pixels - 1 : 0, live ? ", over ctrl_sample" : "");
+        return -1;
+    }
+    if (!live)
+        return 0; /* the request's own spec, as before */
+    char buf[4096];
+    json_t *spec = vafm_map_to_json(&cp->map, buf, sizeof buf) > 0 ? json_loads(buf, 0, NULL) : NULL;
+    if (!spec || !(cp->sample = json_pack("{s:s,s:o}", "ctrl_sample", text, "map", spec))) {
+        vafmd_err_set(e, VAFMD_E_BUSY, "", "out of memory for the map's sample; retry");
+        return -1;
+    }
+    return 0;
+}
+
 /* `campaign`: check the whole grid here (every point's scene, the first point's simulation), where an
  * error can still be answered; the simulation thread then runs the curves one after the other. */
 json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
@@ -323,15 +350,15 @@ json_t *vafmd_control_campaign(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     }
     cp->base = d->scene;
     /* a campaign from the live state over a sample: all its curves over the material under the tip (as a
-     * curve's), each run.start naming the point */
-    if (c->kind != VAFMD_CMD_MAP && vafmd_live_curve_scene(d, &cp->base, &cp->sample, e) < 0) {
+     * curve's), each run.start naming the point; a map: the controller's sample, if it gives none */
+    if (c->kind != VAFMD_CMD_MAP ? vafmd_live_curve_scene(d, &cp->base, &cp->sample, e) < 0
+                                 : s_camp_map_spec(d, c, cp, e) < 0) {
         s_camp_free(cp);
         return NULL;
     }
     if (c->kind == VAFMD_CMD_MAP) {
         /* a force map: a campaign whose grid is the pixels, each curve the pixel's scene (vafm_map_pixel) */
         cp->is_map = 1;
-        cp->map = c->map;
         cp->lateral_speed_m_per_s = c->map_lateral_speed;
         vafm_error merr = { 0 };
         int mrc = vafm_map_validate(&cp->map, &cp->base, &merr);

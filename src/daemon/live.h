@@ -105,6 +105,10 @@ int vafmd_live_set(struct vafmd *d, const struct vafmd_cmd *c, struct vafmd_err 
  * there, as a map pixel's) and *info (new reference) the point's ground truth and the sample, for run.start.
  * @return 1 (p changed), 0 (no sample: p untouched, *info NULL) or -1 (e says why). */
 int vafmd_live_curve_scene(struct vafmd *d, vafm_params *p, json_t **info, struct vafmd_err *e);
+/* A map from the live state: with a sample under the controller (ctrl_sample), *spec becomes its spec and *text
+ * its ctrl_sample text (borrowed: valid until the next `set` on the control thread).
+ * @return 1 (a sample is set) or 0 (none: spec and text untouched). */
+int vafmd_live_sample(struct vafmd *d, vafm_map_spec *spec, const char **text);
 /* cmd_json.c: decode the controller commands' arguments (engage, withdraw, move, z, feedback) */
 int vafmd_live_decode(json_t *root, struct vafmd_cmd *c, struct vafmd_err *e);
 #endif

@@ -518,6 +518,16 @@ int vafmd_live_curve_scene(vafmd *d, vafm_params *p, json_t **info, vafmd_err *e
     return 1;
 }
 
+int vafmd_live_sample(vafmd *d, vafm_map_spec *spec, const char **text)
+{
+    vafmd_live *L = d->live;
+    if (!L || !L->has_sample)
+        return 0;
+    *spec = L->sample;
+    *text = L->sample_text;
+    return 1;
+}
+
 void vafmd_live_config_default(vafmd_live_config *c)
 {
     memset(c, 0, sizeof *c);
