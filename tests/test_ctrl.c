@@ -535,6 +535,144 @@ static void test_reproducible(void)
     ENSURE(a != d);
 }
 
+/* ---- carry: the state goes on in a controller built over new settings (issue #27) ---------------- */
+
+static vafm_ctrl *s_carried(const vafm_ctrl *old, vafm_params *p, vafm_ctrl_params *cp, const vafm_map_spec *map)
+{
+    vafm_ctrl *c = s_new(p, cp, map);
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    int r = vafm_ctrl_carry(c, old, &err);
+    ENSURE_MSG(r == 0, "vafm_ctrl_carry: %d %s", r, err.message);
+    return c;
+}
+
+typedef struct s_carry_rec {
+    s_blk f;
+    long not_engaged;
+} s_carry_rec;
+
+static void s_carry_sink(void *user, const vafm_ctrl_samples *b)
+{
+    s_carry_rec *r = user;
+    for (size_t i = 0; i < b->n; i++) {
+        r->not_engaged += b->state[i] != VAFM_CTRL_ENGAGED;
+        s_blk_push(&r->f, b->force_N[i]);
+    }
+}
+
+/* Engaged at 10 kHz and 298 K, carried into a controller over 20 kHz and 350 K: still engaged at once, the motor
+ * and piezo where they were, the clock going on (time continues, the new interval from there), and the feedback
+ * holds the setpoint: over N = 100 000 samples (5 s; S_NB blocks of 2000, far beyond the correlation time) the
+ * mean force is the setpoint within 5 standard errors, and no sample leaves the engaged state. */
+static void test_carry_engaged(void)
+{
+    vafm_params p;
+    s_scene(&p);
+    vafm_ctrl_params cp;
+    vafm_ctrl_params_default(&cp);
+    cp.motor_z0_m = 30e-6;
+    vafm_ctrl *old = s_engaged(&p, &cp, NULL);
+    vafm_ctrl_status a, b;
+    vafm_ctrl_status_get(old, &a);
+    ENSURE(a.state == VAFM_CTRL_ENGAGED && a.feedback && a.in_contact);
+    vafm_params p2 = p;
+    p2.sample_rate_Hz = 2.0 * p.sample_rate_Hz;
+    p2.T_K = 350.0;
+    vafm_ctrl *c = s_carried(old, &p2, &cp, NULL);
+    vafm_ctrl_destroy(&old);
+    vafm_ctrl_status_get(c, &b);
+    ENSURE(b.state == VAFM_CTRL_ENGAGED && b.feedback && b.in_contact);
+    ENSURE(b.motor_z_m == a.motor_z_m && b.piezo_z_m == a.piezo_z_m && b.x_m == a.x_m && b.y_m == a.y_m);
+    ENSURE(b.setpoint_N == a.setpoint_N && b.baseline_N == a.baseline_N && b.motor_steps == a.motor_steps);
+    ENSURE(b.sample == a.sample && b.time_s == a.time_s);
+    ENSURE(b.clock_base_s == a.time_s && b.clock_base_sample == a.sample);
+    vafm_ctrl_event ev;
+    ENSURE(vafm_ctrl_event_pop(c, &ev) == 0); /* nothing to report */
+    const long N = 100000;
+    s_carry_rec rec;
+    memset(&rec, 0, sizeof rec);
+    s_blk_init(&rec.f, N);
+    ENSURE(vafm_ctrl_advance(c, (size_t)N, s_carry_sink, &rec) == N);
+    vafm_ctrl_status_get(c, &b);
+    double m, se;
+    s_blk_stat(&rec.f, 0, &m, &se);
+    fprintf(stderr, "  carried into 20 kHz, 350 K: <F> %.6g ± %.2g N (setpoint %.6g N), piezo %.6g -> %.6g m, "
+            "t %.6f -> %.6f s, %ld samples not engaged\n", m, se, b.setpoint_N, a.piezo_z_m, b.piezo_z_m, a.time_s,
+            b.time_s, rec.not_engaged);
+    ENSURE(rec.not_engaged == 0 && b.state == VAFM_CTRL_ENGAGED);
+    ENSURE(fabs(m - b.setpoint_N) < 5.0 * se);
+    ENSURE(b.sample == a.sample + (uint64_t)N);
+    ENSURE_REL(b.time_s, a.time_s + (double)N / p2.sample_rate_Hz, 1e-12);
+    while (vafm_ctrl_event_pop(c, &ev))
+        ENSURE_MSG(ev.type != VAFM_CTRL_EV_FAILED && ev.type != VAFM_CTRL_EV_CRASH &&
+                   ev.type != VAFM_CTRL_EV_LOST_CONTACT && ev.type != VAFM_CTRL_EV_Z_SATURATED,
+                   "event %s after the carry", vafm_ctrl_event_name(ev.type));
+    ENSURE(vafm_ctrl_carry(c, c, NULL) == VAFM_EINVAL);
+    vafm_ctrl *d = s_new(&p, &cp, NULL);
+    ENSURE(vafm_ctrl_carry(c, d, NULL) == VAFM_ESTATE); /* c has run: carry only into a fresh controller */
+    vafm_ctrl_destroy(&d);
+    vafm_ctrl_destroy(&c);
+}
+
+/* Settings that make the state impossible clamp it and say so: a piezo range below the engaged extension (the piezo
+ * at the new range, the feedback saturated, a z_saturated event), an XY range that no longer holds the tip (at the
+ * edge, an xy_range event with the coordinate it had), a surface far above the tip (a crash). */
+static void test_carry_clamp(void)
+{
+    vafm_params p;
+    s_scene(&p);
+    vafm_ctrl_params cp;
+    vafm_ctrl_params_default(&cp);
+    cp.motor_z0_m = 30e-6;
+    vafm_ctrl *old = s_engaged(&p, &cp, NULL);
+    vafm_error err;
+    ENSURE(vafm_ctrl_move(old, 30e-6, -10e-6, 1e-2, &err) == 0);
+    vafm_ctrl_event ev;
+    ENSURE(s_until(old, VAFM_CTRL_EV_MOVED, 1.0, &ev, NULL, NULL) == 1);
+    vafm_ctrl_status a, b;
+    vafm_ctrl_status_get(old, &a);
+    ENSURE(a.state == VAFM_CTRL_ENGAGED && a.piezo_z_m > 0 && a.x_m == 30e-6);
+    vafm_ctrl_params cp2 = cp;
+    cp2.piezo_range_m = 0.5 * a.piezo_z_m;
+    cp2.xy_range_m = 40e-6;
+    vafm_ctrl *c = s_carried(old, &p, &cp2, NULL);
+    vafm_ctrl_status_get(c, &b);
+    fprintf(stderr, "  clamp: piezo %.4g -> %.4g m, x %.4g -> %.4g m, state %s\n", a.piezo_z_m, b.piezo_z_m, a.x_m,
+            b.x_m, vafm_ctrl_state_name(b.state));
+    ENSURE(b.piezo_z_m == cp2.piezo_range_m && b.saturated && b.feedback);
+    ENSURE(b.x_m == 20e-6 && b.y_m == -10e-6);
+    int sat = 0, xy = 0;
+    while (vafm_ctrl_event_pop(c, &ev)) {
+        if (ev.type == VAFM_CTRL_EV_Z_SATURATED && ev.value == cp2.piezo_range_m)
+            sat++;
+        if (ev.type == VAFM_CTRL_EV_XY_RANGE && ev.value == 30e-6)
+            xy++;
+    }
+    ENSURE(sat == 1 && xy == 1);
+    vafm_ctrl_destroy(&c);
+    /* a dome 5 µm high under the tip: the support would be ~5 µm below the new surface, far past the force limit */
+    vafm_map_spec map;
+    vafm_map_spec_default(&map);
+    map.pattern = VAFM_MAP_DOME;
+    map.center_x_m = 30e-6;
+    map.center_y_m = -10e-6;
+    map.radius_m = 10e-6;
+    map.height_m = 5e-6;
+    c = s_carried(old, &p, &cp, &map);
+    vafm_ctrl_status_get(c, &b);
+    int crash = 0;
+    while (vafm_ctrl_event_pop(c, &ev))
+        if (ev.type == VAFM_CTRL_EV_CRASH && ev.value > cp.force_limit_N)
+            crash++;
+    fprintf(stderr, "  a surface above the tip: gap %.4g m, state %s, crash force %.4g N\n", b.gap_m,
+            vafm_ctrl_state_name(b.state), b.crash_force_N);
+    ENSURE(crash == 1 && b.state == VAFM_CTRL_CRASHED && !b.feedback && b.crash_force_N > cp.force_limit_N);
+    ENSURE(vafm_ctrl_advance(c, 1000, NULL, NULL) == 1000); /* the simulation copes: the piezo retracts */
+    vafm_ctrl_destroy(&c);
+    vafm_ctrl_destroy(&old);
+}
+
 int main(void)
 {
     RUN_TEST(test_params);
@@ -545,5 +683,7 @@ int main(void)
     RUN_TEST(test_move_dome);
     RUN_TEST(test_saturation);
     RUN_TEST(test_reproducible);
+    RUN_TEST(test_carry_engaged);
+    RUN_TEST(test_carry_clamp);
     return harness_done();
 }

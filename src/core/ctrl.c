@@ -4,6 +4,7 @@
  * simulation's live scene. Commands set targets and states only; ctrl_loop.c acts on them at the next sample
  * boundary. Everything is allocated in vafm_ctrl_new.
  */
+#include <inttypes.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -147,7 +148,9 @@ int vafm_ctrl_status_get(const vafm_ctrl *c, vafm_ctrl_status *st)
     st->engage_phase = c->phase;
     st->last_fail = c->last_fail;
     st->sample = c->sample;
-    st->time_s = (double)c->sample * c->Ts;
+    st->time_s = c->t0 + (double)(c->sample - c->s0) * c->Ts;
+    st->clock_base_s = c->t0;
+    st->clock_base_sample = c->s0;
     st->motor_z_m = c->motor_z;
     st->piezo_z_m = c->piezo_z;
     st->x_m = c->x;
@@ -335,4 +338,133 @@ int vafm_ctrl_feedback_set(vafm_ctrl *c, double setpoint, int unit, int relative
     if (c->state != VAFM_CTRL_APPROACHING || c->phase != VAFM_CTRL_ENGAGE_BASELINE)
         c->F_target = vafm_ctrl_setpoint_abs(&c->cp, c->baseline, c->k, c->invols, c->scene.baseline_offset_V);
     return 0;
+}
+
+/* ---- carry: the state handed on to a controller built over new settings (issue #27) -------------- */
+
+/* 1 when scenes a and b give the same detector chain (its settings, seed, spring, rate) for stream `index` */
+static int s_same_detector(const vafm_params *a, const vafm_params *b, uint64_t index)
+{
+    vafm_detector da, db; /* vafm_detector_begin clears each whole, padding included */
+    vafm_detector_begin(&da, a, index);
+    vafm_detector_begin(&db, b, index);
+    return memcmp(&da, &db, sizeof da) == 0;
+}
+
+static double s_clamp(double v, double half)
+{
+    return v > half ? half : v < -half ? -half : v;
+}
+
+int vafm_ctrl_carry(vafm_ctrl *dst, const vafm_ctrl *src, vafm_error *err)
+{
+    if (!dst || !src || dst == src) {
+        vafm_err_set(err, VAFM_EINVAL, "", "vafm_ctrl_carry: two different controllers are needed");
+        return VAFM_EINVAL;
+    }
+    if (dst->sample != 0 || dst->carried) {
+        vafm_err_set(err, VAFM_ESTATE, "", "vafm_ctrl_carry: the new controller has run already (%" PRIu64 " samples%s): "
+                     "carry into one fresh from vafm_ctrl_new", dst->sample, dst->carried ? ", carried into" : "");
+        return VAFM_ESTATE;
+    }
+    vafm_ctrl *c = dst;
+    const vafm_ctrl_params *cp = &c->cp;
+    /* where the tip will be, checked before anything changes (the live scene takes heights within ±1 m) */
+    const double half = 0.5 * cp->xy_range_m;
+    const double x = s_clamp(src->x, half), y = s_clamp(src->y, half);
+    const double pz = fmin(src->piezo_z, cp->piezo_range_m);
+    const double surf = vafm_ctrl_surface(c, x, y), gap = src->motor_z - pz - surf;
+    if (!(fabs(gap) <= 1.0)) {
+        vafm_err_set(err, VAFM_EINVAL, "motor_z_m", "vafm_ctrl_carry: the support would be %g m above the new surface "
+                     "(within [-1, 1] m only)", gap);
+        return VAFM_EINVAL;
+    }
+    /* the clock goes on; the lever takes the next random stream (as after a simulation error) */
+    c->carried = 1;
+    c->sample = c->s0 = src->sample;
+    c->t0 = src->t0 + (double)(src->sample - src->s0) * src->Ts;
+    c->t_now = c->t0;
+    c->restarts = src->restarts + 1;
+    /* the state and what is under way */
+    c->state = src->state;
+    c->phase = src->phase;
+    c->last_fail = src->last_fail;
+    c->motor_z = src->motor_z;
+    c->motor_target = src->motor_target;
+    c->back_steps = src->back_steps;
+    c->motor_steps = src->motor_steps;
+    c->piezo_z = pz;
+    c->z_target = fmin(src->z_target, cp->piezo_range_m);
+    c->z_moving = src->z_moving;
+    c->z_speed = c->state == VAFM_CTRL_APPROACHING && c->phase == VAFM_CTRL_ENGAGE_EXTEND ? cp->engage_speed_m_per_s
+                                                                                          : cp->z_speed_m_per_s;
+    if (c->state == VAFM_CTRL_APPROACHING && c->phase == VAFM_CTRL_ENGAGE_EXTEND)
+        c->z_target = cp->piezo_range_m; /* the search sweeps the new range */
+    c->t_engage0 = src->t_engage0;
+    c->x = x;
+    c->y = y;
+    c->tx = src->tx;
+    c->ty = src->ty;
+    c->moving = src->moving;
+    c->xy_dist = src->xy_dist;
+    /* a move at the default speed takes the new default; one given its own speed keeps it */
+    c->xy_speed = src->xy_speed == src->cp.xy_speed_m_per_s ? cp->xy_speed_m_per_s : src->xy_speed;
+    c->surface = surf;
+    c->in_contact = src->in_contact;
+    c->feedback = src->feedback;
+    c->saturated = src->saturated;
+    c->lost_contact = src->lost_contact;
+    c->err_prev = src->err_prev;
+    c->baseline = src->baseline;
+    c->base_sum = src->base_sum;
+    c->base_n = src->base_n;
+    c->base_boot = src->base_boot;
+    c->force = src->force;
+    c->defl = src->defl;
+    c->volts = src->volts;
+    c->error = src->error;
+    c->crash_force = src->crash_force;
+    /* the setpoint: an absolute one is the new setting's (vafm_ctrl_new computed it); a relative one counts from
+     * the carried baseline once one is known */
+    if (cp->setpoint_relative)
+        c->F_target = isfinite(src->F_target)
+                          ? vafm_ctrl_setpoint_abs(cp, c->baseline, c->k, c->invols, c->scene.baseline_offset_V)
+                          : NAN;
+    /* the events not yet read */
+    memcpy(c->ev, src->ev, sizeof c->ev);
+    c->ev_head = src->ev_head;
+    c->ev_n = src->ev_n;
+    c->ev_dropped = src->ev_dropped;
+    /* the detector's chain: the same settings go on as they were, others start afresh on the next stream */
+    if (s_same_detector(&src->scene, &c->scene, cp->stream ^ VAFM_SIM_LIVE_KEY))
+        c->det = src->det;
+    else
+        vafm_detector_begin(&c->det, &c->scene, (cp->stream + c->restarts) ^ VAFM_SIM_LIVE_KEY);
+    /* what the new settings make impossible: clamped above, reported here */
+    if (src->piezo_z > cp->piezo_range_m) {
+        vafm_ctrl_push(c, VAFM_CTRL_EV_Z_SATURATED, 0, c->piezo_z);
+        c->saturated = c->feedback;
+    }
+    if (x != src->x || y != src->y)
+        vafm_ctrl_push(c, VAFM_CTRL_EV_XY_RANGE, 0, x != src->x ? src->x : src->y);
+    if (c->moving && (fabs(c->tx) > half || fabs(c->ty) > half)) {
+        vafm_ctrl_push(c, VAFM_CTRL_EV_XY_RANGE, 0, fabs(c->tx) > half ? c->tx : c->ty);
+        c->moving = 0;
+    }
+    double h0 = gap;
+    const double depth = 2.0 * cp->force_limit_N / c->k; /* the deepest the scene's force range covers */
+    if (gap < -depth) { /* a surface above the tip: crashed into */
+        c->force = c->k * -gap;
+        h0 = -depth;
+        if (c->state == VAFM_CTRL_CRASHED) {
+            c->crash_force = fmax(c->crash_force, c->force);
+            vafm_ctrl_push(c, VAFM_CTRL_EV_CRASH, 0, c->force);
+        } else {
+            vafm_ctrl_crash(c);
+        }
+    }
+    int r = vafm_sim_live_begin_contact(c->sim, cp->stream + c->restarts, h0, c->in_contact, vafm_ctrl_loop, c);
+    if (r && err)
+        *err = *vafm_sim_error(c->sim);
+    return r;
 }

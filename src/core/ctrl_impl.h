@@ -3,7 +3,8 @@
  * The always-on controller's private state (vafm/ctrl.h), shared by its files:
  *   ctrl_params.c  settings: defaults, ranges, validation, names;
  *   ctrl.c         lifecycle, commands (engage, withdraw, move, z, feedback), status, the event queue's reader,
- *                  vafm_ctrl_advance (drives the simulation's live scene and hands blocks out);
+ *                  vafm_ctrl_advance (drives the simulation's live scene and hands blocks out), vafm_ctrl_carry
+ *                  (the state handed on to a controller built over new settings);
  *   ctrl_loop.c    what happens at each sample boundary: measure (detector), crash check, the engage and
  *                  withdraw state machines, the Z feedback, the motor, piezo and XY motion, and the support's
  *                  height for the next interval (the live scene's commander, vafm_sim_live_begin).
@@ -30,10 +31,13 @@ struct vafm_ctrl {
     double Ts;                  /* sample interval, s */
     double k;                   /* spring constant, N/m */
     double invols;              /* m/V */
-    uint64_t restarts;          /* live scene restarts after a simulation error */
+    uint64_t restarts;          /* live scene restarts after a simulation error or a carry (its next stream) */
+    int carried;                /* 1: a state was carried into it (vafm_ctrl_carry) */
     /* state */
     int state, phase, last_fail;
     uint64_t sample;            /* samples made */
+    double t0;                  /* the clock's base: sample s0 ended at t0 (0, 0 unless carried: vafm_ctrl_carry) */
+    uint64_t s0;
     double t_now;               /* time of the sample being handled (in the loop) or of the last one made, s */
     double motor_z, motor_target;
     double piezo_z, z_target, z_speed;
@@ -76,6 +80,9 @@ static inline void vafm_ctrl_push(vafm_ctrl *c, int type, int reason, double val
     e->time_s = c->t_now;
     e->value = value;
 }
+
+/** The crash: feedback off, the piezo retracts, the motor backs off one step; events (ctrl_loop.c). */
+void vafm_ctrl_crash(vafm_ctrl *c);
 
 /** The live scene's commander (ctrl_loop.c): one sample boundary. */
 double vafm_ctrl_loop(void *user, const vafm_live_sample *smp);

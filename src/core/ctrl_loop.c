@@ -36,7 +36,7 @@ static double s_toward(double value, double target, double step, int *arrived)
     return value + (d > 0 ? step : -step);
 }
 
-static void s_crash(vafm_ctrl *c)
+void vafm_ctrl_crash(vafm_ctrl *c)
 {
     if (c->state == VAFM_CTRL_APPROACHING) {
         c->last_fail = VAFM_CTRL_FAIL_CRASH;
@@ -156,7 +156,7 @@ double vafm_ctrl_loop(void *user, const vafm_live_sample *smp)
 {
     vafm_ctrl *c = user;
     const vafm_ctrl_params *cp = &c->cp;
-    const double Ts = c->Ts, t = (double)(c->sample + 1) * Ts;
+    const double Ts = c->Ts, t = c->t0 + (double)(c->sample + 1 - c->s0) * Ts;
     c->t_now = t;
     /* measure: the detector's chain, as the instrument records it */
     c->defl = smp->deflection_m; /* the chain off leaves these as they are */
@@ -179,7 +179,7 @@ double vafm_ctrl_loop(void *user, const vafm_live_sample *smp)
         if (c->force > c->crash_force)
             c->crash_force = c->force; /* the force reached */
     } else if (c->force > cp->force_limit_N) {
-        s_crash(c);
+        vafm_ctrl_crash(c);
     }
     if (c->state == VAFM_CTRL_APPROACHING)
         s_engage(c, t);

@@ -68,6 +68,12 @@ double vafm_jkr_sqrt_a(double c, double s_m, double u, double s_guess);
  *  for fast curves at a high sample rate is valid though its default tune would not be.) */
 int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, int tune_scene, vafm_error *err);
 
+/** vafm_sim_live_begin whose lever, with in_contact 1, starts at equilibrium on the contact branch even with the
+ *  support above the surface (an adhesive contact held there: the state vafm_ctrl_carry hands on; the thermal
+ *  draw may still take it off the branch). in_contact 0 is vafm_sim_live_begin. (sim.c) */
+int vafm_sim_live_begin_contact(vafm_sim *s, uint64_t stream, double height0_m, int in_contact, vafm_live_fn fn,
+                                void *user);
+
 /** The cost estimate of a scene from its numerics (vafm_sim_estimate). */
 void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out);
 

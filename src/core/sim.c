@@ -321,7 +321,7 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     /* Start in contact at equilibrium (pressed in, or start_in_contact), else free at the support; a
      * thermal draw of position then velocity either way. */
     const int start_pressed = has_contact && (s->uspr_start >= K->contact.u_touch ||
-                                              (scene != S_SCENE_LIVE && s->p.start_in_contact));
+                                              (scene != S_SCENE_LIVE ? s->p.start_in_contact : s->live_contact));
     double sigma_u = s->sigma_free;
     if (start_pressed) {
         double K_loc;
@@ -709,6 +709,12 @@ static void s_live_logic(vafm_sim *s, size_t j)
 
 int vafm_sim_live_begin(vafm_sim *s, uint64_t stream, double height0_m, vafm_live_fn fn, void *user)
 {
+    return vafm_sim_live_begin_contact(s, stream, height0_m, 0, fn, user);
+}
+
+int vafm_sim_live_begin_contact(vafm_sim *s, uint64_t stream, double height0_m, int in_contact, vafm_live_fn fn,
+                                void *user)
+{
     if (!s)
         return VAFM_EINVAL;
     memset(&s->err, 0, sizeof s->err);
@@ -724,6 +730,7 @@ int vafm_sim_live_begin(vafm_sim *s, uint64_t stream, double height0_m, vafm_liv
     s->live_fn = fn;
     s->live_user = user;
     s->live_h0_m = height0_m;
+    s->live_contact = in_contact ? 1 : 0;
     s->list = 0;
     s_begin(s, stream, S_SCENE_LIVE);
     return 0;

@@ -86,6 +86,7 @@ struct vafm_sim {
     vafm_live_fn live_fn;
     void *live_user;
     double live_h0_m;   /* the support's height above the surface at the start, m */
+    int live_contact;   /* 1: the lever starts on the contact branch even above the surface (a carried state) */
     vafm_free_ou ou_live; /* exact free transition over a whole sample interval (live scene, far from the surface) */
     /* a segment list (vafm_sim_segments_begin; list = 0: the plain curve). The phase follows the segment's
      * motion (APPROACH: extend, DWELL: pause or modulate, RETRACT: retract) so that contact events, the
