@@ -537,7 +537,7 @@ static void test_reproducible(void)
 
 /* ---- carry: the state goes on in a controller built over new settings (issue #27) ---------------- */
 
-static vafm_ctrl *s_carried(const vafm_ctrl *old, vafm_params *p, vafm_ctrl_params *cp, const vafm_map_spec *map)
+static vafm_ctrl *s_carried(vafm_ctrl *old, vafm_params *p, vafm_ctrl_params *cp, const vafm_map_spec *map)
 {
     vafm_ctrl *c = s_new(p, cp, map);
     vafm_error err;
@@ -673,6 +673,95 @@ static void test_carry_clamp(void)
     vafm_ctrl_destroy(&old);
 }
 
+/* sample by sample (however the advances split the blocks) */
+static void s_hash_time_sink(void *user, const vafm_ctrl_samples *b)
+{
+    uint64_t *h = user;
+    for (size_t i = 0; i < b->n; i++) {
+        const double v[6] = { b->time_s[i], b->force_N[i], b->piezo_z_m[i], b->motor_z_m[i], b->x_m[i],
+                              b->gap_m[i] };
+        *h = s_fnv(*h, v, sizeof v);
+        *h = s_fnv(*h, &b->state[i], 1);
+    }
+}
+
+/* advance by n samples, carrying the state into a controller over a scene changed in curve-only values (start
+ * height, dwell) and a ctrl setting that does not act here (the engage timeout, raised) when sample `at` comes */
+static void s_advance_carry(vafm_ctrl **c, long n, uint64_t at, vafm_params *p, vafm_ctrl_params *cp,
+                            const vafm_map_spec *map, uint64_t *h)
+{
+    vafm_ctrl_status st;
+    vafm_ctrl_status_get(*c, &st);
+    if (at > st.sample && at < st.sample + (uint64_t)n) {
+        const long first = (long)(at - st.sample);
+        ENSURE(vafm_ctrl_advance(*c, (size_t)first, s_hash_time_sink, h) == first);
+        n -= first;
+        vafm_params p2 = *p;
+        p2.dwell_s = 0.5;
+        p2.start_height_m = 2.0 * p->start_height_m;
+        vafm_ctrl_params cp2 = *cp;
+        cp2.engage_timeout_s = 500.0;
+        vafm_ctrl *d = s_carried(*c, &p2, &cp2, map);
+        vafm_ctrl_destroy(c);
+        *c = d;
+    }
+    ENSURE(vafm_ctrl_advance(*c, (size_t)n, s_hash_time_sink, h) == n);
+}
+
+/* s_session's script with a carry at sample `at` (0: none) */
+static uint64_t s_session_carry(uint64_t at)
+{
+    vafm_params p;
+    s_scene(&p);
+    p.seed = 7;
+    vafm_map_spec map;
+    vafm_map_spec_default(&map);
+    map.pattern = VAFM_MAP_DISC;
+    map.center_x_m = 5e-6;
+    map.radius_m = 2e-6;
+    map.height_m = 50e-9;
+    vafm_ctrl_params cp;
+    vafm_ctrl_params_default(&cp);
+    cp.motor_z0_m = 25e-6;
+    vafm_ctrl *c = s_new(&p, &cp, &map);
+    uint64_t h = 1469598103934665603ULL;
+    vafm_error err;
+    s_advance_carry(&c, 1000, at, &p, &cp, &map, &h);
+    ENSURE(vafm_ctrl_engage(c) == 0);
+    s_advance_carry(&c, 40000, at, &p, &cp, &map, &h);
+    ENSURE(vafm_ctrl_move(c, 7e-6, 0.0, 10e-6, &err) == 0);
+    s_advance_carry(&c, 10000, at, &p, &cp, &map, &h);
+    ENSURE(vafm_ctrl_withdraw(c, 1) == 0);
+    s_advance_carry(&c, 5000, at, &p, &cp, &map, &h);
+    vafm_ctrl_event ev;
+    while (vafm_ctrl_event_pop(c, &ev)) {
+        h = s_fnv(h, &ev.type, sizeof ev.type);
+        h = s_fnv(h, &ev.sample, sizeof ev.sample);
+        h = s_fnv(h, &ev.time_s, sizeof ev.time_s);
+        h = s_fnv(h, &ev.value, sizeof ev.value);
+    }
+    vafm_ctrl_status st;
+    vafm_ctrl_status_get(c, &st);
+    ENSURE(st.state == VAFM_CTRL_WITHDRAWN);
+    vafm_ctrl_destroy(&c);
+    return h;
+}
+
+/* A change the lever does not feel (curve-only scene values, a ctrl setting not acting) changes nothing: the
+ * session with a carry during the approach, while engaged or during the withdraw is the same bit for bit (every
+ * sample's force, piezo, motor, state and time, every event) as without one. */
+static void test_carry_bit_for_bit(void)
+{
+    const uint64_t none = s_session_carry(0);
+    const uint64_t at[3] = { 5000, 30123, 55555 };
+    for (int i = 0; i < 3; i++) {
+        const uint64_t h = s_session_carry(at[i]);
+        fprintf(stderr, "  session hash: no carry %016llx, carried at sample %llu %016llx\n",
+                (unsigned long long)none, (unsigned long long)at[i], (unsigned long long)h);
+        ENSURE(h == none);
+    }
+}
+
 int main(void)
 {
     RUN_TEST(test_params);
@@ -685,5 +774,6 @@ int main(void)
     RUN_TEST(test_reproducible);
     RUN_TEST(test_carry_engaged);
     RUN_TEST(test_carry_clamp);
+    RUN_TEST(test_carry_bit_for_bit);
     return harness_done();
 }

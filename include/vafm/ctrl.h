@@ -214,9 +214,9 @@ VAFM_API int vafm_ctrl_new(vafm_ctrl **out, const vafm_params *scene, const vafm
 
 /** Carry the state of controller src into dst, a controller just made by vafm_ctrl_new over new settings (a new
  *  scene, ctrl settings or sample) that has not advanced yet: what a real instrument keeps when a setting
- *  changes. After it dst goes on where src was (src is left as it was; destroy it):
- *  - the clock: dst's sample count and time continue from src's (a new sample rate applies from here on:
- *    status.clock_base_s); a caller's timed commands keep their times;
+ *  changes. After it dst goes on where src was; destroy src then (its lever may have been handed to dst):
+ *  - the clock: dst's sample count and time continue from src's (a new sample rate applies from here on and
+ *    moves status.clock_base_s there; at the same rate the times are the same as without the carry);
  *  - the state (idle, approaching, engaged, withdrawing, withdrawn, crashed) and what is under way: an engage,
  *    a withdraw, a move or a `z` goes on, at the new settings' speeds (a move keeps a speed it was given);
  *    the feedback (on/off, its integrator: the piezo z; its last error), the baseline (and a start-up baseline
@@ -224,20 +224,23 @@ VAFM_API int vafm_ctrl_new(vafm_ctrl **out, const vafm_params *scene, const vafm
  *  - motor z and its target, piezo z and its target, x and y (and a move's target);
  *  - the setpoint: a relative one is the new setting over the carried baseline, an absolute one the new
  *    setting (unchanged settings: the same force);
- *  - the lever: it starts at thermal equilibrium at the carried support height over the new scene's lever
- *    and surface, on the contact branch if it touched the sample (its exact position and velocity do not carry:
- *    the lever, temperature or rate may differ), on the next random stream; the detector's chain carries
- *    (drift, 1/f noise, its noise stream) when the scene's detector settings are the same, else it restarts.
+ *  - the lever: when the scenes differ only in what the live scene does not use (the ramp, trigger, dwell, piezo
+ *    model and other curve-only values) and the surface under the tip is the same, dst takes src's lever over
+ *    as it is (position, velocity, contact, random stream): the session goes on bit for bit as if nothing had
+ *    changed. Otherwise (another lever, temperature, rate, contact, surface...) the lever starts at thermal
+ *    equilibrium at the carried support height, on the contact branch if it touched the sample, on the next
+ *    random stream. The detector's chain carries (drift, 1/f noise, its noise stream) when the scene's detector
+ *    settings are the same, else it restarts on that stream.
  *  What the new settings make impossible is clamped and reported as the controller's events, never silently:
  *  a piezo z beyond a smaller piezo_range_m comes to the range (VAFM_CTRL_EV_Z_SATURATED; the feedback, if on,
  *  is saturated there); x or y beyond a smaller xy_range_m comes to its edge, and a move whose target lies
  *  beyond it stops (VAFM_CTRL_EV_XY_RANGE, value: the coordinate beyond); a new surface pressing the tip further
  *  than the scene's force range (2·force_limit_N / k below the surface) is a crash (VAFM_CTRL_EV_CRASH, value:
  *  k × that depth, N; the lever starts at that depth) — a lesser one past force_limit_N is seen as a crash at the
- *  next sample as ever. Not for the hot path: it restarts dst's live scene (no allocation, though).
- *  @return 0, VAFM_EINVAL (no controller, or the same twice) or VAFM_ESTATE (dst has advanced already, or is
- *  carried into), err says which: dst is then unchanged. */
-VAFM_API int vafm_ctrl_carry(vafm_ctrl *dst, const vafm_ctrl *src, vafm_error *err);
+ *  next sample as ever. Not for the hot path (though it allocates nothing).
+ *  @return 0, VAFM_EINVAL (no controller, the same twice, or a support beyond ±1 m of the new surface) or
+ *  VAFM_ESTATE (dst has advanced already, or is carried into), err says which: dst is then unchanged. */
+VAFM_API int vafm_ctrl_carry(vafm_ctrl *dst, vafm_ctrl *src, vafm_error *err);
 
 /** Destroy; NULL-safe; sets *c to NULL. */
 VAFM_API void vafm_ctrl_destroy(vafm_ctrl **c);

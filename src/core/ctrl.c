@@ -351,12 +351,37 @@ static int s_same_detector(const vafm_params *a, const vafm_params *b, uint64_t 
     return memcmp(&da, &db, sizeof da) == 0;
 }
 
+/* 1 when the live scene (the lever) of controllers over scenes a and b is the same physics: the scenes differ at
+ * most in what only curves, tunes and their artefacts use (the ramp, the trigger, the dwell, the piezo model, the
+ * curve's sample: the live scene has none of them, vafm_sim_live_begin). A difference in padding bytes only makes
+ * it 0 (the lever then restarts: safe). */
+static void s_live_only(vafm_params *q)
+{
+    q->v_approach_m_per_s = q->v_retract_m_per_s = q->start_height_m = 0.0;
+    q->start_in_contact = 0;
+    q->trigger_height_m = q->z_range_m = q->dwell_s = q->retract_margin_m = q->retract_max_m = 0.0;
+    q->tune_duration_s = q->tune_rate_Hz = 0.0;
+    q->ramp_size_m = q->ramp_rate_Hz = q->extend_time_s = q->retract_time_s = 0.0;
+    q->ramp_start = q->segment_samples = q->setpoint_mode = q->dwell_mode = 0;
+    q->setpoint_V = q->dwell_feedback_s = q->surface_height_m = q->contact_point_sd_m = 0.0;
+    q->sample_drift_m_per_s = q->piezo_hysteresis = q->piezo_hysteresis_length_m = 0.0;
+    q->piezo_creep = q->piezo_creep_t0_s = 0.0;
+}
+
+static int s_same_lever(const vafm_params *a, const vafm_params *b)
+{
+    vafm_params qa = *a, qb = *b;
+    s_live_only(&qa);
+    s_live_only(&qb);
+    return memcmp(&qa, &qb, sizeof qa) == 0;
+}
+
 static double s_clamp(double v, double half)
 {
     return v > half ? half : v < -half ? -half : v;
 }
 
-int vafm_ctrl_carry(vafm_ctrl *dst, const vafm_ctrl *src, vafm_error *err)
+int vafm_ctrl_carry(vafm_ctrl *dst, vafm_ctrl *src, vafm_error *err)
 {
     if (!dst || !src || dst == src) {
         vafm_err_set(err, VAFM_EINVAL, "", "vafm_ctrl_carry: two different controllers are needed");
@@ -379,12 +404,24 @@ int vafm_ctrl_carry(vafm_ctrl *dst, const vafm_ctrl *src, vafm_error *err)
                      "(within [-1, 1] m only)", gap);
         return VAFM_EINVAL;
     }
-    /* the clock goes on; the lever takes the next random stream (as after a simulation error) */
+    /* the same lever over the same surface, nothing clamped: dst takes src's running live scene over, so the
+     * lever goes on exactly as it was (its position, velocity, contact and random stream): bit for bit as if
+     * nothing had changed */
+    const int takeover = cp->stream == src->cp.stream && s_same_lever(&src->scene, &c->scene) && surf == src->surface && x == src->x &&
+                         y == src->y && pz == src->piezo_z;
+    /* the clock goes on: at the same rate its base stays (the times are the same bits as without the carry);
+     * at a new rate it moves to here */
     c->carried = 1;
-    c->sample = c->s0 = src->sample;
-    c->t0 = src->t0 + (double)(src->sample - src->s0) * src->Ts;
-    c->t_now = c->t0;
-    c->restarts = src->restarts + 1;
+    c->sample = src->sample;
+    if (c->Ts == src->Ts) {
+        c->s0 = src->s0;
+        c->t0 = src->t0;
+    } else {
+        c->s0 = src->sample;
+        c->t0 = src->t0 + (double)(src->sample - src->s0) * src->Ts;
+    }
+    c->t_now = src->t_now;
+    c->restarts = takeover ? src->restarts : src->restarts + 1; /* a new lever: the next random stream */
     /* the state and what is under way */
     c->state = src->state;
     c->phase = src->phase;
@@ -462,6 +499,14 @@ int vafm_ctrl_carry(vafm_ctrl *dst, const vafm_ctrl *src, vafm_error *err)
         } else {
             vafm_ctrl_crash(c);
         }
+    }
+    if (takeover && h0 == gap) {
+        vafm_sim *mine = c->sim;
+        c->sim = src->sim;
+        src->sim = mine; /* src keeps dst's fresh lever: still a working controller, only to be destroyed */
+        vafm_sim_live_commander(c->sim, vafm_ctrl_loop, c);
+        vafm_sim_live_commander(src->sim, vafm_ctrl_loop, src);
+        return 0;
     }
     int r = vafm_sim_live_begin_contact(c->sim, cp->stream + c->restarts, h0, c->in_contact, vafm_ctrl_loop, c);
     if (r && err)

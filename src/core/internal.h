@@ -74,6 +74,9 @@ int vafm_numerics_check_tune(const vafm_params *p, const vafm_numerics *nm, int 
 int vafm_sim_live_begin_contact(vafm_sim *s, uint64_t stream, double height0_m, int in_contact, vafm_live_fn fn,
                                 void *user);
 
+/** Hand a running live scene to another commander (its lever's state and stream go on; vafm_ctrl_carry). */
+void vafm_sim_live_commander(vafm_sim *s, vafm_live_fn fn, void *user);
+
 /** The cost estimate of a scene from its numerics (vafm_sim_estimate). */
 void vafm_numerics_estimate(const vafm_params *p, const vafm_numerics *nm, vafm_sim_estimate *out);
 

@@ -736,6 +736,12 @@ int vafm_sim_live_begin_contact(vafm_sim *s, uint64_t stream, double height0_m, 
     return 0;
 }
 
+void vafm_sim_live_commander(vafm_sim *s, vafm_live_fn fn, void *user)
+{
+    s->live_fn = fn;
+    s->live_user = user;
+}
+
 static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sample_fn fn, void *user);
 
 int vafm_sim_advance(vafm_sim *s, size_t max_samples, vafm_sample_fn fn, void *user)
