@@ -173,10 +173,14 @@ def test_crash_and_engage_timeout_reported():
     d.cmd({"cmd": "withdraw", "motor_steps": 1})
     wait_event(s, ["withdrawn"])
     # an engage that cannot finish in time: the timeout, as an event and in status
+    # (from 150 um up: an engage takes ~20 s of the controller's time)
+    d.cmd({"cmd": "withdraw", "motor_steps": 30})
+    wait_event(s, ["withdrawn"])
+    z = d.cmd({"cmd": "status"})["ctrl"]["motor_z_m"]
     r = d.cmd({"cmd": "set", "values": {"ctrl_engage_timeout_s": 2}})
     assert r["status"] == "ok"
     st = d.cmd({"cmd": "status"})["ctrl"]
-    assert st["generation"] == 2 and st["motor_z_m"] == 200e-6  # rebuilt: it starts again
+    assert st["generation"] == 2 and st["motor_z_m"] == z and st["state"] == "withdrawn", st  # its state carries
     assert d.cmd({"cmd": "get", "names": ["ctrl_engage_timeout_s"]})["values"]["ctrl_engage_timeout_s"] == 2
     d.cmd({"cmd": "engage"})
     ev = wait_event(s, ["engage_failed", "engaged"], 30)
@@ -208,9 +212,11 @@ def test_fault_plan_on_engage():
     d.stop()
 
 
-def session(seed, until_s=38.0):
+def session(seed, until_s=38.0, set_at_s=None):
     """A scripted session in free run: the same commands at the same controller times. Returns the live
-    points (all channels) of the controller built over the seed, up to until_s."""
+    points (all channels) of the controller built over the seed (the seed's `set` starts it afresh), up to
+    until_s. set_at_s: once the controller's clock passes it, a `set` of values the lever does not feel (a ramp
+    value, the engage timeout raised): the state carries (wire.md §2.4) and the session goes on as it was."""
     d = Daemon()
     s = live_sub(d)
     assert d.cmd({"cmd": "set", "values": {"free_run": True, "speed": 25, "monitor_rate_Hz": 1000,
@@ -224,10 +230,16 @@ def session(seed, until_s=38.0):
     pts, seqs, events = [], [], []
     while True:
         t, m = recv(s)
-        if t == "event" and m.get("source") == "ctrl" and m.get("generation") == gen:
+        if t == "event" and m.get("source") == "ctrl" and m.get("generation") >= gen:
             events.append(m)
-        if t != "live" or m[0]["generation"] != gen:
+        if t != "live" or m[0]["generation"] < gen:
             continue
+        if set_at_s is not None and m[1]["time_s"][-1] >= set_at_s:
+            r = d.cmd({"cmd": "set", "values": {"dwell_s": 0.3, "ctrl_engage_timeout_s": 500}})
+            assert r["status"] == "ok", r
+            st = d.cmd({"cmd": "status"})["ctrl"]
+            assert st["generation"] == gen + 1 and st["held_commands"] >= 1 and st["time_s"] >= set_at_s, st
+            set_at_s = None
         seqs.append(m[0]["seq"])
         pts.append(np.stack([m[1][n] for n in m[0]["channels"]]))
         if m[1]["time_s"][-1] >= until_s:
@@ -240,9 +252,11 @@ def session(seed, until_s=38.0):
 
 def test_scripted_session_reproducible():
     """Two daemons, the same seed and the same commands at the same controller times: identical live samples
-    (every channel, bit for bit) and events; another seed differs."""
-    a, ea = session(7)
-    b, eb = session(7)
+    (every channel, bit for bit) and events, though each got a `set` in the middle (at a controller time that
+    depends on the machine: 12 s in one, during the approach, 30 s in the other, engaged); another seed
+    differs."""
+    a, ea = session(7, set_at_s=12.0)
+    b, eb = session(7, set_at_s=30.0)
     kinds = [k for k, _ in ea]
     assert kinds[:1] == ["engaged"] and "moved" in kinds and kinds[-1] == "withdrawn", ea
     n = min(a.shape[1], b.shape[1])
@@ -252,6 +266,52 @@ def test_scripted_session_reproducible():
     c, _ = session(8)
     m = min(n, c.shape[1])
     assert a[:, :m].tobytes() != c[:, :m].tobytes()
+
+
+def test_set_keeps_the_controller_state():
+    """Issue #27: a `set` of a scene value (T_K, a ramp value) and a ctrl_* setting rebuilds the controller
+    (generation + 1) but its state carries: still engaged with the feedback on, the motor where it was (exactly),
+    the piezo within the feedback's noise, the clock going on, a command held for its at_s applied at its time.
+    Then a smaller piezo range than the piezo's extension clamps it, reported as z_saturated."""
+    d = Daemon()
+    assert d.cmd({"cmd": "set", "values": {"speed": 50}})["status"] == "ok"
+    s = live_sub(d)
+    d.cmd({"cmd": "engage"})
+    assert wait_event(s, ["engaged", "engage_failed", "crash"], 60)["kind"] == "engaged"
+    st0 = d.cmd({"cmd": "status"})["ctrl"]
+    at = st0["time_s"] + 20.0
+    r = d.cmd({"cmd": "move", "x_m": 1e-6, "y_m": 0, "at_s": at})
+    assert r["status"] == "ok" and r["scheduled"] and not r["late"], r
+    r = d.cmd({"cmd": "set", "values": {"T_K": 310, "dwell_s": 0.2, "ctrl_engage_speed_m_per_s": 30e-6}})
+    assert r["status"] == "ok", r
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    print(f"before the set: t {st0['time_s']:.4f} s, motor {st0['motor_z_m']:.6g} m, piezo {st0['piezo_z_m']:.6g} m;"
+          f" after: t {st['time_s']:.4f} s, piezo {st['piezo_z_m']:.6g} m, generation {st['generation']}")
+    assert st["generation"] == st0["generation"] + 1, st
+    assert st["state"] == "engaged" and st["feedback"] and st["in_contact"], st
+    assert st["motor_z_m"] == st0["motor_z_m"] and st["time_s"] >= st0["time_s"] and st["held_commands"] == 1, st
+    # the piezo under feedback at the setpoint: it stays where it was within the thermal noise of the tip's
+    # height in contact, sqrt(kT/(k + k_c)) < 1 pm (k_c ~ 90 N/m, contact-silica), plus the integral loop's
+    # correction of a deflection off by the lever's thermal sd sqrt(kT/k) = 0.2 nm: 1 nm bounds both
+    assert abs(st["piezo_z_m"] - st0["piezo_z_m"]) < 1e-9, (st0["piezo_z_m"], st["piezo_z_m"])
+    f, states = [], []
+    while len(f) < 50:
+        t, m = recv(s)
+        if t == "live" and m[0]["generation"] == st["generation"]:
+            f.extend(m[1]["force_N"])
+            states.extend(m[1]["state"])
+    assert set(states) == {2.0}, set(states)  # engaged throughout
+    assert abs(np.mean(f) - st["setpoint_N"]) < 0.05 * st["setpoint_N"], (np.mean(f), st["setpoint_N"])
+    ev = wait_event(s, ["moved"], 30)  # the held command, at its time on the clock that went on
+    assert abs(ev["time_s"] - (at + 0.1)) < 0.002, (at, ev)  # 1 um at 10 um/s from at_s on
+    # a piezo range below the extension: clamped to it and reported; the feedback saturates there
+    pz = d.cmd({"cmd": "status"})["ctrl"]["piezo_z_m"]
+    assert d.cmd({"cmd": "set", "values": {"ctrl_piezo_range_m": pz / 2}})["status"] == "ok"
+    ev = wait_event(s, ["z_saturated"], 10)
+    assert ev["piezo_z_m"] == pz / 2, (ev, pz)
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["feedback"] and st["piezo_z_m"] <= pz / 2, st
+    d.stop()
 
 
 def curve_at(d, s, index):

@@ -220,8 +220,6 @@ static void s_sink(void *user, const vafm_ctrl_samples *b)
         if (idx % L->decim == 0) { /* a point begins */
             L->acc_n = 0;
             memset(L->acc, 0, sizeof L->acc);
-            if (!L->out_n)
-                L->out_first = idx;
         }
         for (size_t k = 0; k < S_NCH; k++) {
             if (k == S_STATE_CH)
@@ -231,6 +229,8 @@ static void s_sink(void *user, const vafm_ctrl_samples *b)
         }
         L->acc_n++;
         if ((idx + 1) % L->decim == 0 && L->acc_n == L->decim) { /* a whole point ends */
+            if (!L->out_n) /* (a message flushed at a new controller may leave a point under way) */
+                L->out_first = idx + 1 - L->decim;
             for (size_t k = 0; k < S_NCH; k++)
                 L->out[k][L->out_n] = k == S_STATE_CH ? (double)b->state[i] : L->acc[k] / (double)L->acc_n;
             if (++L->out_n >= L->out_target)
@@ -379,10 +379,15 @@ static int s_apply(vafmd_live *L, const vafmd_live_op *op, vafmd_err *e)
     return 0;
 }
 
+/* The controller sample at which time at_s comes: the clock goes on across controllers (vafm_ctrl_carry), from
+ * its base (t0, s0: 0 and 0 for the first controller) at the current rate. Before the base: the sample before it
+ * (the command is late). */
 static uint64_t s_at_sample(const vafmd_live *L, double at_s)
 {
-    double n = ceil(at_s * L->fs - 1e-6);
-    return n <= 0 ? 0 : (uint64_t)n;
+    double n = ceil((at_s - L->t0) * L->fs - 1e-6);
+    if (n > 0)
+        return L->s0 + (uint64_t)n;
+    return n < 0 && L->s0 > 0 ? L->s0 - 1 : L->s0;
 }
 
 /* Apply the held commands whose time has come (in the order they were given). */
@@ -409,23 +414,61 @@ static void s_ack(vafmd_live *L, uint64_t req, int rc)
     atomic_store_explicit(&L->ack, req, memory_order_release);
 }
 
+/* The feedback settings the `set` did not change (fb_given) stay those of the running controller: a `feedback`
+ * command changes them there (and one held for its at_s must not act before it). Should the old values not fit
+ * the new scene (the set was checked with the new ones), the new ones stay. */
+static void s_feedback_keep(vafm_ctrl *to, const vafm_ctrl *from, unsigned given)
+{
+    const vafm_ctrl_params *o = vafm_ctrl_params_get(from), *n = vafm_ctrl_params_get(to);
+    vafm_ctrl_feedback_set(to, given & VAFMD_LIVE_FB_SETPOINT ? n->setpoint : o->setpoint,
+                           given & VAFMD_LIVE_FB_UNIT ? n->setpoint_unit : o->setpoint_unit,
+                           given & VAFMD_LIVE_FB_RELATIVE ? n->setpoint_relative : o->setpoint_relative,
+                           given & VAFMD_LIVE_FB_P ? n->fb_p_m_per_N : o->fb_p_m_per_N,
+                           given & VAFMD_LIVE_FB_I ? n->fb_i_m_per_N_s : o->fb_i_m_per_N_s,
+                           given & VAFMD_LIVE_FB_TAU ? n->fb_tau_s : o->fb_tau_s, NULL);
+}
+
 void vafmd_live_apply(vafmd *d, const vafmd_live_op *op)
 {
     vafmd_live *L = d->live;
     memset(&L->ack_err, 0, sizeof L->ack_err);
     if (op->op == VAFMD_LIVE_OP_NEW) {
         s_flush(L);
-        vafm_ctrl_destroy(&L->ctrl); /* rare: a scene or settings change (the allocator may be used here) */
+        /* rare: a scene or settings change (the allocator may be used here). The new controller goes on from the
+         * old one's state (vafm_ctrl_carry: position, state, feedback, clock); a new seed (a new simulated world:
+         * what a scripted session sets first) or a scene that cannot host a controller start afresh */
+        int carry_rc = 0;
+        vafm_error cerr;
+        memset(&cerr, 0, sizeof cerr);
+        if (op->ctrl && L->ctrl && !op->fresh) {
+            s_feedback_keep(op->ctrl, L->ctrl, op->fb_given);
+            carry_rc = vafm_ctrl_carry(op->ctrl, L->ctrl, &cerr);
+        }
+        vafm_ctrl_destroy(&L->ctrl);
         free(L->map);            /* after the controller that borrowed it */
         L->ctrl = op->ctrl;
         L->map = op->map;
         snprintf(L->why, sizeof L->why, "%s", op->why);
         L->generation++;
-        L->n_pend = 0;
-        L->cur = 0;
+        vafm_ctrl_status st;
+        memset(&st, 0, sizeof st);
+        if (L->ctrl)
+            vafm_ctrl_status_get(L->ctrl, &st);
+        if (!L->ctrl || carry_rc || op->fresh)
+            L->n_pend = 0; /* else the held commands keep their times: the clock goes on */
+        L->cur = st.sample;
+        L->t0 = st.clock_base_s;
+        L->s0 = st.clock_base_sample;
         L->anchored = 0;
+        const double fs = L->fs;
         L->fs = L->ctrl ? 1.0 / vafm_ctrl_sample_interval_s(L->ctrl) : 0.0;
-        s_decimation(L);
+        if (L->fs != fs || carry_rc || !L->ctrl || op->fresh)
+            s_decimation(L); /* else the point under way goes on: the samples do */
+        if (carry_rc) /* cannot happen with a fresh controller; never silent */
+            s_send_json(L, "event", json_pack("{s:i,s:s,s:s,s:I,s:i,s:s}", "run_id", 0, "source", "ctrl", "kind",
+                                              "sim_error", "generation", (json_int_t)L->generation, "code", carry_rc,
+                                              "message", cerr.message));
+        s_events(L); /* what the carry clamped (z_saturated, xy_range, crash) */
         s_publish(L, 1);
         s_ack(L, op->req, 0);
         return;

@@ -11,7 +11,8 @@
  *   engage/withdraw/move/z/feedback ──ring──▶   VAFMD_SIM_CTRL op: applied between two advances (or held until
  *     waits for the ack (≤ 1 s; the               its `at_s`, the controller's time), result written, then
  *     simulation thread never waits)              ack = req (release)
- *   set (scene or ctrl_* changed) ──ring──▶     OP_NEW: a controller built here replaces the old one
+ *   set (scene or ctrl_* changed) ──ring──▶     OP_NEW: a controller built there replaces the old one and goes on
+ *                                               from its state (vafm_ctrl_carry; a new seed: afresh)
  *   status ◀── snapshot under a mutex that the simulation thread only ever TRY-locks (never waits)
  *
  * The live channel list is declared once, in live_int.h (s_live_channels).
@@ -37,6 +38,10 @@ enum vafmd_live_op_kind {
     VAFMD_LIVE_OP_SETTINGS = 7, /* the pacing speed and the monitor rate */
 };
 
+/* The feedback settings of vafmd_live_op.fb_given. */
+enum { VAFMD_LIVE_FB_SETPOINT = 1, VAFMD_LIVE_FB_UNIT = 2, VAFMD_LIVE_FB_RELATIVE = 4, VAFMD_LIVE_FB_P = 8,
+       VAFMD_LIVE_FB_I = 16, VAFMD_LIVE_FB_TAU = 32 };
+
 /* One controller command, copied through the command ring inside a vafmd_sim_cmd. */
 typedef struct vafmd_live_op {
     int op;              /* enum vafmd_live_op_kind */
@@ -55,6 +60,9 @@ typedef struct vafmd_live_op {
     vafm_ctrl *ctrl;                    /* NEW */
     vafm_map_spec *map;                 /* NEW: the sample ctrl borrows (malloc'ed; ownership passes; NULL: flat) */
     char why[256];                      /* NEW with ctrl NULL: why there is no controller */
+    int fresh;                          /* NEW: 1 = start afresh (a new seed), 0 = carry the old one's state */
+    unsigned fb_given;                  /* NEW: the feedback settings the `set` changed (VAFMD_LIVE_FB_*); the
+                                           others carry from the running controller (a `feedback` command's) */
     double speed, monitor_rate_Hz;      /* SETTINGS */
     int free_run;
 } vafmd_live_op;

@@ -446,7 +446,7 @@ int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             return -1;
         }
     }
-    /* the settings first: a new controller then starts on the new decimation grid from its sample 0 */
+    /* the settings first: a new controller then goes on with the new decimation */
     if (rate_given || set.speed != d->set.speed) {
         vafmd_live_op op;
         memset(&op, 0, sizeof op);
@@ -457,10 +457,21 @@ int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
             return -1;
     }
     const uint64_t h = vafmd_live_scene_hash(&scene);
-    if (ctrl_given || sample_given || h != L->scene_hash) { /* a new controller over the new scene: it starts again */
+    if (ctrl_given || sample_given || h != L->scene_hash) { /* a new controller over the new scene: the simulation
+                                                                 * thread carries the state into it (vafm_ctrl_carry) */
         vafmd_live_op op;
         memset(&op, 0, sizeof op);
         op.op = VAFMD_LIVE_OP_NEW;
+        op.fresh = scene.seed != d->scene.seed;
+        /* the feedback's settings the set changes; the others stay the running controller's: a `feedback`
+         * command held for its at_s has put its values in L->cp already, the controller takes them at at_s */
+        const vafm_ctrl_params *o = &L->cp;
+        op.fb_given = (cp.setpoint != o->setpoint ? VAFMD_LIVE_FB_SETPOINT : 0u) |
+                      (cp.setpoint_unit != o->setpoint_unit ? VAFMD_LIVE_FB_UNIT : 0u) |
+                      (cp.setpoint_relative != o->setpoint_relative ? VAFMD_LIVE_FB_RELATIVE : 0u) |
+                      (cp.fb_p_m_per_N != o->fb_p_m_per_N ? VAFMD_LIVE_FB_P : 0u) |
+                      (cp.fb_i_m_per_N_s != o->fb_i_m_per_N_s ? VAFMD_LIVE_FB_I : 0u) |
+                      (cp.fb_tau_s != o->fb_tau_s ? VAFMD_LIVE_FB_TAU : 0u);
         if (has_sample && !(op.map = malloc(sizeof *op.map))) {
             vafmd_err_set(e, VAFMD_E_BUSY, "", "out of memory for the controller's sample; retry");
             return -1;

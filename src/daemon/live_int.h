@@ -64,6 +64,8 @@ struct vafmd_live {
     double fs, speed, rate;
     int64_t anchor_ns, last_ns;
     uint64_t anchor_sample, cur;
+    double t0;             /* the controller's clock base (status.clock_base_s): at_s → sample from there */
+    uint64_t s0;
     int anchored, dead;
     uint64_t decim;
     double acc[S_NCH];
