@@ -572,6 +572,52 @@ def test_approach_withdraw(nd):
     c.close()
 
 
+def test_zspectr_leaves_zctrl_as_it_found_it(nd):
+    """Issue #27: a Z spectroscopy `set`s the scene for its sweep and back, which rebuilds the controller; its
+    state carries, so ZCtrl is as it was: engaged stays engaged (ZCtrl.OnOffGet 1, StatusGet 2), the motor, X
+    and Y where they were, and Z within the feedback's noise. The integral loop (tau = 10 samples) moves Z by
+    G*e per sample, G = Ts/(k tau) = 1 m/N, on a force error e of the thermal sd in contact
+    sigma_F = k sqrt(kT/(k + k_c)) = 0.1 N/m * sqrt(4.1e-21 J / 87.5 N/m) = 0.68 pN (k_c: JKR on silica at
+    2 nN); with g = G*k*k_c/(k + k_c) = 0.1 the stationary sd of Z is G sigma_F / sqrt(2g) = 1.5 pm (an upper
+    bound: the default mean anti-alias filter lowers sigma_F). Z before and after are two such samples (sd
+    2.1 pm for their difference): 5 sd = 10.6 pm, plus two float32 roundings (0.23 pm each at 5 um): 11 pm."""
+    assert nd.cmd({"cmd": "set", "values": {"speed": 20}})["status"] == "ok"
+    c = Conn(nd.port)
+    c.call("AutoApproach.OnOffSet", u16(1))
+
+    def on():
+        b, _, _ = c.call("ZCtrl.StatusGet")
+        return struct.unpack(">H", b)[0] == 2
+
+    poll(on, 90, "the controller on (engaged)")
+    time.sleep(0.5)  # 10 s of the controller's time: the loop settled at the setpoint
+    c.call("FolMe.XYPosSet", f64(0.5e-6) + f64(-0.25e-6) + u32(1))
+    before = ctrl(nd)
+    b, _, _ = c.call("ZCtrl.ZPosGet")
+    z0 = struct.unpack(">f", b)[0]
+    b, _, _ = c.call("ZCtrl.OnOffGet")
+    assert struct.unpack(">I", b) == (1,) and z0 < 0
+    # 1.23 ms per point: 12 samples, so the sweep's sample_rate_Hz is 9756 Hz, not 10 kHz: the lever restarts
+    # at its equilibrium twice (the sweep's set, the restore), the hard case
+    setup_sweep(c, points=20, t_int=1.23e-3, dist=100e-9, bwd=1, retract=(2, 5e-9, 3, 0))
+    c.call("ZSpectr.RangeSet", f32(50e-9) + f32(100e-9))
+    names, data, params = zspectr_start(c)
+    assert data.shape == (8, 20) and np.isfinite(data[1]).all()
+    b, _, _ = c.call("ZCtrl.OnOffGet")
+    on_after = struct.unpack(">I", b)[0]
+    b, _, _ = c.call("ZCtrl.ZPosGet")
+    z1 = struct.unpack(">f", b)[0]
+    after = ctrl(nd)
+    print(f"ZCtrl before the sweep: on, Z {z0:.6g} m; after: on {on_after}, Z {z1:.6g} m (dZ {z1 - z0:.3g} m), "
+          f"state {after['state']}, generation {before['generation']} -> {after['generation']}")
+    assert on_after == 1 and after["state"] == "engaged" and after["feedback"], after
+    assert after["generation"] > before["generation"]  # the sweep's sets did rebuild it
+    assert (after["motor_z_m"], after["x_m"], after["y_m"]) == (before["motor_z_m"], before["x_m"], before["y_m"])
+    assert abs(z1 - z0) < 11e-12, (z0, z1)
+    assert on()
+    c.close()
+
+
 def test_framing_errors(nd):
     c = Conn(nd.port)
     # unknown command: named, the connection stays usable

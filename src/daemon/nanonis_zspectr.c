@@ -448,31 +448,6 @@ static int s_restore(nnc_ctx *x, const json_t *saved, int *rc)
     return r;
 }
 
-/* The tip back to (xm, ym): the scene `set`s of a sweep rebuild the controller (wire.md §2.4), which puts it
- * at X = Y = 0, and a curve over ctrl_sample takes the material under the tip. A move at 1 cm/s, waited for
- * (at most 5 s). Nothing to do at the centre. */
-static int s_goto_xy(nnc_ctx *x, double xm, double ym)
-{
-    if ((xm == 0 && ym == 0) || !isfinite(xm) || !isfinite(ym))
-        return NNC_OK;
-    int rc = nnc_call(x, json_pack("{s:s,s:f,s:f,s:f}", "cmd", "move", "x_m", xm, "y_m", ym, "speed_m_per_s", 0.01),
-                      NULL);
-    for (double end = nn_now_s() + 5; rc == NNC_OK;) {
-        json_t *st = NULL;
-        if ((rc = nnc_call(x, json_pack("{s:s}", "cmd", "status"), &st)))
-            break;
-        int moving = json_is_true(json_object_get(json_object_get(st, "ctrl"), "moving"));
-        json_decref(st);
-        if (!moving)
-            break;
-        if (nn_now_s() > end || nn_quitting())
-            return nnc_fail(x, "%s", "the tip did not get back to its X, Y within 5 s");
-        struct timespec ts = { 0, 2000000 };
-        nanosleep(&ts, NULL);
-    }
-    return rc;
-}
-
 static int h_zs_start(nnc_ctx *x)
 {
     uint32_t get_data = nn_get_u32(&x->r, "Get data");
@@ -493,7 +468,6 @@ static int h_zs_start(nnc_ctx *x)
     nnc_m.running = 1;
     nnc_m.stop = 0;
     pthread_mutex_unlock(&nnc_mu);
-    double tip_x = 0, tip_y = 0; /* the tip's X, Y: each curve is taken there (a sample under the tip) */
     int rc = NNC_OK, applied = 0; /* applied: the sweep's values are set and not yet put back */
     json_t *saved = NULL, *vals = NULL;
     double *acc = NULL;
@@ -534,8 +508,6 @@ static int h_zs_start(nnc_ctx *x)
         double gap = nnc_num(c, "gap_m");
         if (json_is_string(state) && !strcmp(json_string_value(state), "engaged") && isfinite(gap))
             start = gap + (double)p.z_offset_m;
-        tip_x = nnc_num(c, "x_m");
-        tip_y = nnc_num(c, "y_m");
         json_decref(st);
     }
     double k_N = nnc_num(saved, "k_N_per_m"), sens = nnc_num(saved, "sensitivity_m_per_V");
@@ -607,10 +579,8 @@ static int h_zs_start(nnc_ctx *x)
         }
         rc = nnc_call(x, json_pack("{s:s,s:O}", "cmd", "set", "values", vals), NULL);
         if (rc == NNC_OK) {
-            applied = 1;
-            rc = s_goto_xy(x, tip_x, tip_y);
-            if (rc == NNC_OK)
-                rc = nnc_call(x, json_pack("{s:s,s:I}", "cmd", "curve", "index", (json_int_t)index), &reply);
+            applied = 1; /* the rebuilt controller keeps its state, X and Y included (wire.md §2.4) */
+            rc = nnc_call(x, json_pack("{s:s,s:I}", "cmd", "curve", "index", (json_int_t)index), &reply);
             if (s_restore(x, saved, &rc) == NNC_OK)
                 applied = 0;
         }
@@ -720,15 +690,6 @@ static int h_zs_start(nnc_ctx *x)
 out:
     if (applied) /* a restore that failed after the curve started: once more */
         s_restore(x, saved, &rc);
-    if (saved && rc != NNC_SILENT) { /* the restore rebuilt the controller: the tip back where it was */
-        char tmp[NNC_ERR];
-        memcpy(tmp, x->err, sizeof tmp);
-        int r = s_goto_xy(x, tip_x, tip_y);
-        if (r && rc == NNC_OK)
-            rc = r;
-        else
-            memcpy(x->err, tmp, sizeof tmp);
-    }
     json_decref(saved);
     json_decref(vals);
     free(acc);
