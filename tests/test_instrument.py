@@ -311,6 +311,10 @@ def test_set_keeps_the_controller_state():
     assert ev["piezo_z_m"] == pz / 2, (ev, pz)
     st = d.cmd({"cmd": "status"})["ctrl"]
     assert st["feedback"] and st["piezo_z_m"] <= pz / 2, st
+    # a start height asked for (as a new seed) starts afresh: there, idle, the clock from 0
+    assert d.cmd({"cmd": "set", "values": {"ctrl_motor_z0_m": 50e-6}})["status"] == "ok"
+    st = d.cmd({"cmd": "status"})["ctrl"]
+    assert st["motor_z_m"] == 50e-6 and st["state"] == "idle" and not st["feedback"] and st["time_s"] < 5, st
     d.stop()
 
 

@@ -436,7 +436,8 @@ void vafmd_live_apply(vafmd *d, const vafmd_live_op *op)
         s_flush(L);
         /* rare: a scene or settings change (the allocator may be used here). The new controller goes on from the
          * old one's state (vafm_ctrl_carry: position, state, feedback, clock); a new seed (a new simulated world:
-         * what a scripted session sets first) or a scene that cannot host a controller start afresh */
+         * what a scripted session sets first) or ctrl_motor_z0_m, or a scene that cannot host a controller start
+         * afresh */
         int carry_rc = 0;
         vafm_error cerr;
         memset(&cerr, 0, sizeof cerr);

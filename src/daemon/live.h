@@ -12,7 +12,8 @@
  *     waits for the ack (≤ 1 s; the               its `at_s`, the controller's time), result written, then
  *     simulation thread never waits)              ack = req (release)
  *   set (scene or ctrl_* changed) ──ring──▶     OP_NEW: a controller built there replaces the old one and goes on
- *                                               from its state (vafm_ctrl_carry; a new seed: afresh)
+ *                                               from its state (vafm_ctrl_carry; a new seed or start
+ *                                               height: afresh)
  *   status ◀── snapshot under a mutex that the simulation thread only ever TRY-locks (never waits)
  *
  * The live channel list is declared once, in live_int.h (s_live_channels).
@@ -60,7 +61,7 @@ typedef struct vafmd_live_op {
     vafm_ctrl *ctrl;                    /* NEW */
     vafm_map_spec *map;                 /* NEW: the sample ctrl borrows (malloc'ed; ownership passes; NULL: flat) */
     char why[256];                      /* NEW with ctrl NULL: why there is no controller */
-    int fresh;                          /* NEW: 1 = start afresh (a new seed), 0 = carry the old one's state */
+    int fresh;                          /* NEW: 1 = start afresh (a new seed or ctrl_motor_z0_m), 0 = carry */
     unsigned fb_given;                  /* NEW: the feedback settings the `set` changed (VAFMD_LIVE_FB_*); the
                                            others carry from the running controller (a `feedback` command's) */
     double speed, monitor_rate_Hz;      /* SETTINGS */

@@ -462,7 +462,9 @@ int vafmd_live_set(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
         vafmd_live_op op;
         memset(&op, 0, sizeof op);
         op.op = VAFMD_LIVE_OP_NEW;
-        op.fresh = scene.seed != d->scene.seed;
+        /* afresh: a new seed (a new simulated world) or a new ctrl_motor_z0_m (where the controller starts: asking
+         * for it is asking for a start there) */
+        op.fresh = scene.seed != d->scene.seed || cp.motor_z0_m != L->cp.motor_z0_m;
         /* the feedback's settings the set changes; the others stay the running controller's: a `feedback`
          * command held for its at_s has put its values in L->cp already, the controller takes them at at_s */
         const vafm_ctrl_params *o = &L->cp;
