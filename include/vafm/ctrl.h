@@ -153,8 +153,8 @@ typedef struct vafm_ctrl_status {
     int state;               /**< enum vafm_ctrl_state */
     int engage_phase;        /**< enum vafm_ctrl_engage_phase */
     int last_fail;           /**< enum vafm_ctrl_fail of the last failed engage (0: none since) */
-    uint64_t sample;         /**< samples made since the start */
-    double time_s;           /**< simulated time since the start, s */
+    uint64_t sample;         /**< samples made since the start (a carried state counts on: vafm_ctrl_carry) */
+    double time_s;           /**< simulated time since the start, s (carried likewise; see clock_base_s) */
     double motor_z_m;        /**< motor height, m */
     double piezo_z_m;        /**< piezo extension, m, [0, piezo_range_m] */
     double x_m, y_m;         /**< tip position over the sample, m */

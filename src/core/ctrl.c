@@ -388,8 +388,9 @@ int vafm_ctrl_carry(vafm_ctrl *dst, vafm_ctrl *src, vafm_error *err)
         return VAFM_EINVAL;
     }
     if (dst->sample != 0 || dst->carried) {
-        vafm_err_set(err, VAFM_ESTATE, "", "vafm_ctrl_carry: the new controller has run already (%" PRIu64 " samples%s): "
-                     "carry into one fresh from vafm_ctrl_new", dst->sample, dst->carried ? ", carried into" : "");
+        vafm_err_set(err, VAFM_ESTATE, "", "vafm_ctrl_carry: the new controller has run already (%" PRIu64
+                     " samples%s): carry into one fresh from vafm_ctrl_new", dst->sample,
+                     dst->carried ? ", carried into" : "");
         return VAFM_ESTATE;
     }
     vafm_ctrl *c = dst;
@@ -407,8 +408,8 @@ int vafm_ctrl_carry(vafm_ctrl *dst, vafm_ctrl *src, vafm_error *err)
     /* the same lever over the same surface, nothing clamped: dst takes src's running live scene over, so the
      * lever goes on exactly as it was (its position, velocity, contact and random stream): bit for bit as if
      * nothing had changed */
-    const int takeover = cp->stream == src->cp.stream && s_same_lever(&src->scene, &c->scene) && surf == src->surface && x == src->x &&
-                         y == src->y && pz == src->piezo_z;
+    const int takeover = cp->stream == src->cp.stream && s_same_lever(&src->scene, &c->scene) &&
+                         surf == src->surface && x == src->x && y == src->y && pz == src->piezo_z;
     /* the clock goes on: at the same rate its base stays (the times are the same bits as without the carry);
      * at a new rate it moves to here */
     c->carried = 1;
