@@ -762,6 +762,50 @@ static void test_carry_bit_for_bit(void)
     }
 }
 
+/* The contact branch carries: held by the feedback at a tensile force (−1 nN, within JKR's pull-off on silica),
+ * the support is above the surface and the tip sticks; carried into 300 K (the lever restarts at equilibrium
+ * there) it starts on the contact branch and stays in contact, engaged, with no lost_contact — a free start at
+ * that height would have the tip off the surface. */
+static void test_carry_adhesive_contact(void)
+{
+    vafm_params p;
+    s_scene(&p);
+    vafm_ctrl_params cp;
+    vafm_ctrl_params_default(&cp);
+    cp.motor_z0_m = 30e-6;
+    vafm_ctrl *old = s_engaged(&p, &cp, NULL);
+    vafm_error err;
+    ENSURE(vafm_ctrl_feedback_set(old, -1e-9, VAFM_CTRL_UNIT_N, 0, NAN, NAN, NAN, &err) == 0);
+    ENSURE(vafm_ctrl_advance(old, 20000, NULL, NULL) == 20000);
+    vafm_ctrl_status a, b;
+    vafm_ctrl_status_get(old, &a);
+    vafm_ctrl_event ev;
+    while (vafm_ctrl_event_pop(old, &ev))
+        ENSURE_MSG(ev.type != VAFM_CTRL_EV_LOST_CONTACT, "lost contact before the carry");
+    fprintf(stderr, "  adhesive hold: gap %.4g m, force %.4g N, in contact %d\n", a.gap_m, a.force_N, a.in_contact);
+    ENSURE(a.state == VAFM_CTRL_ENGAGED && a.in_contact && a.gap_m > 0);
+    vafm_params p2 = p;
+    p2.T_K = 300.0;
+    vafm_ctrl_params cp2 = *vafm_ctrl_params_get(old); /* the settings in force: the tensile setpoint */
+    vafm_ctrl *c = s_carried(old, &p2, &cp2, NULL);
+    vafm_ctrl_destroy(&old);
+    s_carry_rec rec;
+    memset(&rec, 0, sizeof rec);
+    s_blk_init(&rec.f, 20000);
+    ENSURE(vafm_ctrl_advance(c, 20000, s_carry_sink, &rec) == 20000);
+    vafm_ctrl_status_get(c, &b);
+    int lost = 0;
+    while (vafm_ctrl_event_pop(c, &ev))
+        lost += ev.type == VAFM_CTRL_EV_LOST_CONTACT;
+    double m, se;
+    s_blk_stat(&rec.f, 0, &m, &se);
+    fprintf(stderr, "  carried into 300 K: in contact %d, lost_contact events %d, <F> %.4g ± %.2g N\n", b.in_contact,
+            lost, m, se);
+    ENSURE(lost == 0 && b.in_contact && b.state == VAFM_CTRL_ENGAGED && rec.not_engaged == 0);
+    ENSURE(fabs(m - b.setpoint_N) < 5.0 * se);
+    vafm_ctrl_destroy(&c);
+}
+
 int main(void)
 {
     RUN_TEST(test_params);
@@ -775,5 +819,6 @@ int main(void)
     RUN_TEST(test_carry_engaged);
     RUN_TEST(test_carry_clamp);
     RUN_TEST(test_carry_bit_for_bit);
+    RUN_TEST(test_carry_adhesive_contact);
     return harness_done();
 }
