@@ -201,6 +201,14 @@ def test_engaged(vafm_engaged, vafmd):
     assert len(live["force_N"]) == 50 and np.all(live["state"] == 2)
     print("FORCE", live["force_N"].mean(), st["setpoint_N"])       # setpoint_N: from the free baseline
     assert abs(live["force_N"].mean() - st["setpoint_N"]) < 0.05e-9
+    vafmd.client.set({"T_K": 310.0})                                # rebuilt: the state carries over
+    st = vafm_engaged.ctrl()
+    assert st["generation"] > vafm_engaged.generation and st["state"] == "engaged", st
+    for _ in range(200):                                            # past the points buffered before the set
+        after = vafm_engaged.live(10, timeout=10)
+        if after["time_s"][-1] > st["time_s"]:
+            break
+    assert after["time_s"][-1] > st["time_s"] and np.all(after["state"] == 2)
 
 @pytest.mark.vafm_engage(settings={"engage_timeout_s": "2s"})
 def test_timeout(vafm_engaged):

@@ -582,14 +582,15 @@ class Engaged:
         return self.client.status()["ctrl"]
 
     def live(self, n, timeout=30.0):
-        """{channel: numpy array} of the next n points of the `live` topic (wire.md §3.7), this controller's
-        only; raises TransportError if they do not come within `timeout` s (or a live message is lost:
-        the points would not be consecutive)."""
+        """{channel: numpy array} of the next n points of the `live` topic (wire.md §3.7), of this controller
+        and of those that took its state over (a `set` rebuilds the controller and carries its state: a later
+        generation, the same samples going on); raises TransportError if they do not come within `timeout` s
+        (or a live message is lost: the points would not be consecutive)."""
         deadline = time.monotonic() + timeout
         since = self.event.get("sample")  # points that begin before the engaged event are not "engaged" points
         parts, got, last = [], 0, None
         for topic, x in self.stream.messages(deadline=deadline):
-            if topic != "live" or x[0].get("generation") != self.generation:
+            if topic != "live" or (x[0].get("generation") or 0) < (self.generation or 0):
                 continue
             h, ch = x
             if last is not None and h["seq"] != last + 1:
@@ -641,7 +642,7 @@ def engage(inst, setpoint=None, settings=None, approach_speed=1000, timeout=60.0
     if not st.get("available"):
         raise RuntimeError(f"the daemon has no controller: {st.get('error')}")
     if values:
-        c.set(values)  # a ctrl_* change rebuilds the controller: it starts again from far away
+        c.set(values)  # the controller keeps its state (ctrl_motor_z0_m would start it again from far away)
     elif st["state"] == "engaged":  # a shared daemon already engaged as asked
         return Engaged(inst, stream, {"kind": "engaged", "generation": st["generation"], "reused": True})
     st = c.status()["ctrl"]
