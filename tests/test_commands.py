@@ -93,6 +93,30 @@ def test_vafmd_help():
     assert all(len(line.split(None, 1)) == 2 for line in sec), "a command without help"
 
 
+def help_settings(out):
+    """[name] of `vafmd --help`'s PARAMETERS AND SETTINGS section, one per line, in order."""
+    assert "\nPARAMETERS AND SETTINGS" in out, "vafmd --help lists no parameters and settings"
+    sec = out.split("\nPARAMETERS AND SETTINGS", 1)[1].split("\n\n", 1)[0].splitlines()[1:]
+    return [line.split()[0] for line in sec if line.startswith("  ") and not line.startswith("   ")]
+
+
+def test_vafmd_help_lists_every_setting():
+    """Every key `get` accepts (scene parameters, daemon settings, ctrl_*, monitor_rate_Hz, ctrl_sample; issue
+    #26: 0.7.0's help named 16 of them) is in `vafmd --help`, once, with a description, and nothing else is."""
+    out = subprocess.run([VAFMD, "--help"], capture_output=True, text=True, check=True).stdout
+    names = help_settings(out)
+    d = Daemon()
+    keys = set(d.cmd({"cmd": "get"})["values"])
+    d.stop()
+    assert {"monitor_rate_Hz", "ctrl_sample", "ctrl_setpoint", "segment_channel", "k_N_per_m"} <= keys
+    assert sorted(set(names)) == sorted(names), "a name listed twice"
+    assert keys - set(names) == set(), f"get's keys missing from vafmd --help: {sorted(keys - set(names))}"
+    assert set(names) - keys == set(), f"vafmd --help lists what get does not know: {sorted(set(names) - keys)}"
+    sec = out.split("\nPARAMETERS AND SETTINGS", 1)[1].split("\n\n", 1)[0].splitlines()[1:]
+    first = {line.split()[0]: line for line in sec if line.startswith("  ") and not line.startswith("   ")}
+    assert all(len(first[n].split()) >= 2 for n in names), "a setting without description"
+
+
 def test_ctl_help():
     out = subprocess.run([VAFM_CLI, "ctl", "--help"], capture_output=True, text=True, check=True).stdout
     lines = out.splitlines()

@@ -83,6 +83,9 @@ void vafmd_live_config_default(vafmd_live_config *c);
 int vafmd_live_config_parse(const struct vafmd *d, json_t *values, vafmd_live_config *c, struct vafmd_err *e);
 /* True for a key of `values` that vafmd_live_config_parse takes. */
 int vafmd_live_config_key(const char *name);
+/* {name: {"unit", "kind", "doc"}} of the controller's settings get/set take (ctrl_*, monitor_rate_Hz,
+ * ctrl_sample), from the table that defines them (vafmd --help lists them). New reference, NULL: no memory. */
+json_t *vafmd_live_settings_info(void);
 
 /* main.c: create the live state and the first controller (before the threads start; c NULL: defaults), free
  * it after. */

@@ -554,6 +554,23 @@ int vafmd_live_config_key(const char *name)
     return s_cset_find(name) || !strcmp(name, "ctrl_sample") || !strcmp(name, "monitor_rate_Hz");
 }
 
+json_t *vafmd_live_settings_info(void)
+{
+    json_t *o = json_object();
+    for (size_t i = 0; o && i < S_NCSET; i++) {
+        char nm[64];
+        snprintf(nm, sizeof nm, "ctrl_%s", s_csets[i].name);
+        json_object_set_new(o, nm, s_cset_info(&s_csets[i]));
+    }
+    if (o) {
+        json_object_set_new(o, "monitor_rate_Hz", json_pack("{s:s,s:s,s:s}", "unit", "Hz", "kind", "real", "doc",
+                                                            s_monitor_doc));
+        json_object_set_new(o, "ctrl_sample", json_pack("{s:s,s:s,s:s}", "unit", "", "kind", "text", "doc",
+                                                        s_sample_doc));
+    }
+    return o;
+}
+
 int vafmd_live_config_parse(const vafmd *d, json_t *values, vafmd_live_config *c, vafmd_err *e)
 {
     const char *key;

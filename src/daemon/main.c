@@ -91,6 +91,55 @@ static void s_bind_address(const char *ep, char *out, size_t len)
         snprintf(out, len, "%s", ep);
 }
 
+/* One info object of `get`: "(unit, kind[, min..max][: choices]) doc" on one line. */
+static void s_help_line(const char *name, json_t *f)
+{
+    const char *unit = json_string_value(json_object_get(f, "unit"));
+    const char *kind = json_string_value(json_object_get(f, "kind"));
+    const char *choices = json_string_value(json_object_get(f, "choices"));
+    json_t *mn = json_object_get(f, "min"), *mx = json_object_get(f, "max");
+    printf("  %-26s (%s%s%s", name, kind ? kind : "?", unit && unit[0] ? ", " : "", unit && unit[0] ? unit : "");
+    if (json_is_number(mn) && json_is_number(mx))
+        printf(", [%g, %g]", json_number_value(mn), json_number_value(mx));
+    if (choices)
+        printf(": %s", choices);
+    if (json_is_true(json_object_get(f, "read_only")))
+        printf(", read-only");
+    printf(") %s\n", json_string_value(json_object_get(f, "doc")) ? json_string_value(json_object_get(f, "doc")) : "");
+}
+
+/* Every name `get` and `set` take, from the tables that define them (the scene's parameter table, the daemon's
+ * settings, the controller's): what `get` with "info": true answers. @return 0, or 1 (out of memory). */
+static int s_help_settings(void)
+{
+    vafm_params p;
+    vafm_params_default(&p);
+    vafmd_settings set;
+    memset(&set, 0, sizeof set);
+    vafmd_settings_default(&set);
+    vafmd_cmd c;
+    memset(&c, 0, sizeof c);
+    c.info = 1;
+    vafmd_err e;
+    memset(&e, 0, sizeof e);
+    json_t *v = vafmd_get_values(&p, &set, &c, &e), *live = vafmd_live_settings_info();
+    json_t *info = json_object_get(v, "info");
+    if (!info || !live) {
+        json_decref(v);
+        json_decref(live);
+        fprintf(stderr, "vafmd: out of memory\n");
+        return 1;
+    }
+    printf("\nPARAMETERS AND SETTINGS (all get/set and --config \"values\" take; as get with \"info\": true)\n");
+    const char *k;
+    json_t *f;
+    json_object_foreach(info, k, f) s_help_line(k, f);
+    json_object_foreach(live, k, f) s_help_line(k, f);
+    json_decref(v);
+    json_decref(live);
+    return 0;
+}
+
 static int s_usage_error(const char *fmt, const char *a)
 {
     fprintf(stderr, "vafmd: ");
@@ -179,8 +228,9 @@ int main(int argc, char **argv)
             fputs(s_usage, stdout);
             for (int k = 0; k < VAFMD_CMD_N; k++)
                 printf("  %-10s %s\n", vafmd_cmd_name(k), vafmd_cmd_help(k));
+            int hrc = s_help_settings();
             fputs(s_usage_tail, stdout);
-            return 0;
+            return hrc;
         } else if (!strcmp(a, "--version")) {
             printf("vafmd %s (library %s)\n", VAFMD_VERSION, vafm_version());
             return 0;
