@@ -1849,6 +1849,198 @@ static void test_segment_lists(void)
     vafm_h5_reader_destroy(&r);
 }
 
+/* ---- curves with their own segment lists (issue #26, log): format 1.3, 'vafm segments <i>', rule V7 ---------- */
+
+#define S_SEG3 "{\"segments\": [{\"kind\": \"extend\"}, {\"kind\": \"pause\"}, {\"kind\": \"retract\"}]}"
+
+/* Curve i of the mixed file: 0 and 3 plain (segment count 2), 1 a 4-segment list's, 2 a 3-segment list's. */
+static void cseg_make(syn *s, size_t i)
+{
+    size_t n = 400 + 13 * i;
+    if (i == 1) {
+        seg4_make(s, n, i);
+        return;
+    }
+    syn_make(s, n, 0.05, i);
+    if (i == 2) {
+        for (size_t j = 0; j < n; j++)
+            s->seg[j] = (uint8_t)(3 * j / n);
+        s->c.meta.segment_count = 3;
+    }
+}
+
+static const char *cseg_list(size_t i)
+{
+    return i == 1 ? S_SEG4 : i == 2 ? S_SEG3 : NULL;
+}
+
+/* Curves [from, to) of the mixed file, into a new file or a resumed one; flush: 0 leaves the last curve unflushed
+ * and the writer destroyed (what a kill leaves). @return 0 or the first error. */
+static int cseg_file(const char *path, int resume, size_t to, int flush, vafm_error *e)
+{
+    vafm_params p;
+    s_fig4(&p);
+    vafm_h5_writer_opts o;
+    vafm_h5_writer_opts_default(&o);
+    o.resume = resume;
+    o.keep_intact = 1;
+    vafm_h5_writer *w = NULL;
+    int rc = vafm_h5_writer_open(&w, path, &o, e);
+    if (!rc)
+        rc = vafm_h5_writer_set_provenance(w, &p, NULL, e);
+    for (size_t i = w ? (size_t)vafm_h5_writer_count(w) : 0; i < to && !rc; i++) {
+        syn s;
+        cseg_make(&s, i);
+        if (cseg_list(i))
+            rc = vafm_h5_writer_set_curve_segments(w, cseg_list(i), e);
+        if (!rc)
+            rc = vafm_h5_writer_append(w, &s.c, &s.truth, e);
+        if (!rc && (flush || i + 1 < to))
+            rc = vafm_h5_writer_flush(w, e);
+        syn_free(&s);
+    }
+    if (!flush) {
+        vafm_h5_writer_destroy(&w);
+        return rc;
+    }
+    int rc2 = w ? vafm_h5_writer_close(&w, e) : 0;
+    return rc ? rc : rc2;
+}
+
+/* The curves and their lists read back (count curves of the mixed file, bit for bit). */
+static void cseg_read_back(const char *path, size_t count)
+{
+    vafm_error e = { 0 };
+    vafm_h5_reader *r = NULL;
+    int rc = vafm_h5_reader_open(&r, path, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    if (rc)
+        return;
+    vafm_h5_provenance pv;
+    vafm_h5_reader_provenance(r, &pv);
+    ENSURE(pv.format_minor == VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS && !pv.segments_json && pv.segment_count == 0);
+    ENSURE(vafm_h5_reader_count(r) == count);
+    for (size_t i = 0; i < count && i < vafm_h5_reader_count(r); i++) {
+        const char *list = "unset";
+        rc = vafm_h5_reader_curve_segments(r, i, &list, &e);
+        ENSURE_MSG(rc == 0 && s_same_str(list, cseg_list(i)), "curve %zu: %d %s", i, rc, list ? list : "(none)");
+        syn s;
+        cseg_make(&s, i);
+        vafm_h5_curve c;
+        rc = vafm_h5_reader_curve(r, i, &c, &e);
+        char why[200] = "";
+        ENSURE_MSG(rc == 0 && s_curve_eq(&s.c, &c, 0, why, sizeof why), "curve %zu: %s %s", i, e.message, why);
+        ENSURE(rc || c.meta.segment_count == (i == 1 ? 4 : i == 2 ? 3 : 2));
+        syn_free(&s);
+    }
+    vafm_h5_reader_destroy(&r);
+}
+
+/* Edit a copy of the mixed file with plain HDF5: 0 deletes curve 1's list (a count of 4 without one), 1 adds a
+ * list for a curve that is not there, 2 says 1.1, 3 gives curve 2 a 4-segment list (its count is 3). */
+static void cseg_hostile(const char *src, const char *dst, int kind)
+{
+    size_t n = 0;
+    unsigned char *b = s_slurp(src, &n);
+    s_spit(dst, b, n);
+    free(b);
+    hid_t f = H5Fopen(dst, H5F_ACC_RDWR, H5P_DEFAULT);
+    ENSURE(f >= 0);
+    if (kind == 0)
+        ENSURE(H5Adelete(f, "vafm segments 1") >= 0);
+    if (kind == 1)
+        h_str(f, "vafm segments 9", S_SEG3, 0);
+    if (kind == 2) {
+        H5Adelete(f, "vafm format version");
+        h_str(f, "vafm format version", "1.1", 0);
+    }
+    if (kind == 3) {
+        H5Adelete(f, "vafm segments 2");
+        h_str(f, "vafm segments 2", S_SEG4, 0);
+    }
+    H5Fclose(f);
+}
+
+static void test_curve_segment_lists(void)
+{
+    const char *path = "t_h5_cseg.h5", *bad = "t_h5_cseg_bad.h5";
+    remove(path);
+    vafm_error e = { 0 };
+    /* plain, 4-segment, 3-segment, plain: format 1.3, each list read back with its curve */
+    int rc = cseg_file(path, 0, 4, 1, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    rc = vafm_h5_check(path, &e);
+    ENSURE_MSG(rc == 0, "conformance: %s", e.message);
+    cseg_read_back(path, 4);
+    /* a kill after curve 2's append: resume keeps 0 and 1 and drops curve 2 with its list, then appends it */
+    remove(path);
+    rc = cseg_file(path, 0, 3, 0, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    rc = cseg_file(path, 1, 2, 1, &e);
+    ENSURE_MSG(rc == 0, "%s", e.message);
+    hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE(f >= 0 && H5Aexists(f, "vafm segments 1") > 0 && H5Aexists(f, "vafm segments 2") == 0);
+    H5Fclose(f);
+    rc = vafm_h5_check(path, &e);
+    ENSURE_MSG(rc == 0, "conformance after resume: %s", e.message);
+    cseg_read_back(path, 2);
+    rc = cseg_file(path, 1, 4, 1, &e);
+    ENSURE_MSG(rc == 0 && vafm_h5_check(path, &e) == 0, "%s", e.message);
+    cseg_read_back(path, 4);
+    /* the writer refuses a count other than the curve's list's, a value ≥ it, a bad list, a list in a 1.2 file */
+    {
+        vafm_params p;
+        s_fig4(&p);
+        for (int k = 0; k < 4; k++) {
+            const char *wf = "t_h5_cseg_w.h5";
+            remove(wf);
+            vafm_h5_writer *w = NULL;
+            ENSURE(vafm_h5_writer_open(&w, wf, NULL, &e) == 0);
+            if (k == 3)
+                ENSURE(vafm_h5_writer_set_segments(w, S_SEG4, &e) == 0);
+            ENSURE(vafm_h5_writer_set_provenance(w, &p, NULL, &e) == 0);
+            rc = vafm_h5_writer_set_curve_segments(w, k == 2 ? "{\"segments\": []}" : S_SEG4, &e);
+            if (k >= 2) {
+                ENSURE_MSG(rc == (k == 2 ? VAFM_EINVAL : VAFM_ESTATE), "case %d: %d %s", k, rc, e.message);
+                vafm_h5_writer_destroy(&w);
+                continue;
+            }
+            ENSURE(rc == 0);
+            syn s;
+            seg4_make(&s, 400, 0);
+            if (k == 0)
+                s.c.meta.segment_count = 2;
+            if (k == 1)
+                s.seg[9] = 4;
+            rc = vafm_h5_writer_append(w, &s.c, &s.truth, &e);
+            ENSURE_MSG(rc == VAFM_EINVAL && strstr(e.message, k == 0 ? "the curve's segment list has 4" : "below"),
+                       "case %d: %d %s", k, rc, e.message);
+            /* the list was for that append only: the next curve is a plain one */
+            syn_free(&s);
+            syn_make(&s, 300, 0.05, 0);
+            rc = vafm_h5_writer_append(w, &s.c, &s.truth, &e);
+            ENSURE_MSG(rc == 0, "case %d: %s", k, e.message);
+            syn_free(&s);
+            ENSURE(vafm_h5_writer_close(&w, &e) == 0);
+            ENSURE_MSG(vafm_h5_check(wf, &e) == 0, "case %d: a file of plain curves: %s", k, e.message);
+            vafm_h5_reader *r = NULL;
+            ENSURE(vafm_h5_reader_open(&r, wf, &e) == 0);
+            vafm_h5_provenance pv;
+            vafm_h5_reader_provenance(r, &pv);
+            ENSURE_MSG(pv.format_minor == VAFM_H5_FORMAT_MINOR, "case %d: format 1.%d", k, pv.format_minor);
+            vafm_h5_reader_destroy(&r);
+        }
+    }
+    /* hostile files: the checker names the rule */
+    static const char *const rule[] = { "[V2]", "[V7]", "[V7]", "[V7]" };
+    rc = cseg_file(path, 1, 4, 1, &e);
+    for (int k = 0; k < 4; k++) {
+        cseg_hostile(path, bad, k);
+        rc = vafm_h5_check(bad, &e);
+        ENSURE_MSG(rc == VAFM_EFORMAT && strstr(e.message, rule[k]), "case %d: %d %s", k, rc, e.message);
+    }
+}
+
 static int make_files(const char *dir)
 {
     char a[512], b[512];
@@ -1888,6 +2080,7 @@ int main(int argc, char **argv)
     S_RUN(test_writer_refusals);
     S_RUN(test_resume_trailing);
     S_RUN(test_segment_lists);
+    S_RUN(test_curve_segment_lists);
     S_RUN(test_journal_steps);
     S_RUN(test_campaign_roundtrip);
     S_RUN(test_damaged_files);

@@ -65,7 +65,7 @@ if [ "$rc" -eq 0 ] && grep -q "^grid         a force map (vafm map), pattern str
     grep -qE "^  a  E\* = 5.3e\+10 +Pa +gamma = 0.05 .* 4 curves" "$TMP/out" &&
     grep -qE "^  b  E\* = 5e\+09 +Pa +gamma = 0.02 .* 4 curves" "$TMP/out" &&
     grep -A2 "^material map" "$TMP/out" | grep -qx "  aabb" &&
-    grep -q "^adhesion map" "$TMP/out" && grep -q "^conformance  ok: .*V1-V6" "$TMP/out"; then
+    grep -q "^adhesion map" "$TMP/out" && grep -q "^conformance  ok: .*V1-V7" "$TMP/out"; then
     ok "info: a map as a map (grid, per-material regions, material and adhesion maps), conformance ok"
 else bad "info of a map" "exit $rc: $(head -c 1500 "$TMP/out")"; fi
 

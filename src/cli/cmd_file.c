@@ -207,6 +207,44 @@ static void s_info_segments(FILE *o, const vafm_h5_provenance *pv)
     }
 }
 
+/* A format 1.3 file (a daemon's log): the curves that carry their own list ("vafm segments <i>"), one a line
+ * with its segments' kinds; the first 20, then a count. @return 1 if the file has such curves. */
+static int s_info_curve_lists(FILE *o, vafm_h5_reader *r, const vafm_h5_provenance *pv)
+{
+    static const char *const kinds[] = { "extend", "retract", "pause", "modulate" };
+    if (!pv->is_vafm || pv->format_minor < VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS || pv->segments_json)
+        return 0;
+    size_t n = vafm_h5_reader_count(r), listed = 0, more = 0;
+    vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
+    fprintf(o, "segments     curves with their own segment list (format 1.3; segment = the position); others "
+               "force-distance\n");
+    for (size_t i = 0; i < n; i++) {
+        const char *json = NULL;
+        vafm_error err;
+        memset(&err, 0, sizeof err);
+        if (vafm_h5_reader_curve_segments(r, i, &json, &err) || !json)
+            continue;
+        if (listed == 20) {
+            more++;
+            continue;
+        }
+        listed++;
+        size_t ns = 0;
+        if (vafm_segments_from_json(json, segs, VAFM_SEGMENTS_MAX, &ns, &err)) {
+            fprintf(o, "  curve %" PRIu64 ": a list that does not parse here (%s)\n", vafm_h5_reader_group(r, i),
+                    err.message);
+            continue;
+        }
+        fprintf(o, "  curve %" PRIu64 ": %zu segments:", vafm_h5_reader_group(r, i), ns);
+        for (size_t k = 0; k < ns; k++)
+            fprintf(o, " %s", segs[k].kind >= 0 && segs[k].kind <= 3 ? kinds[segs[k].kind] : "?");
+        fputc('\n', o);
+    }
+    if (more)
+        fprintf(o, "  ... and %zu more\n", more);
+    return 1;
+}
+
 int vafm_cli_cmd_info(const vafm_cli_args *a)
 {
     vafm_h5_reader *r = NULL;
@@ -229,11 +267,15 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
     s_info_provenance(stdout, a->file, &pv, &ip);
     if (pv.segments_json)
         s_info_segments(stdout, &pv);
+    int own = s_info_curve_lists(stdout, r, &pv);
     printf("curves       points per segment (%s); SI%s\n",
-           pv.segments_json ? "the list's first three: positions 0, 1, 2" : "0 approach, 1 retract, 2 dwell",
+           pv.segments_json ? "the list's first three: positions 0, 1, 2"
+           : own            ? "0 approach, 1 retract, 2 dwell; a curve of its own list: positions 0, 1, 2"
+                            : "0 approach, 1 retract, 2 dwell",
            pv.is_vafm ? "; ground truth: pull-off forces tensile, nN" : "");
-    printf("  %6s %8s %8s %8s %6s %12s %12s %12s %12s", "curve", "points", pv.segments_json ? "seg 0" : "approach",
-           pv.segments_json ? "seg 1" : "retract", pv.segments_json ? "seg 2" : "dwell", "k_N_per_m", "v_appr_m/s",
+    int seg = pv.segments_json || own;
+    printf("  %6s %8s %8s %8s %6s %12s %12s %12s %12s", "curve", "points", seg ? "seg 0" : "approach",
+           seg ? "seg 1" : "retract", seg ? "seg 2" : "dwell", "k_N_per_m", "v_appr_m/s",
            "v_retr_m/s", "duration_s");
     if (pv.is_vafm)
         printf(" | %5s %6s %5s %12s %12s", "point", "status", "flags", "pulloff_samp", "detach_force");
@@ -284,7 +326,7 @@ int vafm_cli_cmd_info(const vafm_cli_args *a)
     memset(&cerr, 0, sizeof cerr);
     int ck = vafm_h5_check(a->file, &cerr);
     if (!ck)
-        printf("conformance  ok: every rule of protocol/hdf5.md (L1-L17%s)\n", pv.is_vafm ? ", V1-V6" : "");
+        printf("conformance  ok: every rule of protocol/hdf5.md (L1-L17%s)\n", pv.is_vafm ? ", V1-V7" : "");
     else
         printf("conformance  FAILED: %s\n", cerr.message[0] ? cerr.message : vafm_strerror(ck));
     if (damaged) {

@@ -39,6 +39,9 @@ extern "C" {
  *  such files get it (others stay 1.1, byte for byte): a 1.1 reader would take a list's segment 1 for the
  *  retract. */
 #define VAFM_H5_FORMAT_MINOR_SEGMENTS 2
+/** The minor version of a file in which curves carry their own segment lists (vafm_h5_writer_set_curve_segments:
+ *  a daemon's log whose curves run different lists, or none): "1.3". Only such files get it. */
+#define VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS 3
 /** The most segments a file's list may hold (segment values are uint8 positions below the count). */
 #define VAFM_H5_SEGMENTS_MAX 255
 
@@ -220,6 +223,17 @@ VAFM_API int vafm_h5_resume_check_segments(const char *path, const vafm_params *
 VAFM_API int vafm_h5_writer_set_segments(vafm_h5_writer *w, const char *json, vafm_error *err);
 
 /**
+ * The segment list of the next appended curve alone (format 1.3, hdf5.md V7): json as
+ * vafm_h5_writer_set_segments takes it, or NULL (the default) for a force-distance curve. The next
+ * vafm_h5_writer_append, whatever it returns, uses it and clears it. That append writes the root attribute
+ * "vafm segments <group>" = json with the group (the same flush makes both durable), gives the curve
+ * "segment count" = the list's length, and, for the file's first such curve, sets the format version to 1.3;
+ * a file whose curves carry no list stays 1.1, byte for byte. Not for a file with one list for every curve.
+ * @return 0, VAFM_EINVAL (not such a text), VAFM_ESTATE (the file has one list for every curve), VAFM_ENOMEM.
+ */
+VAFM_API int vafm_h5_writer_set_curve_segments(vafm_h5_writer *w, const char *json, vafm_error *err);
+
+/**
  * Append one curve as group "<count>". The curve is checked against the layout first (lengths,
  * segment values, time from 0 and increasing, tip position convention, date/time formats); "point
  * count" is set to n. In a file with provenance, truth is required and truth->result.index must equal
@@ -293,6 +307,15 @@ VAFM_API int vafm_h5_reader_curve_info(vafm_h5_reader *r, size_t i, vafm_h5_curv
 
 /** Provenance of the file (strings owned by the reader). @return 0. */
 VAFM_API int vafm_h5_reader_provenance(const vafm_h5_reader *r, vafm_h5_provenance *out);
+
+/**
+ * The segment list curve i ran: {"segments": [...]} (format 1.2: the file's one list; format 1.3: the root
+ * attribute "vafm segments <group>" of its group), or *json NULL for a force-distance curve. *json is owned
+ * by the reader, valid until the next call of this function or destroy.
+ * @return 0, VAFM_EINVAL (i out of range), VAFM_EFORMAT (the attribute is not a segment list: err names it;
+ *         vafm_h5_check compares its length with the curve's "segment count"), VAFM_ENOMEM.
+ */
+VAFM_API int vafm_h5_reader_curve_segments(vafm_h5_reader *r, size_t i, const char **json, vafm_error *err);
 
 /** Ground truth of curve number `curve`. @return 0, or VAFM_ENOTFOUND (no row for it). */
 VAFM_API int vafm_h5_reader_truth(const vafm_h5_reader *r, uint64_t curve, vafm_h5_truth *out);

@@ -24,6 +24,9 @@ typedef struct s_ctx {
     double *spring;       /* per curve, for V4 */
     int format_minor;     /* of "vafm format version" */
     int nsegs;            /* segments of "vafm segments" (V6), 0: none */
+    int cnsegs;           /* segments of the curve in check's own list ("vafm segments <i>", V7), 0: none */
+    uint64_t clists;      /* root attributes "vafm segments <i>" (V7) */
+    uint64_t clists_seen; /* of them, those a curve group had */
     int map;              /* the grid is a force map's ("map" in "vafm grid", V5) */
     vafm_h5_meta grid0;   /* curve 0's grid attributes (V5) */
 } s_ctx;
@@ -274,11 +277,43 @@ static int s_map_curve(s_ctx *x, const char *obj, uint64_t num, const vafm_h5_me
     return 0;
 }
 
+/* V7: the curve's own segment list, "vafm segments <num>" (format 1.3), into x->cnsegs (0: none). */
+static int s_curve_list(s_ctx *x, const char *gname)
+{
+    char an[64];
+    snprintf(an, sizeof an, VAFM_H5I_A_CURVE_SEGMENTS "%s", gname);
+    x->cnsegs = 0;
+    if (!x->clists || H5Aexists(x->file, an) <= 0)
+        return 0;
+    char *s = NULL;
+    int rc = s_vlen_str(x, "V7", x->file, "/", an, &s);
+    if (rc)
+        return rc;
+    x->cnsegs = vafm_h5i_segments_count(s);
+    free(s);
+    if (x->cnsegs < 1)
+        FAIL("V7", "/", "'%s' is not a segment list {\"segments\": [1 to %d objects]}", an, VAFM_H5_SEGMENTS_MAX);
+    x->clists_seen++;
+    return 0;
+}
+
+static herr_t s_count_lists(hid_t loc, const char *name, const H5A_info_t *info, void *op)
+{
+    (void)loc;
+    (void)info;
+    if (!strncmp(name, VAFM_H5I_A_CURVE_SEGMENTS, strlen(VAFM_H5I_A_CURVE_SEGMENTS)))
+        ++*(uint64_t *)op;
+    return 0;
+}
+
 static int s_group(s_ctx *x, uint64_t num)
 {
     char gname[24], obj[32];
     snprintf(gname, sizeof gname, "%llu", (unsigned long long)num);
     snprintf(obj, sizeof obj, "/%s", gname);
+    int lrc = s_curve_list(x, gname);
+    if (lrc)
+        return lrc;
     hid_t g = H5Gopen2(x->file, gname, H5P_DEFAULT);
     if (g < 0)
         FAIL_H5("L4", obj, "curve group cannot be opened");
@@ -339,7 +374,7 @@ static int s_group(s_ctx *x, uint64_t num)
             goto done;
         }
     }
-    if ((rule = vafm_h5i_rule_segment(data[VAFM_H5I_SEGMENT], n, m.segment_count, x->nsegs > 0, &at))) {
+    if ((rule = vafm_h5i_rule_segment(data[VAFM_H5I_SEGMENT], n, m.segment_count, x->nsegs > 0 || x->cnsegs > 0, &at))) {
         vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[L12] %s: %s/segment: sample %zu is %u: %s", x->path, obj, at,
                      ((uint8_t *)data[VAFM_H5I_SEGMENT])[at], rule);
         goto done;
@@ -369,7 +404,13 @@ static int s_group(s_ctx *x, uint64_t num)
                          "('" VAFM_H5I_A_SEGMENTS "') has %d", x->path, obj, (long long)m.segment_count, x->nsegs);
             goto done;
         }
-        if (!x->nsegs && m.segment_count != 2) {
+        if (x->cnsegs && m.segment_count != x->cnsegs) {
+            vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[V7] %s: %s: 'segment count' is %lld, the curve's segment "
+                         "list ('" VAFM_H5I_A_CURVE_SEGMENTS "%s') has %d", x->path, obj, (long long)m.segment_count,
+                         gname, x->cnsegs);
+            goto done;
+        }
+        if (!x->nsegs && !x->cnsegs && m.segment_count != 2) {
             vafm_h5i_err(x->err, rc = VAFM_EFORMAT, obj, "[V2] %s: %s: 'segment count' is %lld (force-distance: 2; "
                          "another count needs a segment list, '" VAFM_H5I_A_SEGMENTS "', format 1.%d: V6)", x->path, obj,
                          (long long)m.segment_count, VAFM_H5_FORMAT_MINOR_SEGMENTS);
@@ -524,6 +565,18 @@ static int s_check(s_ctx *x)
             FAIL("V6", "/", "'" VAFM_H5I_A_SEGMENTS "' in a format %s file (a segment list needs format %d.%d: a reader "
                  "of 1.%d would read a list's segment 1 as the retract)", v, VAFM_H5_FORMAT_MAJOR,
                  VAFM_H5_FORMAT_MINOR_SEGMENTS, VAFM_H5_FORMAT_MINOR);
+        /* V7: curves' own lists ("vafm segments <i>") are a format 1.3 file's, and a 1.3 file has one */
+        hsize_t idx = 0;
+        if (H5Aiterate2(x->file, H5_INDEX_NAME, H5_ITER_NATIVE, &idx, s_count_lists, &x->clists) < 0)
+            FAIL_H5("L2", "/", "the root attributes cannot be listed");
+        if (x->clists && mi != VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS)
+            FAIL("V7", "/", "%llu curve segment list(s) ('" VAFM_H5I_A_CURVE_SEGMENTS "<i>') in a format %s file (they "
+                 "need format %d.%d)", (unsigned long long)x->clists, v, VAFM_H5_FORMAT_MAJOR,
+                 VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS);
+        if (mi == VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS && (has_segs || !x->clists))
+            FAIL("V7", "/", "format %s %s (1.%d is the format of files whose curves carry their own lists, '"
+                 VAFM_H5I_A_CURVE_SEGMENTS "<i>', and only those)", v, has_segs ? "with one list for every curve, '"
+                 VAFM_H5I_A_SEGMENTS "'" : "without any curve's segment list", VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS);
         if (!has_segs && mi == VAFM_H5_FORMAT_MINOR_SEGMENTS)
             FAIL("V6", "/", "format %s without '" VAFM_H5I_A_SEGMENTS "' (1.%d is the format of files with a segment "
                  "list; others are 1.%d)", v, VAFM_H5_FORMAT_MINOR_SEGMENTS, VAFM_H5_FORMAT_MINOR);
@@ -611,6 +664,10 @@ static int s_check(s_ctx *x)
         }
         rc = s_group(x, i);
     }
+    if (!rc && x->clists != x->clists_seen)
+        vafm_h5i_err(x->err, rc = VAFM_EFORMAT, "/", "[V7] %s: /: %llu of the %llu curve segment lists ('"
+                     VAFM_H5I_A_CURVE_SEGMENTS "<i>') name no curve group", path,
+                     (unsigned long long)(x->clists - x->clists_seen), (unsigned long long)x->clists);
     if (!rc && x->has_prov)
         rc = s_truth(x);
 done:

@@ -48,6 +48,7 @@
 #define VAFM_H5I_A_SEED "vafm seed"
 #define VAFM_H5I_A_CREATED "vafm created"
 #define VAFM_H5I_A_SEGMENTS "vafm segments" /* format 1.2: the segment list of every curve */
+#define VAFM_H5I_A_CURVE_SEGMENTS "vafm segments " /* + group: format 1.3, that curve's own list */
 #define VAFM_H5I_A_TRUTH "vafm ground truth"           /* merged table */
 #define VAFM_H5I_A_TRUTH_PART "vafm ground truth from " /* + first curve: rows of one flush */
 
@@ -269,6 +270,9 @@ struct vafm_h5_writer {
     char *segs;          /* "vafm segments": the file's list (set or found on resume), NULL: none */
     int nsegs;           /* its segments, 0: none */
     int segs_given;      /* the caller gave the list (vafm_h5_writer_set_segments) */
+    int minor;           /* the file's format minor version as written now */
+    char *cseg;          /* the next curve's own list (vafm_h5_writer_set_curve_segments), NULL: none */
+    int ncseg;           /* its segments, 0: none */
 };
 
 /** The file access properties of every file the writer opens: the 1.8 format, strong close, the journal. */

@@ -12,6 +12,7 @@
  * damaged header cannot make the reader allocate without limit.
  */
 #include <errno.h>
+#include <inttypes.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -32,6 +33,7 @@ struct vafm_h5_reader {
     vafm_h5i_curvebuf buf;
     char *software, *software_version, *scene, *grid, *created;
     char *segments; /* "vafm segments" (format 1.2), NULL: none */
+    char *cseg;     /* the last curve list vafm_h5_reader_curve_segments read (format 1.3) */
     int nsegs;
     int is_vafm, fmt_major, fmt_minor;
     uint64_t seed;
@@ -613,6 +615,7 @@ void vafm_h5_reader_destroy(vafm_h5_reader **rp)
     free(r->grid);
     free(r->created);
     free(r->segments);
+    free(r->cseg);
     free(r->rows);
     r->tag = 0xdeadbeefu;
     free(r);
@@ -856,6 +859,35 @@ int vafm_h5_reader_provenance(const vafm_h5_reader *r, vafm_h5_provenance *out)
     out->truth_rows = r->nrows;
     out->segments_json = r->segments;
     out->segment_count = r->segments ? r->nsegs : 0;
+    return 0;
+}
+
+int vafm_h5_reader_curve_segments(vafm_h5_reader *r, size_t i, const char **json, vafm_error *err)
+{
+    if (!r || !json || i >= r->n) {
+        vafm_h5i_err(err, VAFM_EINVAL, "i", "vafm_h5_reader_curve_segments: no reader, or curve %zu of %zu", i,
+                     r ? r->n : 0);
+        return VAFM_EINVAL;
+    }
+    *json = r->segments; /* format 1.2: the file's one list; older files: none */
+    if (!r->is_vafm || r->fmt_minor < VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS || r->segments)
+        return 0;
+    free(r->cseg);
+    r->cseg = NULL;
+    char name[64];
+    snprintf(name, sizeof name, VAFM_H5I_A_CURVE_SEGMENTS "%" PRIu64, r->groups[i]);
+    vafm_h5i_quiet q;
+    vafm_h5i_quiet_begin(&q);
+    int rc = s_root_string(r->file, r->path, name, 0, &r->cseg, err);
+    vafm_h5i_quiet_end(&q);
+    if (rc)
+        return rc;
+    if (r->cseg && vafm_h5i_segments_count(r->cseg) < 1) {
+        vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: root attribute '%s' is not a segment list {\"segments\": [1 to %d "
+                     "objects]} (hdf5.md V7)", r->path, name, VAFM_H5_SEGMENTS_MAX);
+        return VAFM_EFORMAT;
+    }
+    *json = r->cseg;
     return 0;
 }
 

@@ -151,9 +151,10 @@ int vafm_h5i_writer_resume(vafm_h5_writer *w, vafm_error *err)
         free(fmt);
         return VAFM_EFORMAT;
     }
-    /* a file with a segment list is 1.2, one without 1.1: an older minor's rows and scene lack fields this
-     * version writes */
-    if (mi != (w->segs ? VAFM_H5_FORMAT_MINOR_SEGMENTS : VAFM_H5_FORMAT_MINOR)) {
+    /* a file with a segment list is 1.2, one without 1.1 or 1.3 (curves with lists of their own): an older
+     * minor's rows and scene lack fields this version writes */
+    if (mi != (w->segs ? VAFM_H5_FORMAT_MINOR_SEGMENTS : VAFM_H5_FORMAT_MINOR) &&
+        (w->segs || mi != VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS)) {
         vafm_h5i_err(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %s%s, this vafm writes %d.%d "
                      "(%d.%d with a segment list); resume it with the vafm version that wrote it", w->path, fmt,
                      w->segs ? " with a segment list" : "", VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR,
@@ -168,6 +169,7 @@ int vafm_h5i_writer_resume(vafm_h5_writer *w, vafm_error *err)
         return VAFM_EFORMAT;
     }
     free(fmt);
+    w->minor = mi;
     if (s_read_root_str(w->file, VAFM_H5I_A_SCENE, &w->scene) || s_read_root_str(w->file, VAFM_H5I_A_GRID, &w->grid)) {
         vafm_h5i_err_hdf5(err, VAFM_EFORMAT, "/", "%s: cannot be resumed: the stored scene cannot be read", w->path);
         return VAFM_EFORMAT;
@@ -228,12 +230,17 @@ int vafm_h5i_writer_resume(vafm_h5_writer *w, vafm_error *err)
     }
     vafm_h5i_curvebuf_free(&buf);
     free(present);
-    for (size_t i = 0; i < l.names.n; i++)
-        if (l.num[i] >= c && H5Ldelete(w->file, l.names.v[i], H5P_DEFAULT) < 0) {
+    for (size_t i = 0; i < l.names.n; i++) {
+        if (l.num[i] < c)
+            continue;
+        char an[64]; /* format 1.3: the dropped curve's own segment list goes with it */
+        snprintf(an, sizeof an, VAFM_H5I_A_CURVE_SEGMENTS "%s", l.names.v[i]);
+        if (H5Ldelete(w->file, l.names.v[i], H5P_DEFAULT) < 0 || (H5Aexists(w->file, an) > 0 && H5Adelete(w->file, an) < 0)) {
             vafm_h5i_err_hdf5(err, rc = VAFM_EIO, "/", "%s: cannot be resumed: incomplete curve '%s' cannot be removed",
                               w->path, l.names.v[i]);
             goto done;
         }
+    }
     w->count = c;
     w->nrows = 0;
     if (w->has_prov) {

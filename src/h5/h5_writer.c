@@ -172,6 +172,7 @@ static int s_create(vafm_h5_writer *w, vafm_error *err)
         vafm_h5i_err_hdf5(err, VAFM_EIO, "/", "%s: root attributes cannot be written", w->path);
         return VAFM_EIO;
     }
+    w->minor = VAFM_H5_FORMAT_MINOR;
     return 0;
 }
 
@@ -190,6 +191,7 @@ void vafm_h5_writer_destroy(vafm_h5_writer **wp)
     free(w->grid);
     free(w->rows);
     free(w->segs);
+    free(w->cseg);
     w->tag = 0xdeadbeefu;
     free(w);
     *wp = NULL;
@@ -395,7 +397,8 @@ int vafm_h5_resume_check_segments(const char *path, const vafm_params *scene, co
     else if (!pv.is_vafm || pv.format_major != VAFM_H5_FORMAT_MAJOR)
         vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: not a vafm file of format %d.x", path,
                      VAFM_H5_FORMAT_MAJOR);
-    else if (pv.format_minor != (pv.segments_json ? VAFM_H5_FORMAT_MINOR_SEGMENTS : VAFM_H5_FORMAT_MINOR))
+    else if (pv.format_minor != (pv.segments_json ? VAFM_H5_FORMAT_MINOR_SEGMENTS : VAFM_H5_FORMAT_MINOR) &&
+             (segments_json || pv.format_minor != VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS))
         vafm_h5i_err(err, rc = VAFM_EFORMAT, "/", "%s: cannot be resumed: written in format %d.%d, this vafm writes "
                      "%d.%d (%d.%d with a segment list); resume it with the vafm version that wrote it", path,
                      pv.format_major, pv.format_minor, VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR, VAFM_H5_FORMAT_MAJOR,
@@ -514,9 +517,41 @@ int vafm_h5_writer_set_segments(vafm_h5_writer *w, const char *json, vafm_error 
         w->segs = copy;
         w->nsegs = n;
         w->segs_given = 1;
+        w->minor = VAFM_H5_FORMAT_MINOR_SEGMENTS;
     }
     vafm_h5i_quiet_end(&q);
     return rc;
+}
+
+int vafm_h5_writer_set_curve_segments(vafm_h5_writer *w, const char *json, vafm_error *err)
+{
+    if (!w || w->tag != S_TAG) {
+        vafm_h5i_err(err, VAFM_EINVAL, "segments", "vafm_h5_writer_set_curve_segments: no writer given");
+        return VAFM_EINVAL;
+    }
+    free(w->cseg);
+    w->cseg = NULL;
+    w->ncseg = 0;
+    if (!json)
+        return 0;
+    int n = vafm_h5i_segments_count(json);
+    if (n < 1 || strlen(json) >= S_JSON_MAX) {
+        vafm_h5i_err(err, VAFM_EINVAL, "segments", "%s: a segment list is a JSON object {\"segments\": [...]} of 1 to %d "
+                     "objects, at most %d bytes", w->path, VAFM_H5_SEGMENTS_MAX, S_JSON_MAX - 1);
+        return VAFM_EINVAL;
+    }
+    if (w->segs) {
+        vafm_h5i_err(err, VAFM_ESTATE, "segments", "%s: the file's curves all run one list ('" VAFM_H5I_A_SEGMENTS
+                     "', format 1.%d); a curve of its own list needs a file without one", w->path,
+                     VAFM_H5_FORMAT_MINOR_SEGMENTS);
+        return VAFM_ESTATE;
+    }
+    if (!(w->cseg = strdup(json))) {
+        vafm_h5i_err(err, VAFM_ENOMEM, "", "%s: out of memory", w->path);
+        return VAFM_ENOMEM;
+    }
+    w->ncseg = n;
+    return 0;
 }
 
 /* ---- appending curves ----------------------------------------------------------------------------- */
@@ -524,7 +559,8 @@ int vafm_h5_writer_set_segments(vafm_h5_writer *w, const char *json, vafm_error 
 /* The "segment count" curve c gets: a file with a list: the list's length (−1 asks for it). */
 static int64_t s_seg_count(const vafm_h5_writer *w, const vafm_h5_curve *c)
 {
-    return w->nsegs && c->meta.segment_count < 0 ? w->nsegs : c->meta.segment_count;
+    int list = w->nsegs ? w->nsegs : w->ncseg; /* the file's list, or the curve's own */
+    return list && c->meta.segment_count < 0 ? list : c->meta.segment_count;
 }
 
 static int s_check_curve(const vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth,
@@ -533,7 +569,12 @@ static int s_check_curve(const vafm_h5_writer *w, const vafm_h5_curve *c, const 
     const char *p = w->path;
     unsigned long long g = (unsigned long long)w->count;
     int64_t sc = s_seg_count(w, c);
-    if (w->nsegs ? sc != w->nsegs : w->has_prov && sc >= 0 && sc != 2) {
+    if (w->ncseg && sc != w->ncseg) {
+        vafm_h5i_err(err, VAFM_EINVAL, "segment count", "%s: curve %llu: 'segment count' is %lld, the curve's segment "
+                     "list has %d (hdf5.md V7)", p, g, (long long)sc, w->ncseg);
+        return VAFM_EINVAL;
+    }
+    if (!w->ncseg && (w->nsegs ? sc != w->nsegs : w->has_prov && sc >= 0 && sc != 2)) {
         if (w->nsegs)
             vafm_h5i_err(err, VAFM_EINVAL, "segment count", "%s: curve %llu: 'segment count' is %lld, the file's segment "
                          "list has %d (hdf5.md V6)", p, g, (long long)sc, w->nsegs);
@@ -558,7 +599,7 @@ static int s_check_curve(const vafm_h5_writer *w, const vafm_h5_curve *c, const 
         const void *data = *(const void *const *)((const char *)c + ch->offset);
         if (!data)
             continue;
-        const char *rule = ch->is_segment ? vafm_h5i_rule_segment(data, c->n, s_seg_count(w, c), w->nsegs > 0, &at)
+        const char *rule = ch->is_segment ? vafm_h5i_rule_segment(data, c->n, s_seg_count(w, c), w->nsegs > 0 || w->ncseg > 0, &at)
                            : i == VAFM_H5I_TIME ? vafm_h5i_rule_time(data, c->n, &at)
                                                 : vafm_h5i_rule_finite(data, c->n, &at);
         if (rule) {
@@ -715,12 +756,40 @@ static int s_write_meta(vafm_h5_writer *w, hid_t g, const vafm_h5_curve *c)
     return 0;
 }
 
+static int s_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth, vafm_error *err);
+
 int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth, vafm_error *err)
 {
     if (!w || w->tag != S_TAG || !c) {
         vafm_h5i_err(err, VAFM_EINVAL, "", "vafm_h5_writer_append: no writer or curve given");
         return VAFM_EINVAL;
     }
+    int rc = s_append(w, c, truth, err);
+    free(w->cseg); /* a curve's own list is for one append */
+    w->cseg = NULL;
+    w->ncseg = 0;
+    return rc;
+}
+
+/* The curve's own list (format 1.3): its root attribute, and the version at the file's first one; written with
+ * the group, so that the same flush makes them durable. @return 0 or -1. */
+static int s_write_curve_segments(vafm_h5_writer *w, const char *group)
+{
+    char name[64], ver[32];
+    snprintf(name, sizeof name, VAFM_H5I_A_CURVE_SEGMENTS "%s", group);
+    snprintf(ver, sizeof ver, "%d.%d", VAFM_H5_FORMAT_MAJOR, VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS);
+    if (vafm_h5i_put_str(w->file, name, w->cseg))
+        return -1;
+    if (w->minor != VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS) {
+        if (vafm_h5i_put_str(w->file, VAFM_H5I_A_FORMAT, ver))
+            return -1;
+        w->minor = VAFM_H5_FORMAT_MINOR_CURVE_SEGMENTS;
+    }
+    return 0;
+}
+
+static int s_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_h5_truth *truth, vafm_error *err)
+{
     int rc = s_check_curve(w, c, truth, err);
     if (rc)
         return rc;
@@ -741,6 +810,7 @@ int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_
             ok = !s_write_channel(w, g, ch, data, c->n);
     }
     ok = ok && !s_write_meta(w, g, c);
+    ok = ok && (!w->cseg || !s_write_curve_segments(w, name));
     char why[160] = "";
     if (!ok)
         vafm_h5i_reason(why, sizeof why); /* before H5Gclose clears the stack */
@@ -755,6 +825,12 @@ int vafm_h5_writer_append(vafm_h5_writer *w, const vafm_h5_curve *c, const vafm_
                      why[0] && !vafm_h5i_io_errno ? ")" : "");
         if (g >= 0)
             H5Ldelete(w->file, name, H5P_DEFAULT); /* leave no half-written curve behind */
+        if (w->cseg) {
+            char an[64];
+            snprintf(an, sizeof an, VAFM_H5I_A_CURVE_SEGMENTS "%s", name);
+            if (H5Aexists(w->file, an) > 0)
+                H5Adelete(w->file, an);
+        }
     } else {
         if (truth)
             vafm_h5i_row_from_truth(&w->rows[w->nrows++], w->count, truth);
@@ -772,7 +848,8 @@ int vafm_h5_writer_set_note(vafm_h5_writer *w, const char *name, const char *tex
     }
     static const char *const own[] = { VAFM_H5I_A_FORMAT, VAFM_H5I_A_SCENE, VAFM_H5I_A_GRID, VAFM_H5I_A_SEED,
                                        VAFM_H5I_A_CREATED, VAFM_H5I_A_TRUTH };
-    int bad = strncmp(name, "vafm ", 5) != 0 || !strncmp(name, VAFM_H5I_A_TRUTH_PART, strlen(VAFM_H5I_A_TRUTH_PART));
+    int bad = strncmp(name, "vafm ", 5) != 0 || !strncmp(name, VAFM_H5I_A_TRUTH_PART, strlen(VAFM_H5I_A_TRUTH_PART)) ||
+              !strncmp(name, VAFM_H5I_A_SEGMENTS, strlen(VAFM_H5I_A_SEGMENTS));
     for (size_t i = 0; i < sizeof own / sizeof own[0]; i++)
         bad |= !strcmp(name, own[i]);
     if (bad) {
