@@ -482,7 +482,7 @@ SEG4 = [{"kind": "pause", "duration_s": 0.005},
 def test_curve_segment_list_over_the_wire(tmp_path):
     """`curve` with "segments" runs the list: the stream's samples are `vafm samples --segments` of the same list
     and index bit for bit (height, force, each sample's segment through the segment channel), run.start names
-    the list, the events carry the positions; errors name the field; with logging on it is refused, naming why."""
+    the list, the events carry the positions; errors name the field."""
     import subprocess
     d = Daemon()
     s = d.sub(topics=(b"data", b"run.", b"event"))
@@ -510,8 +510,6 @@ def test_curve_segment_list_over_the_wire(tmp_path):
     assert [int(x) for x in np.unique(ch["segment"])] == [0, 1, 2, 3]
     moves = [(e["from_segment"], e["to_segment"]) for e in events if e.get("kind") == "segment"]
     assert moves == [(0, 1), (1, 2), (2, 3)], moves
-    assert d.cmd({"cmd": "log", "path": str(tmp_path / "l.h5")})["status"] == "ok"
-    assert "vafm segments" in err(d.cmd({"cmd": "curve", "segments": SEG4}), "state", "segments")
     d.stop()
 
 
@@ -673,3 +671,104 @@ def test_map_from_live_state_over_a_sample():
     start, _, _, end = collect_run(s, r["run_id"])
     assert end["status"] == "ok" and start["campaign"]["map"]["ix"] == 63 and start["campaign"]["map"]["iy"] == 31
     assert d.stop() == 0  # a clean exit: under the sanitizers, no leak of the runs' "sample"
+
+
+SEG3 = [{"kind": "extend", "speed_m_per_s": 2e-6, "trigger": {"channel": "force", "op": ">", "value": 2e-9}},
+        {"kind": "pause", "duration_s": 0.004},
+        {"kind": "retract", "speed_m_per_s": 1e-6, "end": "detach"}]
+
+
+def _logged_run(d, s, cmd):
+    r = d.cmd(cmd)
+    assert r["status"] == "ok", r
+    start, blocks, _, end = collect_run(s, r["run_id"])
+    assert end["status"] == "ok", end
+    names = [c["name"] for c in start["channels"]]
+    return start, {n: np.concatenate([np.frombuffer(p[k], "<f8") for _, p in blocks]) for k, n in enumerate(names)}
+
+
+def _wait_logged(d, n):
+    deadline = time.time() + 60
+    while d.cmd({"cmd": "status"})["log"]["curves"] < n:
+        assert time.time() < deadline, "the writer did not write the curves"
+        time.sleep(0.01)
+
+
+def _check_log(path, runs):
+    """The file holds the curves of runs [(start, streamed channels)] in order, each bit for bit its stream
+    (force, heights, each sample's segment), with its own list (hdf5.md V7, format 1.3); `vafm info` says
+    conformance ok; the Python reader returns each curve's list."""
+    import subprocess
+    import h5py
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "clients", "python"))
+    from vafm_client.h5 import load_h5
+    with h5py.File(path, "r") as f:
+        assert sorted(f.keys(), key=int) == [str(i) for i in range(len(runs))]
+        assert f.attrs["vafm format version"] == "1.3" and "vafm segments" not in f.attrs
+        for i, (start, ch) in enumerate(runs):
+            g = f[str(i)]
+            for col, name in (("force", "force_N"), ("height (piezo)", "height_m"), ("height (measured)", "height_m")):
+                assert np.array_equal(g[col][:].view(np.uint64), ch[name].view(np.uint64)), (i, col)
+            assert np.array_equal(g["segment"][:].astype(np.float64), ch["segment"]), i
+            lst = start.get("segment_list")
+            assert g.attrs["segment count"] == (len(lst) if lst else 2), i
+            assert (f"vafm segments {i}" in f.attrs) == bool(lst), i
+            if lst:
+                assert json.loads(f.attrs[f"vafm segments {i}"])["segments"] == lst, i
+                assert [int(x) for x in np.unique(g["segment"][:])] == list(range(len(lst))), i
+    info = subprocess.run([os.environ["VAFM_CLI"], "info", str(path)], capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0 and "conformance  ok" in info.stdout, info.stdout + info.stderr
+    h = load_h5(str(path))
+    assert [c.segments for c in h.curves] == [start.get("segment_list") for start, _ in runs]
+
+
+def test_log_holds_segment_list_curves(tmp_path):
+    """Issue #26: with logging on, a plain curve, a 4-segment list and a 3-segment list with a pause go into one
+    file (0.7.0 refused a list's curve while logging): 3 curves, each its own list, bit for bit the stream."""
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "set", "values": {"segment_channel": True}})["status"] == "ok"
+    path = tmp_path / "lists.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    runs = [_logged_run(d, s, {"cmd": "curve", "index": 1}),
+            _logged_run(d, s, {"cmd": "curve", "index": 2, "segments": SEG4}),
+            _logged_run(d, s, {"cmd": "curve", "index": 3, "segments": SEG3})]
+    assert [len(st.get("segment_list") or ()) for st, _ in runs] == [0, 4, 3]
+    _wait_logged(d, 3)
+    st = d.cmd({"cmd": "log", "stop": True})["log"]
+    assert (st["curves"], st["curves_dropped"], st["error"]) == (3, 0, None), st
+    d.stop()
+    _check_log(path, runs)
+
+
+def test_log_segment_lists_kill9_resume(tmp_path):
+    """A daemon killed (-9) during the second list's curve leaves the plain curve and the first list's intact;
+    `log` with resume keeps both and appends the second list's curve again."""
+    path = tmp_path / "k9.h5"
+    d = Daemon("--free-run")
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "set", "values": {"segment_channel": True}})["status"] == "ok"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    runs = [_logged_run(d, s, {"cmd": "curve", "index": 1}),
+            _logged_run(d, s, {"cmd": "curve", "index": 2, "segments": SEG4})]
+    _wait_logged(d, 2)
+    assert d.cmd({"cmd": "set", "values": {"free_run": False, "speed": 0.05}})["status"] == "ok"
+    assert d.cmd({"cmd": "curve", "index": 3, "segments": SEG3})["status"] == "ok"
+    time.sleep(0.3)
+    assert d.cmd({"cmd": "status"})["state"] in ("running", "starting")
+    d.proc.kill()  # SIGKILL: no clean-up at all
+    d.proc.wait(timeout=10)
+    d.ctx.destroy(0)
+    d = Daemon("--free-run")
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "set", "values": {"segment_channel": True}})["status"] == "ok"
+    r = d.cmd({"cmd": "log", "path": str(path), "resume": True})
+    assert r["status"] == "ok" and r["curves_in_file"] == 2, r
+    runs.append(_logged_run(d, s, {"cmd": "curve", "index": 3, "segments": SEG3}))
+    _wait_logged(d, 1)
+    assert d.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 1
+    d.stop()
+    _check_log(path, runs)

@@ -162,13 +162,6 @@ json_t *vafmd_control_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     }
     if (kind == VAFMD_RUN_REPLAY)
         return s_start_replay(d, c, e);
-    if (c->segs && atomic_load_explicit(&d->log.state, memory_order_acquire) != VAFMD_LOG_OFF) {
-        vafmd_err_set(e, VAFMD_E_STATE, "segments", "a segment list's curve cannot go into the log: a log file "
-                      "holds plain curves (format 1.1, segment count 2), and a format-1.2 file's curves all run the "
-                      "one list of its root attribute 'vafm segments' (protocol/hdf5.md V6); stop the log (or run "
-                      "the list with vafm run --segments --out)");
-        return NULL;
-    }
     vafm_params p = d->scene;
     /* a curve or tune from the live state over a sample: the scene and the point under the tip (live_cmd.c) */
     json_t *at_tip = NULL;

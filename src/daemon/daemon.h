@@ -17,6 +17,7 @@
 #include "vafm/campaign.h"
 #include "vafm/map.h"
 #include "vafm/params.h"
+#include "vafm/segments.h"
 #include "vafm/sim.h"
 #include "daemon/spsc_ring.h"
 #include "daemon/faults.h"
@@ -151,6 +152,9 @@ typedef struct vafmd_log_begin {
     vafm_map_truth pixel;
     char ctrl[VAFMD_LOG_CTRL_MAX]; /* run.start's "ctrl" and "sample" as one JSON object ("" none): the
                                       controller's state at the run's start, for the file's "vafm ctrl" */
+    size_t nseg;                   /* a segment list's curve: its list (the file's "vafm segments <group>",
+                                      format 1.3); 0: a force-distance curve */
+    struct vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
 } vafmd_log_begin;
 
 typedef struct vafmd_log_end {

@@ -197,7 +197,10 @@ static void s_write(vafmd_log *L, s_curve *c, const vafmd_log_end *end)
     }
     vafm_error e;
     memset(&e, 0, sizeof e);
-    int r = vafm_recorder_append(L->w, &rc, &e);
+    char *lt = c->begin->nseg ? vafm_segments_to_json(c->begin->segs, c->begin->nseg) : NULL;
+    rc.segments_json = lt; /* a list's curve carries its own list (hdf5.md V7, format 1.3) */
+    int r = c->begin->nseg && !lt ? VAFM_ENOMEM : vafm_recorder_append(L->w, &rc, &e);
+    free(lt);
     if (r) {
         atomic_fetch_add_explicit(&L->curves_dropped, 1, memory_order_relaxed);
         s_set_err(L, "%s (%s)", e.message[0] ? e.message : vafm_strerror(r), e.field);

@@ -355,6 +355,10 @@ static void s_run_start(vafmd_st *x, const vafmd_sim_cmd *c)
             lb->detector = r->det.on;
             memcpy(lb->client_run_id, c->client_run_id, sizeof lb->client_run_id);
             s_log_ctrl(lb->ctrl, sizeof lb->ctrl, r->cmd.start_json);
+            if (c->segs && c->nseg <= VAFM_SEGMENTS_MAX) { /* the curve's list goes into the file with it */
+                memcpy(lb->segs, c->segs, c->nseg * sizeof *lb->segs);
+                lb->nseg = c->nseg;
+            }
             if (c->camp && c->camp->is_map) { /* the file gets the pixel's map attributes */
                 lb->is_map = 1;
                 lb->map = c->camp->map;

@@ -90,6 +90,11 @@ typedef struct vafm_record_curve {
     const vafm_map_truth *pixel;    /**< the curve's pixel: its indices and position, with the map's shape, centre
                                          and size, become afmformats' map attributes ("grid index x", "position x",
                                          ...); its E*, γ and surface height are the scene's (params) */
+    const char *segments_json;      /**< the segment list this curve ran (vafm_segments_to_json's text), in a file
+                                         without one list for every curve (opts.segments_json NULL); NULL: a
+                                         force-distance curve. The file gets it as "vafm segments <group>" and
+                                         format 1.3 (vafm_h5_writer_set_curve_segments), the curve "segment count"
+                                         = its length and no approach/retract attributes. Borrowed for the call */
 } vafm_record_curve;
 
 /** Append one curve as the next group, with its ground truth; durable after the call when the flush

@@ -230,7 +230,18 @@ int vafm_recorder_append(vafm_recorder *r, const vafm_record_curve *c, vafm_erro
     vafm_h5_curve_from_sim(&hc, c->samples, c->params, c->result);
     if (c->measured_force)
         hc.tip_position_m = NULL;
-    if (r->list) { /* a segment list's curve: its count is the list's, its segments' rates and speeds are the list's */
+    if (r->list && c->segments_json) {
+        if (err) {
+            memset(err, 0, sizeof *err);
+            err->code = VAFM_EINVAL;
+            snprintf(err->field, sizeof err->field, "segments");
+            snprintf(err->message, sizeof err->message, "the file's curves all run one list (format 1.2): a curve "
+                     "cannot bring its own");
+        }
+        return VAFM_EINVAL;
+    }
+    if (r->list || c->segments_json) { /* a segment list's curve: its count is the list's, its segments' rates and
+                                          speeds are the list's */
         hc.meta.segment_count = -1;
         hc.meta.setpoint_N = hc.meta.rate_approach_Hz = hc.meta.rate_retract_Hz = NAN;
         hc.meta.speed_approach_m_per_s = hc.meta.speed_retract_m_per_s = NAN;
@@ -272,6 +283,8 @@ int vafm_recorder_append(vafm_recorder *r, const vafm_record_curve *c, vafm_erro
             r->has_prov = 1;
     }
     t.result.index = vafm_h5_writer_count(r->w); /* the group number; the stream index is in the curve id */
+    if (!rc && c->segments_json) /* the curve's own list (format 1.3), for this append only */
+        rc = vafm_h5_writer_set_curve_segments(r->w, c->segments_json, &e);
     if (!rc)
         rc = vafm_h5_writer_append(r->w, &hc, &t, &e);
     r->rep.writer_s += s_now() - t0;

@@ -46,11 +46,13 @@ def _str(v):
 class Curve:
     """One curve group: `channels` {name: numpy array} (the datasets present, SI; force positive
     repulsive, heights decreasing toward the sample), `meta` {attribute: value} (afmformats' names:
-    "spring constant", "rate approach", ...), `units` {name: unit}, `group` (its number) and `truth`
-    (vafm's ground-truth row as a dict, or None)."""
+    "spring constant", "rate approach", ...), `units` {name: unit}, `group` (its number), `truth`
+    (vafm's ground-truth row as a dict, or None) and `segments`, the segment list the curve ran (one dict a
+    segment: the file's one list, format 1.2, or the curve's own, format 1.3) or None (a force-distance curve)."""
 
-    def __init__(self, group, channels, units, meta, truth=None):
+    def __init__(self, group, channels, units, meta, truth=None, segments=None):
         self.group, self.channels, self.units, self.meta, self.truth = group, channels, units, meta, truth
+        self.segments = segments
 
     def __getitem__(self, name):
         return self.channels[name]
@@ -99,7 +101,9 @@ class H5File:
     curve, or None; format 1.1 rows carry each curve's E_star_Pa, gamma_J_per_m2, surface_height_m). A force
     map (`is_map`) has `map_shape`, `map_extent`, `map_spec` and `map_array(values)`. A file whose curves run a
     segment list (format 1.2, "vafm segments") has `segments`, the list (one dict a segment; None otherwise):
-    its curves' `segment` is the segment's position, so `approach`/`retract` are then segments 0 and 1."""
+    its curves' `segment` is the segment's position, so `approach`/`retract` are then segments 0 and 1. In a
+    format 1.3 file (a daemon's log) each curve may carry its own list ("vafm segments <group>"): see
+    Curve.segments, which every file fills."""
 
     def __init__(self, path, curves, attrs, truth):
         self.path, self.curves, self.attrs, self.truth = path, curves, attrs, truth
@@ -112,12 +116,8 @@ class H5File:
         self.seed = int(attrs["vafm seed"]) if "vafm seed" in attrs else None
         self.created = attrs.get("vafm created")
         self.segments = None
-        if "vafm segments" in attrs:
-            seg = json.loads(attrs["vafm segments"])
-            if not (isinstance(seg, dict) and list(seg) == ["segments"] and isinstance(seg["segments"], list)
-                    and 1 <= len(seg["segments"]) <= 255):
-                raise _bad(path, "/", "V6", "'vafm segments' is not a segment list {\"segments\": [1 to 255 objects]}")
-            self.segments = seg["segments"]
+        if SEGMENTS in attrs:
+            self.segments = _segment_list(path, SEGMENTS, attrs[SEGMENTS], "V6")
 
     @property
     def is_map(self):
@@ -226,6 +226,21 @@ def _truth_table(path, root):
     return t
 
 
+SEGMENTS = "vafm segments"  # format 1.2: the list of every curve; + " <group>" (format 1.3): one curve's own
+
+
+def _segment_list(path, name, text, rule):
+    """The segments of root attribute `name` ({"segments": [1 to 255 objects]}), else ValueError naming it."""
+    try:
+        seg = json.loads(text)
+    except (TypeError, ValueError):
+        seg = None
+    if not (isinstance(seg, dict) and list(seg) == ["segments"] and isinstance(seg["segments"], list)
+            and 1 <= len(seg["segments"]) <= 255 and all(isinstance(s, dict) for s in seg["segments"])):
+        raise _bad(path, "/", rule, f"'{name}' is not a segment list {{\"segments\": [1 to 255 objects]}}")
+    return seg["segments"]
+
+
 def load_h5(path, channels=True):
     """Load every curve of `path` (channels=False: metadata and ground truth only, no arrays read)."""
     import h5py  # Debian: python3-h5py; imported here so that the stream client does not need it
@@ -274,5 +289,9 @@ def load_h5(path, channels=True):
             chans = {n: grp[n][()] for n in grp} if channels else {}
             row = rows.get(g)
             t = {k: _str(row[k]) for k in row.dtype.names} if row is not None else None
-            curves.append(Curve(g, chans, units, meta, t))
+            own = f"{SEGMENTS} {g}"  # format 1.3: the curve's own list (hdf5.md V7)
+            segs = _segment_list(path, own, attrs[own], "V7") if own in attrs else None
+            if segs is None and SEGMENTS in attrs:
+                segs = _segment_list(path, SEGMENTS, attrs[SEGMENTS], "V6")
+            curves.append(Curve(g, chans, units, meta, t, segs))
     return H5File(path, curves, attrs, truth)
