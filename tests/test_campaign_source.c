@@ -15,6 +15,7 @@
 #include "vafm/campaign.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
+#include "trace.h"
 
 #define T_N 6       /* curves per point */
 #define T_TOTAL 12  /* two points */
@@ -50,32 +51,6 @@ static int t_same(const vafm_curve_result *a, const vafm_curve_result *b)
            a->steps_contact == b->steps_contact && a->steps_free == b->steps_free && !memcmp(da, db, sizeof da);
 }
 
-typedef struct t_buf {
-    size_t n, cap;
-    double *c[5];
-    uint8_t *seg;
-} t_buf;
-
-static int t_collect(void *user, const vafm_samples *b)
-{
-    t_buf *t = user;
-    if (t->n + b->n > t->cap) {
-        size_t cap = t->cap ? t->cap * 2 : 4096;
-        while (cap < t->n + b->n)
-            cap *= 2;
-        for (int i = 0; i < 5; i++)
-            t->c[i] = realloc(t->c[i], cap * sizeof(double));
-        t->seg = realloc(t->seg, cap);
-        t->cap = cap;
-    }
-    const double *src[5] = { b->time_s, b->height_m, b->deflection_m, b->force_N, b->tip_m };
-    for (int i = 0; i < 5; i++)
-        memcpy(t->c[i] + t->n, src[i], b->n * sizeof(double));
-    memcpy(t->seg + t->n, b->segment, b->n);
-    t->n += b->n;
-    return 0;
-}
-
 static vafm_params t_base;
 static double t_v[2];
 static vafm_campaign_spec t_spec;
@@ -99,13 +74,11 @@ static void t_setup(void)
         ENSURE(vafm_campaign_point_params(&t_base, &t_spec, (size_t)(i / T_N), &pp) == 0);
         vafm_sim *s = NULL;
         ENSURE(vafm_sim_new(&s, &pp, &err) == 0);
-        t_buf b = { 0 };
+        t_trace b = { 0 };
         ENSURE(s && vafm_sim_curve(s, i, t_collect, &b, &t_ref[i]) == 0);
-        vafm_samples all = { b.n, 0, b.c[0], b.c[1], b.c[2], b.c[3], b.c[4], b.seg, NULL };
+        vafm_samples all = { b.n, 0, b.t, b.h, b.d, b.f, b.tip, b.seg, NULL };
         t_ref_hash[i] = t_hash_samples(&all);
-        for (int c = 0; c < 5; c++)
-            free(b.c[c]);
-        free(b.seg);
+        t_trace_free(&b);
         vafm_sim_destroy(&s);
     }
     /* the curves differ from one another, so comparing them means something */

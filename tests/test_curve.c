@@ -18,55 +18,7 @@
 #include "vafm/theory.h"
 #include "vafm/units.h"
 #include "core/kernel.h"
-
-/* ---- sample collection ------------------------------------------------------------------------ */
-
-typedef struct t_curve {
-    size_t n, cap;
-    double *t, *h, *d, *f, *tip;
-    uint8_t *seg;
-} t_curve;
-
-static int t_collect(void *user, const vafm_samples *b)
-{
-    t_curve *c = user;
-    if (c->n + b->n > c->cap) {
-        size_t cap = c->cap ? 2 * c->cap : 4096;
-        while (cap < c->n + b->n)
-            cap *= 2;
-        double **ch[5] = {&c->t, &c->h, &c->d, &c->f, &c->tip};
-        for (int i = 0; i < 5; i++) {
-            double *p = realloc(*ch[i], cap * sizeof(double));
-            if (!p)
-                return 1;
-            *ch[i] = p;
-        }
-        uint8_t *s = realloc(c->seg, cap);
-        if (!s)
-            return 1;
-        c->seg = s;
-        c->cap = cap;
-    }
-    memcpy(c->t + c->n, b->time_s, b->n * sizeof(double));
-    memcpy(c->h + c->n, b->height_m, b->n * sizeof(double));
-    memcpy(c->d + c->n, b->deflection_m, b->n * sizeof(double));
-    memcpy(c->f + c->n, b->force_N, b->n * sizeof(double));
-    memcpy(c->tip + c->n, b->tip_m, b->n * sizeof(double));
-    memcpy(c->seg + c->n, b->segment, b->n);
-    c->n += b->n;
-    return 0;
-}
-
-static void t_curve_free(t_curve *c)
-{
-    free(c->t);
-    free(c->h);
-    free(c->d);
-    free(c->f);
-    free(c->tip);
-    free(c->seg);
-    memset(c, 0, sizeof *c);
-}
+#include "trace.h"
 
 /* A scene given by reduced values on E* = 1 GPa, R = 16 nm, m = 1e-12 kg (the paper-fig4 frame),
  * athermal, gjf, height trigger right below a start at the contact point. */
@@ -352,7 +304,7 @@ static void t_mechanics(int antialias)
     ENSURE_MSG(vafm_sim_new(&s, &p, &err) == 0, "%s", err.message);
     if (!s)
         return;
-    t_curve c;
+    t_trace c;
     memset(&c, 0, sizeof c);
     vafm_curve_result r;
     ENSURE(vafm_sim_curve(s, 2, t_collect, &c, &r) == 0);
@@ -450,7 +402,7 @@ static void t_mechanics(int antialias)
     ENSURE(r.steps_contact > 0);
     ENSURE(dt_s > 0 && dt_s <= Ts);
     ENSURE_REL(r.duration_s, (c.n) * Ts, 1e-12);
-    t_curve_free(&c);
+    t_trace_free(&c);
 }
 
 static void test_mechanics(void)
@@ -486,7 +438,7 @@ static void t_hertz(int jkr_gamma_zero, double gamma_J)
     ENSURE_MSG(vafm_sim_new(&s, &p, &err) == 0, "%s: %s", err.field, err.message);
     if (!s)
         return;
-    t_curve c;
+    t_trace c;
     memset(&c, 0, sizeof c);
     vafm_curve_result r;
     ENSURE(vafm_sim_curve(s, 0, t_collect, &c, &r) == 0);
@@ -515,7 +467,7 @@ static void t_hertz(int jkr_gamma_zero, double gamma_J)
     ENSURE(r.flags == 0);
     ENSURE(isfinite(r.detach_force_N) && fabs(r.detach_force_N) <= drag);
     ENSURE(isnan(r.detach_eq_force_N));
-    t_curve_free(&c);
+    t_trace_free(&c);
 }
 
 static void test_hertz(void)
@@ -537,14 +489,14 @@ static void test_instrument_presets(void)
     vafm_sim *s = NULL;
     vafm_curve_result r;
     ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-    t_curve c;
+    t_trace c;
     memset(&c, 0, sizeof c);
     ENSURE(s && vafm_sim_curve(s, 0, t_collect, &c, &r) == 0);
     vafm_sim_destroy(&s);
     double F_jkr = 1.5 * M_PI * p.gamma_J_per_m2 * p.R_m;
     ENSURE_MSG(r.flags == 0 && r.pulloff_spring_N > 0.8 * F_jkr && r.pulloff_spring_N < 1.0 * F_jkr,
                "contact-silica: flags %d, pull-off %g of F_JKR", r.flags, r.pulloff_spring_N / F_jkr);
-    t_curve_free(&c);
+    t_trace_free(&c);
 
     ENSURE(vafm_preset_apply(&p, "cell-liquid", NULL) == 0);
     p.T_K = 0; /* the Hertz check without thermal noise (0.4 nm rms against ~550 nm of indentation) */
@@ -562,10 +514,10 @@ static void test_instrument_presets(void)
         ENSURE_MSG(delta > 400e-9 && fabs(F / c.f[i] - 1.0) < 0.03, "cell-liquid: indentation %g m, Hertz %g N vs %g N",
                    delta, F, c.f[i]);
     }
-    t_curve_free(&c);
+    t_trace_free(&c);
 }
 
-static int t_run(const vafm_params *p, uint64_t index, t_curve *c, vafm_curve_result *r)
+static int t_run(const vafm_params *p, uint64_t index, t_trace *c, vafm_curve_result *r)
 {
     vafm_sim *s = NULL;
     vafm_error err;
@@ -582,7 +534,7 @@ static int t_run(const vafm_params *p, uint64_t index, t_curve *c, vafm_curve_re
 }
 
 /* Index of the last approach sample (where the trigger fired). */
-static size_t t_turn(const t_curve *c)
+static size_t t_turn(const t_trace *c)
 {
     size_t i = 0;
     while (i + 1 < c->n && c->seg[i + 1] == VAFM_SEG_APPROACH)
@@ -598,7 +550,7 @@ static void test_fixed_ramp(void)
     vafm_preset_apply(&p, "contact-silica", NULL);
     p.ramp_size_m = 300e-9; /* the 5 nN setpoint lies ~150 nm below the 100 nm start */
     double step = p.v_approach_m_per_s / p.sample_rate_Hz;
-    t_curve c;
+    t_trace c;
     vafm_curve_result r;
     if (t_run(&p, 0, &c, &r))
         return;
@@ -613,7 +565,7 @@ static void test_fixed_ramp(void)
     for (size_t i = it; i < c.n; i++)
         free_ret += c.seg[i] == VAFM_SEG_RETRACT && fabs(c.f[i]) < 0.2e-9 && c.h[i] > 20e-9; /* thermal: 20 pN rms */
     ENSURE_MSG(free_ret * step > 70e-9, "retract baseline %g m", free_ret * step);
-    t_curve_free(&c);
+    t_trace_free(&c);
 
     /* a ramp shorter than the way to the setpoint: the approach ends at its full size, flagged, and the
      * retract still returns to the start */
@@ -624,7 +576,7 @@ static void test_fixed_ramp(void)
     it = t_turn(&c);
     ENSURE_MSG(fabs(c.h[it] - (p.start_height_m - p.ramp_size_m)) <= step, "turn at %g m", c.h[it]);
     ENSURE_MSG(fabs(c.h[c.n - 1] - p.start_height_m) <= step, "last height %g m", c.h[c.n - 1]);
-    t_curve_free(&c);
+    t_trace_free(&c);
 
     /* the ramp starts ramp_size_m above the quasi-static trigger point: athermal and slow (1 um/s against a
      * 13 kHz lever, a lag of ~1e-14 m), the turn lies one ramp below the start to within a sample's travel */
@@ -639,13 +591,13 @@ static void test_fixed_ramp(void)
     ENSURE_MSG(fabs(c.h[0] - c.h[it] - p.ramp_size_m) <= 1.5 * step, "start %g m, turn %g m: travel %g m", c.h[0],
                c.h[it], c.h[0] - c.h[it]);
     ENSURE_MSG(fabs(c.h[c.n - 1] - c.h[0]) <= step, "returns to %g m of %g m", c.h[c.n - 1], c.h[0]);
-    t_curve_free(&c);
+    t_trace_free(&c);
 }
 
 /* A relative setpoint counts from the baseline of the approach's first 64 samples, as instruments do; a
  * setpoint in volts is k·InvOLS·V, less the signal's offset when absolute. The test replays the rule on the
  * curve's own (thermal) samples: the trigger fires at the first sample that meets it. */
-static void t_check_trigger(const t_curve *c, double F_set, int relative)
+static void t_check_trigger(const t_trace *c, double F_set, int relative)
 {
     size_t it = t_turn(c);
     double sum = 0.0;
@@ -667,14 +619,14 @@ static void test_setpoint_modes(void)
     vafm_params p;
     vafm_preset_apply(&p, "contact-silica", NULL);
     p.ramp_size_m = 300e-9;
-    t_curve c;
+    t_trace c;
     vafm_curve_result r;
     for (int rel = 0; rel <= 1; rel++) {
         p.setpoint_mode = rel;
         if (t_run(&p, 3, &c, &r))
             return;
         t_check_trigger(&c, p.setpoint_N, rel);
-        t_curve_free(&c);
+        t_trace_free(&c);
     }
     p.baseline_offset_V = 0.2;
     p.setpoint_V = 0.5;
@@ -686,7 +638,7 @@ static void test_setpoint_modes(void)
         if (t_run(&p, 3, &c, &r))
             return;
         t_check_trigger(&c, want, rel);
-        t_curve_free(&c);
+        t_trace_free(&c);
     }
     /* a real baseline: in the scenes above the force's baseline is ≈ 0 (the offset is the signal's, not the
      * force's; the lever's drag is relative to its moving support), so both modes fire on the same sample.
@@ -708,7 +660,7 @@ static void test_setpoint_modes(void)
         base = 0.0;
         for (size_t j = 0; j < VAFM_BASELINE_SAMPLES && j < c.n; j++)
             base += c.f[j] / VAFM_BASELINE_SAMPLES;
-        t_curve_free(&c);
+        t_trace_free(&c);
     }
     fprintf(stderr, "  baseline %.4g N, setpoint %.4g N: trigger at sample %zu, %.4g N (absolute), %zu, %.4g N "
                     "(relative)\n", base, p.setpoint_N, turn[0], f_turn[0], turn[1], f_turn[1]);
@@ -727,7 +679,7 @@ static void test_dwell_force(void)
     p.ramp_size_m = 300e-9;
     p.v_approach_m_per_s = 100e-6;
     p.dwell_s = 0.02; /* 200 samples, the loop's default time constant is 10 */
-    t_curve c;
+    t_trace c;
     vafm_curve_result r;
     double hold[2], h_move[2];
     for (int mode = 0; mode <= 1; mode++) {
@@ -745,7 +697,7 @@ static void test_dwell_force(void)
             return;
         hold[mode] = c.f[i1];
         h_move[mode] = c.h[i1] - c.h[i0];
-        t_curve_free(&c);
+        t_trace_free(&c);
     }
     double over = hold[0] - p.setpoint_N;
     ENSURE_MSG(over > 0.05 * p.setpoint_N, "constant height: overshoot %g N", over);
@@ -769,7 +721,7 @@ static void test_pulloff_sampled_retract_only(void)
     p.sample_rate_Hz = 100e3;
     p.ramp_size_m = 0; /* the adaptive ramp, which retract_max_m bounds */
     p.retract_max_m = 2e-9;
-    t_curve c;
+    t_trace c;
     vafm_curve_result r;
     if (t_run(&p, 0, &c, &r))
         return;
@@ -791,7 +743,7 @@ static void test_pulloff_sampled_retract_only(void)
                "meant", min_other, min_ret);
     ENSURE_MSG(r.pulloff_sampled_N == -min_ret, "pulloff_sampled_N %.17g, -min(force[retract]) %.17g",
                r.pulloff_sampled_N, -min_ret);
-    t_curve_free(&c);
+    t_trace_free(&c);
 }
 
 int main(void)

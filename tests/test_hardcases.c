@@ -21,6 +21,7 @@
 #include "vafm/units.h"
 #include "core/guard.h"
 #include "core/kernel.h"
+#include "trace.h"
 
 #define T_PI 3.14159265358979323846
 
@@ -401,39 +402,6 @@ static void test_barrier(void)
 
 /* ---- γ → 0 ---------------------------------------------------------------------------------------- */
 
-typedef struct t_curve {
-    size_t n, cap;
-    double *f, *tip;
-    uint8_t *seg;
-} t_curve;
-
-static int t_collect(void *user, const vafm_samples *b)
-{
-    t_curve *c = user;
-    if (c->n + b->n > c->cap) {
-        size_t cap = c->cap ? 2 * c->cap : 4096;
-        while (cap < c->n + b->n)
-            cap *= 2;
-        double *f = realloc(c->f, cap * sizeof(double));
-        if (f)
-            c->f = f;
-        double *t = realloc(c->tip, cap * sizeof(double));
-        if (t)
-            c->tip = t;
-        uint8_t *s = realloc(c->seg, cap);
-        if (s)
-            c->seg = s;
-        if (!f || !t || !s)
-            return 1;
-        c->cap = cap;
-    }
-    memcpy(c->f + c->n, b->force_N, b->n * sizeof(double));
-    memcpy(c->tip + c->n, b->tip_m, b->n * sizeof(double));
-    memcpy(c->seg + c->n, b->segment, b->n);
-    c->n += b->n;
-    return 0;
-}
-
 /* JKR with γ = 0 and γ = 1e-12 J/m² (γ̃ = 6e-14) behaves as Hertz: on the approach the sampled force
  * follows (4/3)E*√R δ^{3/2} within 1e-3 (quasi-static: ζṽ/F ≤ 2e-5 above F̃ = 0.05; the adhesive term
  * √(8πγE*)a^{3/2} is 1e-6 of it at γ̃ = 6e-14), and there is no pull-off beyond the drag bound 2m̃ṽ
@@ -454,7 +422,7 @@ static void t_gamma_zero(const vafm_contact_type *type, double gamma_J)
     vafm_sim *s = t_new(&p);
     if (!s)
         return;
-    t_curve c;
+    t_trace c;
     memset(&c, 0, sizeof c);
     vafm_curve_result r;
     ENSURE(vafm_sim_curve(s, 0, t_collect, &c, &r) == 0);
@@ -479,9 +447,7 @@ static void t_gamma_zero(const vafm_contact_type *type, double gamma_J)
     ENSURE(r.pulloff_sampled_N <= drag);
     ENSURE(r.pulloff_spring_N <= drag);
     ENSURE(isfinite(r.detach_force_N) && fabs(r.detach_force_N) <= drag);
-    free(c.f);
-    free(c.tip);
-    free(c.seg);
+    t_trace_free(&c);
 }
 
 static void test_gamma_zero(void)

@@ -18,67 +18,9 @@
 #include "vafm/params.h"
 #include "vafm/segments.h"
 #include "vafm/sim.h"
+#include "trace.h"
 
 #define S_KB 1.380649e-23
-
-typedef struct t_run {
-    size_t n, cap;
-    double *t, *h, *ha, *d, *f, *tip;
-    uint8_t *seg;
-} t_run;
-
-static int t_collect(void *user, const vafm_samples *b)
-{
-    t_run *c = user;
-    if (c->n + b->n > c->cap) {
-        size_t cap = c->cap ? 2 * c->cap : 4096;
-        while (cap < c->n + b->n)
-            cap *= 2;
-        double **ch[6] = { &c->t, &c->h, &c->ha, &c->d, &c->f, &c->tip };
-        for (int i = 0; i < 6; i++) {
-            double *p = realloc(*ch[i], cap * sizeof(double));
-            if (!p)
-                return 1;
-            *ch[i] = p;
-        }
-        uint8_t *s = realloc(c->seg, cap);
-        if (!s)
-            return 1;
-        c->seg = s;
-        c->cap = cap;
-    }
-    memcpy(c->t + c->n, b->time_s, b->n * sizeof(double));
-    memcpy(c->h + c->n, b->height_m, b->n * sizeof(double));
-    memcpy(c->ha + c->n, b->height_measured_m ? b->height_measured_m : b->height_m, b->n * sizeof(double));
-    memcpy(c->d + c->n, b->deflection_m, b->n * sizeof(double));
-    memcpy(c->f + c->n, b->force_N, b->n * sizeof(double));
-    memcpy(c->tip + c->n, b->tip_m, b->n * sizeof(double));
-    memcpy(c->seg + c->n, b->segment, b->n);
-    c->n += b->n;
-    return 0;
-}
-
-static void t_free(t_run *c)
-{
-    free(c->t);
-    free(c->h);
-    free(c->ha);
-    free(c->d);
-    free(c->f);
-    free(c->tip);
-    free(c->seg);
-    memset(c, 0, sizeof *c);
-}
-
-static int t_same(const t_run *a, const t_run *b)
-{
-    if (a->n != b->n)
-        return 0;
-    const size_t nb = a->n * sizeof(double);
-    return !memcmp(a->t, b->t, nb) && !memcmp(a->h, b->h, nb) && !memcmp(a->ha, b->ha, nb) &&
-           !memcmp(a->d, b->d, nb) && !memcmp(a->f, b->f, nb) && !memcmp(a->tip, b->tip, nb) &&
-           !memcmp(a->seg, b->seg, a->n);
-}
 
 /* ---- 1. today's curve as a list, bit for bit ----------------------------------------------------------- */
 
@@ -95,18 +37,18 @@ static void t_bitwise_one(const char *name, const vafm_params *p, int trigger_of
     int n = vafm_segments_from_params(p, segs, VAFM_SEGMENTS_MAX);
     ENSURE(n == (p->dwell_s > 0 ? 3 : 2));
     for (uint64_t idx = 0; idx < 3; idx++) {
-        t_run a = { 0 }, b = { 0 };
+        t_trace a = { 0 }, b = { 0 };
         vafm_curve_result ra, rb;
         int r1 = vafm_sim_curve(s, idx, t_collect, &a, &ra);
         int r2 = vafm_sim_segments(s, idx, segs, (size_t)n, t_collect, &b, &rb);
         ENSURE_MSG(r1 == 0 && r2 == 0, "%s: curve %d, list %d (%s)", name, r1, r2,
                    vafm_sim_error(s) ? vafm_sim_error(s)->message : "");
-        ENSURE_MSG(a.n > 10 && t_same(&a, &b), "%s index %llu: %zu vs %zu samples differ", name, (unsigned long long)idx,
+        ENSURE_MSG(a.n > 10 && t_trace_same(&a, &b), "%s index %llu: %zu vs %zu samples differ", name, (unsigned long long)idx,
                    a.n, b.n);
         ENSURE_MSG(!memcmp(&ra, &rb, sizeof ra), "%s index %llu: results differ (pull-off %.17g vs %.17g, flags %d vs %d)",
                    name, (unsigned long long)idx, ra.pulloff_sampled_N, rb.pulloff_sampled_N, ra.flags, rb.flags);
-        t_free(&a);
-        t_free(&b);
+        t_trace_free(&a);
+        t_trace_free(&b);
     }
     vafm_sim_destroy(&s);
 }
@@ -295,7 +237,7 @@ static void test_height_trigger(void)
     g[1].distance_m = 500e-9;
     vafm_sim *s = NULL;
     ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-    t_run c = { 0 };
+    t_trace c = { 0 };
     vafm_curve_result r;
     ENSURE(vafm_sim_segments(s, 0, g, 2, t_collect, &c, &r) == 0);
     const double step = v / p.sample_rate_Hz;
@@ -309,7 +251,7 @@ static void test_height_trigger(void)
     const double h_end = c.h[c.n - 1];
     ENSURE_MSG(h_end >= 81.1e-9 && h_end < 81.1e-9 + step * (1 + 1e-9), "retract ended at %.6g m", h_end);
     ENSURE(!(r.flags & VAFM_CURVE_NO_TRIGGER));
-    t_free(&c);
+    t_trace_free(&c);
     vafm_sim_destroy(&s);
 }
 
@@ -344,7 +286,7 @@ static void test_force_pause(void)
     g[2].distance_m = 100e-9;
     vafm_sim *s = NULL;
     ENSURE_MSG(vafm_sim_new(&s, &p, &err) == 0, "%s", err.message);
-    t_run c = { 0 };
+    t_trace c = { 0 };
     ENSURE(vafm_sim_segments(s, 3, g, 3, t_collect, &c, NULL) == 0);
     /* the pause's samples after 50 ms of settling (50 τ) */
     size_t i0 = 0, np = 0;
@@ -380,7 +322,7 @@ static void test_force_pause(void)
     ENSURE_ABS(mean, F_hold, 5.0 * se);
     /* the sd of a sample sd over N_eff ≈ N/7 (correlation ~7 samples): ~1%; 10% holds it with margin */
     ENSURE_REL(sd, sd_th, 0.10);
-    t_free(&c);
+    t_trace_free(&c);
     vafm_sim_destroy(&s);
 }
 
@@ -407,7 +349,7 @@ static void test_modulation_fit(void)
     g[2].speed_m_per_s = p.v_retract_m_per_s;
     vafm_sim *s = NULL;
     ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-    t_run c = { 0 };
+    t_trace c = { 0 };
     ENSURE(vafm_sim_segments(s, 1, g, 3, t_collect, &c, NULL) == 0);
     size_t i0 = 0, n = 0;
     for (size_t i = 0; i < c.n; i++)
@@ -461,7 +403,7 @@ static void test_modulation_fit(void)
             best_amp, A, sqrt(best_res / n));
     ENSURE_ABS(best_f, fm, 0.02);
     ENSURE_REL(best_amp, A, 1e-3);
-    t_free(&c);
+    t_trace_free(&c);
     vafm_sim_destroy(&s);
 }
 
@@ -484,7 +426,7 @@ static void test_decimation(void)
     g[2].speed_m_per_s = p.v_retract_m_per_s;
     vafm_sim *s = NULL;
     ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-    t_run full = { 0 }, dec = { 0 };
+    t_trace full = { 0 }, dec = { 0 };
     ENSURE(vafm_sim_segments(s, 5, g, 3, t_collect, &full, NULL) == 0);
     g[1].sample_rate_Hz = p.sample_rate_Hz / 4;
     ENSURE(vafm_sim_segments(s, 5, g, 3, t_collect, &dec, NULL) == 0);
@@ -509,8 +451,8 @@ static void test_decimation(void)
     ENSURE_MSG(ok, "the decimated pause is not the block mean of the full-rate one");
     /* the physics is untouched: the retract after it is the same bit for bit */
     ENSURE(!memcmp(full.f + a0 + na, dec.f + b0 + nb, (full.n - a0 - na) * sizeof(double)));
-    t_free(&full);
-    t_free(&dec);
+    t_trace_free(&full);
+    t_trace_free(&dec);
     vafm_sim_destroy(&s);
 }
 
@@ -535,7 +477,7 @@ static void test_four_segments(void)
     g[3].speed_m_per_s = p.v_retract_m_per_s;
     vafm_sim *s = NULL;
     ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
-    t_run c = { 0 };
+    t_trace c = { 0 };
     vafm_curve_result r;
     ENSURE(vafm_sim_segments(s, 2, g, 4, t_collect, &c, &r) == 0);
     size_t cnt[4] = { 0 };
@@ -551,7 +493,7 @@ static void test_four_segments(void)
     ENSURE(cnt[0] == 50 && cnt[1] > 0 && cnt[2] == 100 && cnt[3] > 0);
     ENSURE(isfinite(r.pulloff_sampled_N) && r.pulloff_sampled_N > 0); /* JKR: a pull-off on the retract segment */
     ENSURE(vafm_sim_segment_current(s) == -1);
-    t_free(&c);
+    t_trace_free(&c);
     vafm_sim_destroy(&s);
 }
 

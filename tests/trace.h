@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * Test helpers: every sample of a run collected per channel (a vafm_sample_fn), compared and hashed
- * bytewise, and curve results compared member by member. Shared by the bit-for-bit tests.
+ * bytewise, and curve results compared member by member. Shared by the bit-for-bit tests and by every test
+ * that reads a run's samples back.
  */
 #ifndef VAFM_TESTS_TRACE_H
 #define VAFM_TESTS_TRACE_H
@@ -12,10 +13,21 @@
 
 #include "vafm/sim.h"
 
-/* Every sample of a run, concatenated per channel, plus the FNV-1a hash of the bytes in delivery order. */
+/* The channels a vafm_samples block delivers (hashed), then the measured height (the commanded one where
+ * the scene has no piezo model to measure it by). */
+#define T_HASHED 5
+#define T_CHANNELS 6
+
+/* Every sample of a run, concatenated per channel, plus the FNV-1a hash of the bytes in delivery order.
+ * Each channel has a name and an index: c.f[i] is c.ch[3][i]. */
 typedef struct t_trace {
     size_t n, cap;
-    double *ch[5]; /* time, height, deflection, force, tip */
+    union {
+        double *ch[T_CHANNELS];
+        struct {
+            double *t, *h, *d, *f, *tip, *hm; /* time, height, deflection, force, tip, measured height */
+        };
+    };
     uint8_t *seg;
     uint64_t first_expected; /* the next block must start here */
     int order_ok;
@@ -23,7 +35,7 @@ typedef struct t_trace {
 
 static inline void t_trace_free(t_trace *t)
 {
-    for (int i = 0; i < 5; i++)
+    for (int i = 0; i < T_CHANNELS; i++)
         free(t->ch[i]);
     free(t->seg);
     memset(t, 0, sizeof *t);
@@ -39,7 +51,7 @@ static inline int t_collect(void *user, const vafm_samples *b)
         size_t cap = t->cap ? 2 * t->cap : 4096;
         while (cap < t->n + b->n)
             cap *= 2;
-        for (int i = 0; i < 5; i++) {
+        for (int i = 0; i < T_CHANNELS; i++) {
             double *p = realloc(t->ch[i], cap * sizeof(double));
             if (!p)
                 return 1;
@@ -51,8 +63,9 @@ static inline int t_collect(void *user, const vafm_samples *b)
         t->seg = s;
         t->cap = cap;
     }
-    const double *src[5] = {b->time_s, b->height_m, b->deflection_m, b->force_N, b->tip_m};
-    for (int i = 0; i < 5; i++)
+    const double *src[T_CHANNELS] = {b->time_s, b->height_m, b->deflection_m, b->force_N, b->tip_m,
+                                     b->height_measured_m ? b->height_measured_m : b->height_m};
+    for (int i = 0; i < T_CHANNELS; i++)
         memcpy(t->ch[i] + t->n, src[i], b->n * sizeof(double));
     memcpy(t->seg + t->n, b->segment, b->n);
     t->n += b->n;
@@ -71,11 +84,11 @@ static inline uint64_t t_fnv1a(uint64_t h, const void *data, size_t len)
 
 #define T_FNV_BASIS UINT64_C(0xcbf29ce484222325)
 
-/* Hash of all sample bytes: each channel's array in turn, then the segments. */
+/* Hash of all sample bytes: each delivered channel's array in turn, then the segments. */
 static inline uint64_t t_trace_hash(const t_trace *t)
 {
     uint64_t h = T_FNV_BASIS;
-    for (int i = 0; i < 5; i++)
+    for (int i = 0; i < T_HASHED; i++)
         h = t_fnv1a(h, t->ch[i], t->n * sizeof(double));
     return t_fnv1a(h, t->seg, t->n);
 }
@@ -84,7 +97,7 @@ static inline int t_trace_same(const t_trace *a, const t_trace *b)
 {
     if (a->n != b->n)
         return 0;
-    for (int i = 0; i < 5; i++)
+    for (int i = 0; i < T_CHANNELS; i++)
         if (memcmp(a->ch[i], b->ch[i], a->n * sizeof(double)))
             return 0;
     return memcmp(a->seg, b->seg, a->n) == 0;
