@@ -199,12 +199,7 @@ static int t_camp_fn(void *user, const vafm_campaign_curve *c)
     if (c->index < 2 * T_NCURVES) {
         t->res[c->index] = c->result;
         t->status[c->index] = c->status;
-        uint64_t h = T_FNV_BASIS;
-        const double *ch[5] = {c->samples.time_s, c->samples.height_m, c->samples.deflection_m, c->samples.force_N,
-                               c->samples.tip_m};
-        for (int i = 0; i < 5; i++)
-            h = t_fnv1a(h, ch[i], c->samples.n * sizeof(double));
-        t->hash[c->index] = t_fnv1a(h, c->samples.segment, c->samples.n);
+        t->hash[c->index] = t_samples_hash(&c->samples);
     }
     t->n++;
     return 0;

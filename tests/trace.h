@@ -84,13 +84,21 @@ static inline uint64_t t_fnv1a(uint64_t h, const void *data, size_t len)
 
 #define T_FNV_BASIS UINT64_C(0xcbf29ce484222325)
 
-/* Hash of all sample bytes: each delivered channel's array in turn, then the segments. */
-static inline uint64_t t_trace_hash(const t_trace *t)
+/* Hash of a block's sample bytes: each delivered channel's array in turn, then the segments. */
+static inline uint64_t t_samples_hash(const vafm_samples *b)
 {
+    const double *ch[T_HASHED] = {b->time_s, b->height_m, b->deflection_m, b->force_N, b->tip_m};
     uint64_t h = T_FNV_BASIS;
     for (int i = 0; i < T_HASHED; i++)
-        h = t_fnv1a(h, t->ch[i], t->n * sizeof(double));
-    return t_fnv1a(h, t->seg, t->n);
+        h = t_fnv1a(h, ch[i], b->n * sizeof(double));
+    return t_fnv1a(h, b->segment, b->n);
+}
+
+/* The same hash over all the samples a trace collected. */
+static inline uint64_t t_trace_hash(const t_trace *t)
+{
+    const vafm_samples all = {t->n, 0, t->t, t->h, t->d, t->f, t->tip, t->seg, NULL};
+    return t_samples_hash(&all);
 }
 
 static inline int t_trace_same(const t_trace *a, const t_trace *b)
