@@ -21,6 +21,7 @@
  */
 #include "harness.h"
 
+#include "campaign_spec.h"
 #include "trace.h"
 #include "vafm/campaign.h"
 #include "vafm/integrator.h"
@@ -220,13 +221,7 @@ static void test_campaigns(void)
     t_scene(&p, 1e-2);
     const double T[2] = { p.T_K, 2.0 * p.T_K };
     const double v[2] = { p.v_retract_m_per_s, 0.5 * p.v_retract_m_per_s };
-    vafm_campaign_spec sp;
-    memset(&sp, 0, sizeof sp);
-    sp.T_K = T;
-    sp.n_T = 2;
-    sp.v_m_per_s = v;
-    sp.n_v = 2;
-    sp.curves_per_point = 4;
+    vafm_campaign_spec sp = t_campaign_spec(T, 2, v, 2, 4);
     sp.keep_samples = 1;
     sp.threads = 1;
     sp.kernel = VAFM_CAMPAIGN_KERNEL_SCALAR;
@@ -303,9 +298,7 @@ static void test_campaign_measured_height(void)
     ENSURE(vafm_sim_curve(s, 1, t_hm_collect, &h, NULL) == 0 && h.nref > 100);
     vafm_sim_destroy(&s);
     for (int k = VAFM_CAMPAIGN_KERNEL_SCALAR; k <= VAFM_CAMPAIGN_KERNEL_BATCH; k++) {
-        vafm_campaign_spec sp;
-        memset(&sp, 0, sizeof sp);
-        sp.curves_per_point = 3;
+        vafm_campaign_spec sp = t_campaign_spec(NULL, 0, NULL, 0, 3);
         sp.keep_samples = 1;
         sp.threads = 1;
         sp.kernel = k;
@@ -426,10 +419,7 @@ static void test_backends(void)
     vafm_params p;
     t_scene(&p, 1e-2);
     const double T[2] = { p.T_K, 2.0 * p.T_K };
-    memset(&sp, 0, sizeof sp);
-    sp.T_K = T;
-    sp.n_T = 2;
-    sp.curves_per_point = 6;
+    sp = t_campaign_spec(T, 2, NULL, 0, 6);
     sp.keep_samples = 1;
     sp.threads = 1;
     sp.kernel = VAFM_CAMPAIGN_KERNEL_SCALAR;

@@ -16,6 +16,7 @@
 #include "vafm/params.h"
 #include "vafm/sim.h"
 #include "trace.h"
+#include "campaign_spec.h"
 
 #define T_N 6       /* curves per point */
 #define T_TOTAL 12  /* two points */
@@ -34,10 +35,7 @@ static void t_setup(void)
     /* fast ramps: ~1 ms per curve; two speeds so workers switch scenes */
     t_v[0] = 6.4e-4;
     t_v[1] = 1.28e-3;
-    memset(&t_spec, 0, sizeof t_spec);
-    t_spec.v_m_per_s = t_v;
-    t_spec.n_v = 2;
-    t_spec.curves_per_point = T_N;
+    t_spec = t_campaign_spec(NULL, 0, t_v, 2, T_N);
     t_spec.keep_samples = 1;
     for (uint64_t i = 0; i < T_TOTAL; i++) {
         vafm_params pp;
@@ -174,15 +172,9 @@ static void test_grid_order(void)
     vafm_params base, q;
     vafm_preset_apply(&base, "paper-fig4", NULL);
     const double T[2] = { 1.0, 2.0 }, v[2] = { 1e-5, 2e-5 }, k[3] = { 0.5, 1.0, 1.5 };
-    vafm_campaign_spec spec;
-    memset(&spec, 0, sizeof spec);
-    spec.T_K = T;
-    spec.n_T = 2;
-    spec.v_m_per_s = v;
-    spec.n_v = 2;
+    vafm_campaign_spec spec = t_campaign_spec(T, 2, v, 2, 1);
     spec.k_N_per_m = k;
     spec.n_k = 3;
-    spec.curves_per_point = 1;
     ENSURE(vafm_campaign_points(&spec) == 12);
     int bad = 0;
     for (size_t pt = 0; pt < 12; pt++) {

@@ -19,6 +19,7 @@
 #include "vafm/units.h"
 
 #include "trace.h"
+#include "campaign_spec.h"
 
 static void t_scene(vafm_params *p)
 {
@@ -213,11 +214,7 @@ static void test_campaign_threads(void)
     vafm_reduced r;
     vafm_units_reduce(&p, &r);
     const double v[2] = {p.v_retract_m_per_s, 2.0 * p.v_retract_m_per_s};
-    vafm_campaign_spec spec;
-    memset(&spec, 0, sizeof spec);
-    spec.v_m_per_s = v;
-    spec.n_v = 2;
-    spec.curves_per_point = T_NCURVES;
+    vafm_campaign_spec spec = t_campaign_spec(NULL, 0, v, 2, T_NCURVES);
     spec.keep_samples = 1;
     ENSURE(vafm_campaign_points(&spec) == 2);
 
@@ -284,9 +281,7 @@ static void test_campaign_stop(void)
 {
     vafm_params p;
     t_scene(&p);
-    vafm_campaign_spec spec;
-    memset(&spec, 0, sizeof spec);
-    spec.curves_per_point = T_NCURVES;
+    vafm_campaign_spec spec = t_campaign_spec(NULL, 0, NULL, 0, T_NCURVES);
     spec.threads = 2;
     uint64_t last = 0;
     vafm_error err = {0};

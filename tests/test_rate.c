@@ -17,6 +17,7 @@
 #include <stdint.h>
 
 #include "vafm/campaign.h"
+#include "campaign_spec.h"
 #include "vafm/integrator.h"
 #include "vafm/params.h"
 #include "vafm/sim.h"
@@ -133,11 +134,7 @@ static void test_dhs(void)
     const double kT = 0.003, zeta = 1.0, vr[2] = { 1e-4, 1e-3 };
     const double v_si[2] = { vr[0] * sc.speed_m_per_s, vr[1] * sc.speed_m_per_s };
     const uint64_t N = LONG_OR(400, 60);
-    vafm_campaign_spec spec;
-    memset(&spec, 0, sizeof spec);
-    spec.v_m_per_s = v_si;
-    spec.n_v = 2;
-    spec.curves_per_point = N;
+    vafm_campaign_spec spec = t_campaign_spec(NULL, 0, v_si, 2, N);
     spec.threads = 0;
     s_runs runs = { 0 };
     int r = s_campaign(&p, &spec, &runs);
@@ -215,9 +212,7 @@ static void test_early_detach(void)
     p.trigger_height_m = 1.99 * sc.length_m;
     p.dwell_s = 2000.0 * sc.time_s;
     p.retract_margin_m = 1.0 * sc.length_m;
-    vafm_campaign_spec spec;
-    memset(&spec, 0, sizeof spec);
-    spec.curves_per_point = LONG_OR(100, 40);
+    vafm_campaign_spec spec = t_campaign_spec(NULL, 0, NULL, 0, LONG_OR(100, 40));
     spec.threads = 0;
     s_runs runs = { 0 };
     ENSURE(s_campaign(&p, &spec, &runs) == 0);

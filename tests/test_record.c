@@ -10,6 +10,7 @@
 #include <unistd.h>
 #include "harness.h"
 #include "vafm/campaign.h"
+#include "campaign_spec.h"
 #include "h5/h5.h"
 #include "record/record.h"
 #include "record/scene.h"
@@ -122,11 +123,7 @@ static int s_run_campaign(const char *path, int mode, double interval, uint64_t 
     vafm_params p;
     s_scene(&p);
     double T[2] = { 0, 1e5 };
-    vafm_campaign_spec sp;
-    memset(&sp, 0, sizeof sp);
-    sp.T_K = T;
-    sp.n_T = 2;
-    sp.curves_per_point = n;
+    vafm_campaign_spec sp = t_campaign_spec(T, 2, NULL, 0, n);
     sp.threads = 2;
     sp.keep_samples = 1;
     vafm_recorder_opts o;
@@ -237,11 +234,7 @@ static void test_campaign_validate(void)
     vafm_params p;
     vafm_preset_apply(&p, "paper-fig4", NULL);
     double T[3] = { 10, -5, 20 };
-    vafm_campaign_spec sp;
-    memset(&sp, 0, sizeof sp);
-    sp.T_K = T;
-    sp.n_T = 3;
-    sp.curves_per_point = 1;
+    vafm_campaign_spec sp = t_campaign_spec(T, 3, NULL, 0, 1);
     size_t bad = 99;
     vafm_error e;
     memset(&e, 0, sizeof e);
