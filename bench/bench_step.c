@@ -470,16 +470,6 @@ static void s_cpu_model(char *buf, size_t len)
     fclose(f);
 }
 
-static FILE *s_open(const char *dir, const char *name)
-{
-    char path[4096];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "w");
-    if (!f)
-        fprintf(stderr, "bench_step: cannot write %s\n", path);
-    return f;
-}
-
 static void s_write_csv(FILE *f, const s_bench *b)
 {
     fprintf(f, "integrator,where,method,ns_per_step_median,ns_min,ns_max,ns_cpu_median,ratio_vs_paper_vv,"
@@ -569,16 +559,16 @@ static void s_write_md(FILE *f, const s_bench *b, const s_rtf *o, int n_rtf)
 
 static int s_emit(const char *dir, const s_bench *b, const s_rtf *o, int n_rtf)
 {
-    FILE *f = s_open(dir, "bench_step.csv");
+    FILE *f = bench_open("bench_step", dir, "bench_step.csv");
     if (!f)
         return -1;
     s_write_csv(f, b);
     fclose(f);
-    if (!(f = s_open(dir, "bench_step_rtf.csv")))
+    if (!(f = bench_open("bench_step", dir, "bench_step_rtf.csv")))
         return -1;
     s_write_rtf_csv(f, o, n_rtf);
     fclose(f);
-    if (!(f = s_open(dir, "bench_step.md")))
+    if (!(f = bench_open("bench_step", dir, "bench_step.md")))
         return -1;
     s_write_md(f, b, o, n_rtf);
     fclose(f);

@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Clocks and the machine's load for the C benchmarks. Benchmarks report wall and CPU time side by side and
- * the load average around a run: on a shared machine wall times include waiting for the CPU, CPU times do not.
+ * Clocks, the machine's load and the report files for the C benchmarks. Benchmarks report wall and CPU time
+ * side by side and the load average around a run: on a shared machine wall times include waiting for the CPU,
+ * CPU times do not.
  */
 #ifndef VAFM_BENCH_UTIL_H
 #define VAFM_BENCH_UTIL_H
@@ -43,5 +44,16 @@ static inline double bench_loadavg(void)
         fclose(f);
     }
     return l;
+}
+
+/* dir/name opened for writing; NULL after saying so on stderr, as "prog: cannot write PATH". */
+static inline FILE *bench_open(const char *prog, const char *dir, const char *name)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "w");
+    if (!f)
+        fprintf(stderr, "%s: cannot write %s\n", prog, path);
+    return f;
 }
 #endif

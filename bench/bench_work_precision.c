@@ -620,24 +620,14 @@ static void s_write_md(FILE *f, const s_row *rows, int n, uint64_t N, uint64_t N
     s_write_reading(f, rows, n);
 }
 
-static FILE *s_open(const char *dir, const char *name)
-{
-    char path[4096];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "w");
-    if (!f)
-        fprintf(stderr, "bench_work_precision: cannot write %s\n", path);
-    return f;
-}
-
 static int s_emit(const char *dir, const s_row *rows, int n, uint64_t N, uint64_t N_bd, double load0, double load1)
 {
-    FILE *f = s_open(dir, "work_precision.csv");
+    FILE *f = bench_open("bench_work_precision", dir, "work_precision.csv");
     if (!f)
         return -1;
     s_write_csv(f, rows, n);
     fclose(f);
-    if (!(f = s_open(dir, "work_precision.md")))
+    if (!(f = bench_open("bench_work_precision", dir, "work_precision.md")))
         return -1;
     s_write_md(f, rows, n, N, N_bd, load0, load1);
     fclose(f);
@@ -736,13 +726,13 @@ static int s_emit_cases(const char *dir, const char *stem, const s_row *rows, in
 {
     char name[64];
     snprintf(name, sizeof name, "%s.csv", stem);
-    FILE *f = s_open(dir, name);
+    FILE *f = bench_open("bench_work_precision", dir, name);
     if (!f)
         return -1;
     s_write_case_csv(f, rows, n);
     fclose(f);
     snprintf(name, sizeof name, "%s.md", stem);
-    if (!(f = s_open(dir, name)))
+    if (!(f = bench_open("bench_work_precision", dir, name)))
         return -1;
     s_write_case_md(f, rows, n, load0, load1);
     fclose(f);
