@@ -38,11 +38,7 @@ def campaign(d, sub):
     r = d.cmd({"cmd": "campaign", "n": CURVES})
     assert r["status"] == "ok", r
     arrive = {}
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline:
-        if not sub.poll(1000):
-            continue
-        parts = sub.recv_multipart()
+    for parts in vafmd_harness.messages_until(sub, time.monotonic() + 300):
         if parts[0] == b"data":
             arrive[HEADER.unpack(parts[1])[3]] = time.time()
         elif parts[0] == b"campaign.end":
@@ -56,12 +52,10 @@ LIVE_S = 3.0
 def live_arrivals(d):
     """{live seq: arrival time} over LIVE_S seconds of an idle daemon."""
     sub = d.sub(topics=(b"live", b"heartbeat"), greet=True)
-    arrive, end = {}, time.monotonic() + LIVE_S
-    while time.monotonic() < end:
-        if sub.poll(100):
-            parts = sub.recv_multipart()
-            if parts[0] == b"live":
-                arrive[json.loads(parts[1])["seq"]] = time.time()
+    arrive = {}
+    for parts in vafmd_harness.messages_until(sub, time.monotonic() + LIVE_S, poll_ms=100):
+        if parts[0] == b"live":
+            arrive[json.loads(parts[1])["seq"]] = time.time()
     sub.close(0)
     return arrive
 

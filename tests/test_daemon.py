@@ -27,7 +27,7 @@ for _var in ("VAFMD", "VAFM_CLI"):
     if not os.environ.get(_var):
         raise RuntimeError(f"{_var} is not set: run this module with meson test (it sets VAFMD, VAFM_CLI)")
 
-from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, collect_run, error_ok, fig4, reap_daemons, receive_run  # noqa: E402,F401
+from vafmd_harness import HEADER, TIMEOUT_MS, Daemon, collect_run, error_ok, fig4, messages_until, reap_daemons, receive_run  # noqa: E402,F401
 
 
 def settle(d, s):
@@ -1072,11 +1072,7 @@ def wait_log_curves(d, n, timeout=30):
 
 def wait_log_notice(s, run_id, timeout=30):
     """The kind of the first logged/log_failed event of run_id on subscriber s (after its run.end)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if not s.poll(1000):
-            continue
-        parts = s.recv_multipart()
+    for parts in messages_until(s, time.monotonic() + timeout):
         if parts[0] == b"event":
             j = json.loads(parts[1])
             if j["run_id"] == run_id and j["kind"] in ("logged", "log_failed"):
@@ -1356,11 +1352,7 @@ def test_log_kill9_keeps_every_curve_said_logged(tmp_path):
     settle(d, s)
     assert d.cmd({"cmd": "campaign", "n": 200})["status"] == "ok"
     force, ends, logged = {}, {}, {}
-    deadline = time.monotonic() + 1.2
-    while time.monotonic() < deadline:
-        if not s.poll(100):
-            continue
-        parts = s.recv_multipart()
+    for parts in messages_until(s, time.monotonic() + 1.2, poll_ms=100):
         if parts[0] == b"data":
             h = HEADER.unpack(parts[1])
             force.setdefault(h[4], []).append(np.frombuffer(parts[2 + CHANNELS.index("force_N")], "<f8"))

@@ -16,7 +16,7 @@ from selenium import webdriver
 from selenium.webdriver.chrome.options import Options
 from selenium.webdriver.chrome.service import Service
 
-from vafmd_harness import HEADER, Daemon
+from vafmd_harness import HEADER, Daemon, messages_until
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 BRIDGE = os.path.join(HERE, "..", "clients", "web", "vafm_web.py")
@@ -107,11 +107,8 @@ def reference_points(blocks, events, B):
 
 
 def collect(sub, run_id, timeout=60):
-    blocks, events, deadline = [], [], time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if not sub.poll(1000):
-            continue
-        parts = sub.recv_multipart()
+    blocks, events = [], []
+    for parts in messages_until(sub, time.monotonic() + timeout):
         if parts[0] == b"data":
             h = HEADER.unpack(parts[1])
             if h[4] == run_id:
@@ -373,11 +370,8 @@ def test_map_and_tune_views(panel):
     rep = wait_for("the map's reply", lambda: last_reply(a, "map"))
     assert rep["reply"]["status"] == "ok" and rep["reply"]["curves"] == nx * ny, rep
     cid = rep["reply"]["campaign_id"]
-    starts, ends, deadline = {}, {}, time.monotonic() + 120
-    while time.monotonic() < deadline:
-        if not sub.poll(1000):
-            continue
-        parts = sub.recv_multipart()
+    starts, ends = {}, {}
+    for parts in messages_until(sub, time.monotonic() + 120):
         if parts[0] in (b"run.start", b"run.end"):
             j = json.loads(parts[1])
             if (j.get("campaign") or {}).get("campaign_id") == cid:
@@ -508,11 +502,11 @@ def test_controller_in_a_browser(panel):
     sub = d.sub(topics=(b"live", b"heartbeat"), greet=True)
     msgs, deadline = [], time.monotonic() + WAIT
     shot1 = a.find_element("id", "scope").screenshot_as_png
-    while len(msgs) < 8 and time.monotonic() < deadline:
-        if sub.poll(1000):
-            parts = sub.recv_multipart()
-            if parts[0] == b"live":
-                msgs.append((json.loads(parts[1]), parts[2:]))
+    for parts in messages_until(sub, deadline):
+        if parts[0] == b"live":
+            msgs.append((json.loads(parts[1]), parts[2:]))
+            if len(msgs) == 8:
+                break
     sub.close(0)
     assert len(msgs) == 8, "the live topic did not flow"
     gen = msgs[-1][0]["generation"]

@@ -147,6 +147,14 @@ def fig4():
     assert d.stop() == 0
 
 
+def messages_until(s, deadline, poll_ms=1000):
+    """The multipart messages socket s receives until time.monotonic() reaches deadline, one at a time,
+    waiting at most poll_ms for each; ends quietly at the deadline (the caller says what was missing)."""
+    while time.monotonic() < deadline:
+        if s.poll(poll_ms):
+            yield s.recv_multipart()
+
+
 def receive_run(s, run_id, timeout_ms=TIMEOUT_MS):
     """All messages of run `run_id` up to its run.end: (start, blocks, events, end, t_ns), blocks as
     (header, channel frames) and t_ns their receive times (time.monotonic_ns: CLOCK_MONOTONIC, the
