@@ -35,29 +35,24 @@ static int h_checks, h_failed;
         }                                                                                \
     } while (0)
 
+/* One check of |a − b| ≤ tol·scale: scale |b| ("rel") or 1 ("abs"), the deviation reported in the same unit. */
+static inline void h_ensure_near(const char *file, int line, const char *sa, double a, const char *sb, double b,
+                                 double tol, int rel)
+{
+    const double scale = rel ? fabs(b) : 1.0;
+    h_checks++;
+    if (!(fabs(a - b) <= tol * scale)) {
+        h_failed++;
+        fprintf(stderr, "%s:%d: FAILED: %s = %.12g vs %s = %.12g (%s %.3g > %.3g)\n", file, line, sa, a, sb, b,
+                rel ? "rel" : "abs", fabs(a - b) / scale, tol);
+    }
+}
+
 /* |a − b| ≤ tol·|b| */
-#define ENSURE_REL(a, b, tol)                                                            \
-    do {                                                                                 \
-        double ea_ = (a), eb_ = (b), et_ = (tol);                                        \
-        h_checks++;                                                                      \
-        if (!(fabs(ea_ - eb_) <= et_ * fabs(eb_))) {                                     \
-            h_failed++;                                                                  \
-            fprintf(stderr, "%s:%d: FAILED: %s = %.12g vs %s = %.12g (rel %.3g > %.3g)\n",  \
-                    __FILE__, __LINE__, #a, ea_, #b, eb_, fabs(ea_ - eb_) / fabs(eb_), et_); \
-        }                                                                                \
-    } while (0)
+#define ENSURE_REL(a, b, tol) h_ensure_near(__FILE__, __LINE__, #a, (a), #b, (b), (tol), 1)
 
 /* |a − b| ≤ tol */
-#define ENSURE_ABS(a, b, tol)                                                            \
-    do {                                                                                 \
-        double ea_ = (a), eb_ = (b), et_ = (tol);                                        \
-        h_checks++;                                                                      \
-        if (!(fabs(ea_ - eb_) <= et_)) {                                                 \
-            h_failed++;                                                                  \
-            fprintf(stderr, "%s:%d: FAILED: %s = %.12g vs %s = %.12g (abs %.3g > %.3g)\n",  \
-                    __FILE__, __LINE__, #a, ea_, #b, eb_, fabs(ea_ - eb_), et_);          \
-        }                                                                                \
-    } while (0)
+#define ENSURE_ABS(a, b, tol) h_ensure_near(__FILE__, __LINE__, #a, (a), #b, (b), (tol), 0)
 
 #define RUN_TEST(fn)                                                                     \
     do {                                                                                 \
