@@ -52,6 +52,15 @@ static void test_table(void)
     ENSURE_REL(t_table[5][0] * 1.5 * T_PI, 5.6548668e-4, 1e-7);
 }
 
+/* Row i of the table: its γ̃ and k̃, their quasi-static solution and the JKR contact at that γ̃. */
+static void t_row(int i, double *g, double *k, vafm_quasistatic *q, vafm_contact *c)
+{
+    *g = t_table[i][0];
+    *k = t_table[i][1];
+    ENSURE(vafm_theory_quasistatic(*g, *k, q) == VAFM_OK);
+    ENSURE(vafm_contact_init(c, vafm_contact_jkr, *g) == VAFM_OK);
+}
+
 /* The instability is where dF/du = −k on the contact branch: check through the contact module (an
  * independent solver path). At u* the branch is evaluated from u (the double root at u_min is ≥ 2e-5
  * away here, so a(u) is accurate to ~1e-11): dF/du = −k and F = −F* to 1e-8. F″ against a centred
@@ -59,11 +68,10 @@ static void test_table(void)
 static void test_instability_via_contact(void)
 {
     for (int i = 0; i < 10; ++i) {
-        const double g = t_table[i][0], k = t_table[i][1];
+        double g, k;
         vafm_quasistatic q;
         vafm_contact c;
-        ENSURE(vafm_theory_quasistatic(g, k, &q) == VAFM_OK);
-        ENSURE(vafm_contact_init(&c, vafm_contact_jkr, g) == VAFM_OK);
+        t_row(i, &g, &k, &q, &c);
         ENSURE(c.u_detach == q.u_min); /* same expressions, bit for bit */
         vafm_contact_eval e, ep, em;
         ENSURE(vafm_contact_eval_at(&c, q.u_star, &e) == VAFM_OK);
@@ -169,11 +177,10 @@ static void test_invalid(void)
 static void test_equilibrium(void)
 {
     for (int i = 0; i < 10; ++i) {
-        const double g = t_table[i][0], k = t_table[i][1];
+        double g, k;
         vafm_quasistatic q;
         vafm_contact c;
-        ENSURE(vafm_theory_quasistatic(g, k, &q) == VAFM_OK);
-        ENSURE(vafm_contact_init(&c, vafm_contact_jkr, g) == VAFM_OK);
+        t_row(i, &g, &k, &q, &c);
         const double L = fabs(q.u_spr_star) + 1.0;
         double u, F;
         /* a sweep from far in compression down to the instability */
