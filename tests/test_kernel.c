@@ -99,6 +99,16 @@ static void s_fig4(vafm_params *p, double k_red, int table)
     p->contact_table = table;
 }
 
+/* Curve 0 of scene p, without samples: its result in *r; the sim is gone (NULL) after. */
+static void s_result(const vafm_params *p, vafm_curve_result *r)
+{
+    vafm_sim *s = NULL;
+    ENSURE(vafm_sim_new(&s, p, NULL) == 0);
+    ENSURE(vafm_sim_curve(s, 0, NULL, NULL, r) == 0);
+    vafm_sim_destroy(&s);
+    ENSURE(s == NULL);
+}
+
 static void test_table_vs_solver_curve(void)
 {
     const double ks[] = { 0.1, 0.8 };
@@ -106,21 +116,15 @@ static void test_table_vs_solver_curve(void)
         vafm_params p0, p1;
         s_fig4(&p0, ks[i], 0);
         s_fig4(&p1, ks[i], 1);
-        vafm_sim *s0 = NULL, *s1 = NULL;
         vafm_curve_result r0, r1;
-        ENSURE(vafm_sim_new(&s0, &p0, NULL) == 0);
-        ENSURE(vafm_sim_new(&s1, &p1, NULL) == 0);
-        ENSURE(vafm_sim_curve(s0, 0, NULL, NULL, &r0) == 0);
-        ENSURE(vafm_sim_curve(s1, 0, NULL, NULL, &r1) == 0);
+        s_result(&p0, &r0);
+        s_result(&p1, &r1);
         ENSURE(r0.flags == 0 && r1.flags == 0);
         ENSURE(r0.steps == r1.steps);
         ENSURE_REL(r1.detach_force_N, r0.detach_force_N, 1e-9);
         ENSURE_REL(r1.detach_height_m, r0.detach_height_m, 1e-9);
         ENSURE_REL(r1.pulloff_spring_N, r0.pulloff_spring_N, 1e-9);
         ENSURE_REL(r1.pulloff_sampled_N, r0.pulloff_sampled_N, 1e-9);
-        vafm_sim_destroy(&s0);
-        vafm_sim_destroy(&s1);
-        ENSURE(s0 == NULL && s1 == NULL);
     }
 }
 
@@ -134,20 +138,15 @@ static void test_adaptive_vs_plain(void)
         p1.omega_dt_far = 1.5;
         /* the larger step acts where the exact well step would otherwise take over: off in both runs */
         p0.well_exact = p1.well_exact = 0;
-        vafm_sim *s0 = NULL, *s1 = NULL;
         vafm_curve_result r0, r1;
-        ENSURE(vafm_sim_new(&s0, &p0, NULL) == 0);
-        ENSURE(vafm_sim_new(&s1, &p1, NULL) == 0);
-        ENSURE(vafm_sim_curve(s0, 0, NULL, NULL, &r0) == 0);
-        ENSURE(vafm_sim_curve(s1, 0, NULL, NULL, &r1) == 0);
+        s_result(&p0, &r0);
+        s_result(&p1, &r1);
         ENSURE(r0.flags == 0 && r1.flags == 0);
         ENSURE_MSG(r1.steps < 0.7 * r0.steps, "k %g: adaptive %llu steps vs plain %llu", ks[i],
                    (unsigned long long)r1.steps, (unsigned long long)r0.steps);
         ENSURE_REL(r1.detach_force_N, r0.detach_force_N, 1e-4);
         ENSURE_REL(r1.detach_height_m, r0.detach_height_m, 1e-4);
         ENSURE_REL(r1.pulloff_spring_N, r0.pulloff_spring_N, 1e-4);
-        vafm_sim_destroy(&s0);
-        vafm_sim_destroy(&s1);
     }
 }
 
