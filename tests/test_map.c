@@ -18,6 +18,7 @@
 #include "h5/h5.h"
 #include "vafm/map.h"
 #include "record/record.h"
+#include "trace.h"
 
 /* ---- bad input ----------------------------------------------------------------------------------- */
 
@@ -97,44 +98,21 @@ static void test_bad_input(void)
 typedef struct t_curve {
     vafm_params p;
     vafm_curve_result r;
-    size_t n;
-    double *t, *h, *d, *f, *tip;
-    uint8_t *seg;
+    t_trace s;
 } t_curve;
-
-static double *t_dup(const double *v, size_t n)
-{
-    double *c = malloc(n * sizeof *c);
-    memcpy(c, v, n * sizeof *c);
-    return c;
-}
 
 static int t_keep(void *user, const vafm_campaign_curve *c)
 {
     t_curve *all = user, *k = &all[c->index];
     k->p = *c->params;
     k->r = c->result;
-    k->n = c->samples.n;
-    k->t = t_dup(c->samples.time_s, k->n);
-    k->h = t_dup(c->samples.height_m, k->n);
-    k->d = t_dup(c->samples.deflection_m, k->n);
-    k->f = t_dup(c->samples.force_N, k->n);
-    k->tip = t_dup(c->samples.tip_m, k->n);
-    k->seg = malloc(k->n);
-    memcpy(k->seg, c->samples.segment, k->n);
-    return c->status != 0;
+    return t_collect(&k->s, &c->samples) || c->status != 0;
 }
 
 static void t_free(t_curve *all, size_t n)
 {
-    for (size_t i = 0; i < n; i++) {
-        free(all[i].t);
-        free(all[i].h);
-        free(all[i].d);
-        free(all[i].f);
-        free(all[i].tip);
-        free(all[i].seg);
-    }
+    for (size_t i = 0; i < n; i++)
+        t_trace_free(&all[i].s);
     free(all);
 }
 
@@ -154,23 +132,6 @@ static t_curve *t_run_map(const vafm_map_spec *s, const vafm_params *base, int t
     return all;
 }
 
-/* one curve alone, as `vafm samples --index I` runs it */
-typedef struct t_one {
-    size_t n;
-    double h[1 << 16], f[1 << 16], tip[1 << 16];
-} t_one;
-
-static int t_one_cb(void *user, const vafm_samples *b)
-{
-    t_one *o = user;
-    for (size_t i = 0; i < b->n && o->n < (1 << 16); i++, o->n++) {
-        o->h[o->n] = b->height_m[i];
-        o->f[o->n] = b->force_N[i];
-        o->tip[o->n] = b->tip_m[i];
-    }
-    return 0;
-}
-
 static void test_uniform_is_single_curve(void)
 {
     vafm_params base;
@@ -183,17 +144,18 @@ static void test_uniform_is_single_curve(void)
     t_curve *a = t_run_map(&s, &base, 1), *b = t_run_map(&s, &base, 2);
     vafm_sim *sim = NULL;
     ENSURE(vafm_sim_new(&sim, &base, NULL) == 0);
-    static t_one one;
     int same = 1, same_threads = 1;
     for (size_t i = 0; i < 12; i++) {
         vafm_curve_result r;
-        one.n = 0;
-        ENSURE(vafm_sim_curve(sim, i, t_one_cb, &one, &r) == 0);
-        same &= one.n == a[i].n && !memcmp(one.h, a[i].h, one.n * sizeof(double)) &&
-                !memcmp(one.f, a[i].f, one.n * sizeof(double)) && !memcmp(one.tip, a[i].tip, one.n * sizeof(double)) &&
+        t_trace one = { 0 };
+        const t_trace *ai = &a[i].s, *bi = &b[i].s;
+        ENSURE(vafm_sim_curve(sim, i, t_collect, &one, &r) == 0);
+        same &= one.n == ai->n && !memcmp(one.h, ai->h, one.n * sizeof(double)) &&
+                !memcmp(one.f, ai->f, one.n * sizeof(double)) && !memcmp(one.tip, ai->tip, one.n * sizeof(double)) &&
                 !memcmp(&r.pulloff_sampled_N, &a[i].r.pulloff_sampled_N, sizeof(double)) && r.steps == a[i].r.steps;
-        same_threads &= a[i].n == b[i].n && !memcmp(a[i].f, b[i].f, a[i].n * sizeof(double)) &&
-                        !memcmp(a[i].h, b[i].h, a[i].n * sizeof(double));
+        same_threads &= ai->n == bi->n && !memcmp(ai->f, bi->f, ai->n * sizeof(double)) &&
+                        !memcmp(ai->h, bi->h, ai->n * sizeof(double));
+        t_trace_free(&one);
         ENSURE(!memcmp(&a[i].p, &base, offsetof(vafm_params, reserved))); /* the pixel's scene is the base scene */
     }
     ENSURE_MSG(same, "a uniform map's pixels are the single curves (seed, index iy*nx + ix) bit for bit");
@@ -207,7 +169,7 @@ static void test_uniform_is_single_curve(void)
 
 /* Least-squares E* of F = (4/3) E* sqrt(R) d^(3/2) over the approach samples with F above a fifth of the
  * setpoint (d = -tip: the indentation), and its standard error from the residuals. */
-static void t_hertz_fit(const t_curve *c, double R, double F_min, double *E, double *se)
+static void t_hertz_fit(const t_trace *c, double R, double F_min, double *E, double *se)
 {
     double sgg = 0, sfg = 0, sff = 0;
     size_t m = 0;
@@ -246,7 +208,7 @@ static void test_stripes_hertz_moduli(void)
         ENSURE(vafm_map_pixel(&s, &base, i % 8, i / 8, NULL, &t, NULL) == 0);
         ENSURE(t.E_star_Pa == Etrue[t.material] && all[i].p.E_star_Pa == t.E_star_Pa);
         double E, se;
-        t_hertz_fit(&all[i], base.R_m, 0.2 * base.setpoint_N, &E, &se);
+        t_hertz_fit(&all[i].s, base.R_m, 0.2 * base.setpoint_N, &E, &se);
         sum[t.material] += E;
         sum2[t.material] += E * E;
         sesum[t.material] += se;
@@ -270,7 +232,7 @@ static void test_stripes_hertz_moduli(void)
 /* ---- topography ------------------------------------------------------------------------------------- */
 
 /* The piezo height where the approach's force first reaches half the setpoint, interpolated. */
-static double t_contact_height(const t_curve *c, double F)
+static double t_contact_height(const t_trace *c, double F)
 {
     for (size_t i = 1; i < c->n; i++)
         if (c->seg[i] == 0 && c->f[i] >= F && c->f[i - 1] < F)
@@ -301,11 +263,11 @@ static void test_topography(void)
         t_curve *all = t_run_map(&s, &base, 0);
         vafm_map_truth t0;
         ENSURE(vafm_map_pixel(&s, &base, 0, 0, NULL, &t0, NULL) == 0 && t0.surface_height_m == 0);
-        double c0 = t_contact_height(&all[0], 0.5 * base.setpoint_N);
+        double c0 = t_contact_height(&all[0].s, 0.5 * base.setpoint_N);
         for (int ix = 1; ix < 5; ix++) {
             vafm_map_truth t;
             ENSURE(vafm_map_pixel(&s, &base, ix, 0, NULL, &t, NULL) == 0);
-            double c = t_contact_height(&all[ix], 0.5 * base.setpoint_N);
+            double c = t_contact_height(&all[ix].s, 0.5 * base.setpoint_N);
             /* within one sample interval's piezo travel (fixed start: the samples fall at another phase of the
              * ramp); the centre pixel sits on the dome's top */
             ENSURE_MSG(fabs(c - c0 - t.surface_height_m) <= sample_dz,
@@ -314,7 +276,7 @@ static void test_topography(void)
             if (ix == 2)
                 ENSURE_REL(t.surface_height_m, 200e-9, 1e-12);
             if (mode == 0) { /* surface: the same curve shifted, the forces bit for bit */
-                ENSURE(all[ix].n == all[0].n && !memcmp(all[ix].f, all[0].f, all[0].n * sizeof(double)));
+                ENSURE(all[ix].s.n == all[0].s.n && !memcmp(all[ix].s.f, all[0].s.f, all[0].s.n * sizeof(double)));
                 ENSURE_REL(all[ix].r.touch_height_m - all[0].r.touch_height_m, t.surface_height_m, 1e-6);
                 ENSURE(all[ix].r.touch_time_s == all[0].r.touch_time_s);
             } else if (t.surface_height_m > 0) { /* fixed: a higher surface is reached sooner */
@@ -426,15 +388,14 @@ static void test_surface_height_param(void)
 {
     vafm_params p;
     vafm_preset_apply(&p, "contact-silica", NULL);
-    static t_one a, b;
+    t_trace a = { 0 }, b = { 0 };
     vafm_curve_result ra, rb;
     vafm_sim *sim = NULL;
-    a.n = b.n = 0;
-    ENSURE(vafm_sim_new(&sim, &p, NULL) == 0 && vafm_sim_curve(sim, 3, t_one_cb, &a, &ra) == 0);
+    ENSURE(vafm_sim_new(&sim, &p, NULL) == 0 && vafm_sim_curve(sim, 3, t_collect, &a, &ra) == 0);
     vafm_sim_destroy(&sim);
     p.surface_height_m = 250e-9;
     ENSURE(vafm_params_validate(&p, NULL) == 0);
-    ENSURE(vafm_sim_new(&sim, &p, NULL) == 0 && vafm_sim_curve(sim, 3, t_one_cb, &b, &rb) == 0);
+    ENSURE(vafm_sim_new(&sim, &p, NULL) == 0 && vafm_sim_curve(sim, 3, t_collect, &b, &rb) == 0);
     vafm_sim_destroy(&sim);
     ENSURE(a.n == b.n && !memcmp(a.f, b.f, a.n * sizeof(double)));
     double worst = 0;
@@ -447,6 +408,8 @@ static void test_surface_height_param(void)
     ENSURE(rb.pulloff_sampled_N == ra.pulloff_sampled_N);
     p.surface_height_m = 2e-3;
     ENSURE(vafm_params_validate(&p, NULL) == VAFM_EINVAL);
+    t_trace_free(&a);
+    t_trace_free(&b);
 }
 
 /* the patterns: stripes' layout, a disc's footprint, domains deterministic from their seed */
