@@ -18,6 +18,7 @@
 #include "vafm/theory.h"
 #include "vafm/units.h"
 #include "core/kernel.h"
+#include "hertz.h"
 #include "trace.h"
 
 /* A scene given by reduced values on E* = 1 GPa, R = 16 nm, m = 1e-12 kg (the paper-fig4 frame),
@@ -411,6 +412,24 @@ static void test_mechanics(void)
     t_mechanics(VAFM_ANTIALIAS_MEAN);
 }
 
+/* Curve `index` of scene p collected whole into *c, its result in *r; a refused scene or a failed curve is a
+ * failed check. @return 0 or the error. */
+static int t_run(const vafm_params *p, uint64_t index, t_trace *c, vafm_curve_result *r)
+{
+    vafm_sim *s = NULL;
+    vafm_error err;
+    memset(&err, 0, sizeof err);
+    memset(c, 0, sizeof *c);
+    int rc = vafm_sim_new(&s, p, &err);
+    ENSURE_MSG(rc == 0, "scene refused: %s", err.message);
+    if (rc)
+        return rc;
+    rc = vafm_sim_curve(s, index, t_collect, c, r);
+    vafm_sim_destroy(&s);
+    ENSURE(rc == 0);
+    return rc;
+}
+
 /* ---- 4. Hertz ---------------------------------------------------------------------------------- */
 
 /* γ = 0, contact hertz, athermal, ṽ = 1e-4, k̃ = 1, setpoint F̃ = 0.5 (δ̃ ≈ 0.52), point sampling.
@@ -426,36 +445,17 @@ static void t_hertz(int jkr_gamma_zero, double gamma_J)
         p.contact = vafm_contact_jkr;
         p.gamma_J_per_m2 = gamma_J;
     }
+    t_hertz_protocol(&p);
     const vafm_scale sc = vafm_units_scale(&p);
-    p.trigger = VAFM_TRIGGER_FORCE;
-    p.start_height_m = 0.05 * sc.length_m;
-    p.setpoint_N = 0.5 * sc.force_N;
-    p.sample_rate_Hz = 1.0 / (20.0 * sc.time_s);
-    p.antialias = VAFM_ANTIALIAS_POINT;
-    p.retract_margin_m = 0.02 * sc.length_m;
-    vafm_sim *s = NULL;
-    vafm_error err = {0};
-    ENSURE_MSG(vafm_sim_new(&s, &p, &err) == 0, "%s: %s", err.field, err.message);
-    if (!s)
-        return;
     t_trace c;
-    memset(&c, 0, sizeof c);
     vafm_curve_result r;
-    ENSURE(vafm_sim_curve(s, 0, t_collect, &c, &r) == 0);
-    vafm_sim_destroy(&s);
-    const double pref = (4.0 / 3.0) * p.E_star_Pa * sqrt(p.R_m);
-    int n_checked = 0, bad = 0;
-    double worst = 0.0;
-    for (size_t i = 0; i < c.n && c.seg[i] == VAFM_SEG_APPROACH; i++) {
-        const double delta = -c.tip[i];
-        if (c.f[i] < 0.05 * sc.force_N)
-            continue;
-        const double F = pref * delta * sqrt(delta);
-        const double e = fabs(c.f[i] - F) / F;
-        worst = fmax(worst, e);
-        bad += e > 1e-3;
-        n_checked++;
+    if (t_run(&p, 0, &c, &r)) {
+        t_trace_free(&c);
+        return;
     }
+    int n_checked, bad;
+    double worst;
+    t_hertz_approach(&c, &p, 0.05 * sc.force_N, 1e-3, &n_checked, &bad, &worst);
     fprintf(stderr, "  %s: %d approach samples vs Hertz, worst rel %.2e; pull-off sampled %.3g, spring %.3g "
             "(units E*R^2)\n", jkr_gamma_zero ? "jkr gamma ~ 0" : "hertz", n_checked, worst,
             r.pulloff_sampled_N / sc.force_N, r.pulloff_spring_N / sc.force_N);
@@ -515,22 +515,6 @@ static void test_instrument_presets(void)
                    delta, F, c.f[i]);
     }
     t_trace_free(&c);
-}
-
-static int t_run(const vafm_params *p, uint64_t index, t_trace *c, vafm_curve_result *r)
-{
-    vafm_sim *s = NULL;
-    vafm_error err;
-    memset(&err, 0, sizeof err);
-    memset(c, 0, sizeof *c);
-    int rc = vafm_sim_new(&s, p, &err);
-    ENSURE_MSG(rc == 0, "scene refused: %s", err.message);
-    if (rc)
-        return rc;
-    rc = vafm_sim_curve(s, index, t_collect, c, r);
-    vafm_sim_destroy(&s);
-    ENSURE(rc == 0);
-    return rc;
 }
 
 /* Index of the last approach sample (where the trigger fired). */

@@ -21,6 +21,7 @@
 #include "vafm/units.h"
 #include "core/guard.h"
 #include "core/kernel.h"
+#include "hertz.h"
 #include "trace.h"
 
 #define T_PI 3.14159265358979323846
@@ -412,13 +413,8 @@ static void t_gamma_zero(const vafm_contact_type *type, double gamma_J)
     t_scene(&p, 1e9, 16e-9, 0.0, 1.0, 0.01, 0.0, 1e-4);
     p.contact = type;
     p.gamma_J_per_m2 = gamma_J;
+    t_hertz_protocol(&p);
     const vafm_scale sc = vafm_units_scale(&p);
-    p.trigger = VAFM_TRIGGER_FORCE;
-    p.start_height_m = 0.05 * sc.length_m;
-    p.setpoint_N = 0.5 * sc.force_N;
-    p.sample_rate_Hz = 1.0 / (20.0 * sc.time_s);
-    p.antialias = VAFM_ANTIALIAS_POINT;
-    p.retract_margin_m = 0.02 * sc.length_m;
     vafm_sim *s = t_new(&p);
     if (!s)
         return;
@@ -427,17 +423,9 @@ static void t_gamma_zero(const vafm_contact_type *type, double gamma_J)
     vafm_curve_result r;
     ENSURE(vafm_sim_curve(s, 0, t_collect, &c, &r) == 0);
     vafm_sim_destroy(&s);
-    const double pref = (4.0 / 3.0) * p.E_star_Pa * sqrt(p.R_m);
-    int n = 0, bad = 0;
-    double worst = 0;
-    for (size_t i = 0; i < c.n && c.seg[i] == VAFM_SEG_APPROACH; i++) {
-        if (c.f[i] < 0.05 * sc.force_N)
-            continue;
-        const double d = -c.tip[i], F = pref * d * sqrt(d), e = fabs(c.f[i] - F) / F;
-        worst = fmax(worst, e);
-        bad += !(e <= 1e-3);
-        n++;
-    }
+    int n, bad;
+    double worst;
+    t_hertz_approach(&c, &p, 0.05 * sc.force_N, 1e-3, &n, &bad, &worst);
     const double drag = 2.0 * 0.01 * 1e-4 * sc.force_N;
     fprintf(stderr, "  %s gamma = %g J/m^2: %d samples, worst rel %.2e vs Hertz; pull-off %.2e N (drag bound %.2e N)\n",
             type->name, gamma_J, n, worst, r.pulloff_sampled_N, drag);
