@@ -6,8 +6,8 @@
 #ifndef VAFM_TESTS_CAMPAIGN_SPEC_H
 #define VAFM_TESTS_CAMPAIGN_SPEC_H
 
+#include <stddef.h>
 #include <stdint.h>
-#include <string.h>
 
 #include "vafm/campaign.h"
 
@@ -16,14 +16,7 @@
 static inline vafm_campaign_spec t_campaign_spec(const double *T, size_t n_T, const double *v, size_t n_v,
                                                  uint64_t n)
 {
-    vafm_campaign_spec sp;
-    memset(&sp, 0, sizeof sp);
-    sp.T_K = T;
-    sp.n_T = n_T;
-    sp.v_m_per_s = v;
-    sp.n_v = n_v;
-    sp.curves_per_point = n;
-    return sp;
+    return (vafm_campaign_spec){ .T_K = T, .n_T = n_T, .v_m_per_s = v, .n_v = n_v, .curves_per_point = n };
 }
 
 #endif
