@@ -297,6 +297,17 @@ static int syn_file(const char *path, const vafm_h5_writer_opts *o, int count, v
     return rc ? rc : rc2;
 }
 
+/* A file just written: conformant, then opened for reading (each a check); NULL where it does not open. */
+static vafm_h5_reader *s_check_open(const char *path, vafm_error *e)
+{
+    int rc = vafm_h5_check(path, e);
+    ENSURE_MSG(rc == 0, "conformance: %s", e->message);
+    vafm_h5_reader *r = NULL;
+    rc = vafm_h5_reader_open(&r, path, e);
+    ENSURE_MSG(rc == 0, "%s", e->message);
+    return rc ? NULL : r;
+}
+
 /* ---- round trip of synthetic curves ------------------------------------------------------------------- */
 
 static void test_roundtrip_synthetic(void)
@@ -314,13 +325,8 @@ static void test_roundtrip_synthetic(void)
         vafm_error e = { 0 };
         int rc = syn_file(path, &o, 4, &e);
         ENSURE_MSG(rc == 0, "%s", e.message);
-        rc = vafm_h5_check(path, &e);
-        ENSURE_MSG(rc == 0, "conformance: %s", e.message);
-
-        vafm_h5_reader *r = NULL;
-        rc = vafm_h5_reader_open(&r, path, &e);
-        ENSURE_MSG(rc == 0, "%s", e.message);
-        if (rc)
+        vafm_h5_reader *r = s_check_open(path, &e);
+        if (!r)
             continue;
         ENSURE(vafm_h5_reader_count(r) == 4);
         vafm_h5_provenance pv;
@@ -1758,13 +1764,9 @@ static void test_segment_lists(void)
     vafm_error e = { 0 };
     int rc = seg4_file(path, 0, 2, S_SEG4, &e);
     ENSURE_MSG(rc == 0, "%s", e.message);
-    rc = vafm_h5_check(path, &e);
-    ENSURE_MSG(rc == 0, "conformance: %s", e.message);
     /* read back bit for bit, with the list and format 1.2 */
-    vafm_h5_reader *r = NULL;
-    rc = vafm_h5_reader_open(&r, path, &e);
-    ENSURE_MSG(rc == 0, "%s", e.message);
-    if (!rc) {
+    vafm_h5_reader *r = s_check_open(path, &e);
+    if (r) {
         vafm_h5_provenance pv;
         vafm_h5_reader_provenance(r, &pv);
         ENSURE(pv.format_major == 1 && pv.format_minor == VAFM_H5_FORMAT_MINOR_SEGMENTS);
