@@ -109,6 +109,25 @@ typedef struct s_row {
     double sd[S_NOBS], mean[S_NOBS], se[S_NOBS], bias[S_NOBS], se_c[S_NOBS], z[S_NOBS], ks[S_NOBS], ks_crit[S_NOBS];
 } s_row;
 
+/* What a report says of all its rows together. */
+typedef struct s_totals {
+    uint64_t excluded; /* curves left out of the statistics (N − n_ok) */
+    uint64_t failed, flagged;
+    double cpu_s;
+} s_totals;
+
+static s_totals s_sum_rows(const s_row *rows, int n)
+{
+    s_totals t = { 0, 0, 0, 0.0 };
+    for (int i = 0; i < n; i++) {
+        t.excluded += rows[i].N - rows[i].n_ok;
+        t.failed += rows[i].n_failed;
+        t.flagged += rows[i].n_flagged;
+        t.cpu_s += rows[i].cpu_s;
+    }
+    return t;
+}
+
 static void s_row_free(s_row *r)
 {
     for (int j = 0; j < S_NOBS; j++) {
@@ -572,15 +591,10 @@ static void s_write_reading(FILE *f, const s_row *rows, int n)
             fprintf(f, "No row is within %.0f standard errors on both observables.\n\n", S_Z_OK);
         }
     }
-    uint64_t excluded = 0, failed = 0, flagged = 0;
-    for (int i = 0; i < n; i++) {
-        excluded += rows[i].N - rows[i].n_ok;
-        failed += rows[i].n_failed;
-        flagged += rows[i].n_flagged;
-    }
+    const s_totals tot = s_sum_rows(rows, n);
     fprintf(f, "Curves left out of the statistics (failed, no contact, early or no detachment): %llu, of which %llu "
                "failed; curves with any flag (including a recontact after the pull-off, which are kept): %llu.\n\n",
-            (unsigned long long)excluded, (unsigned long long)failed, (unsigned long long)flagged);
+            (unsigned long long)tot.excluded, (unsigned long long)tot.failed, (unsigned long long)tot.flagged);
     double gap = s_gjf_baoab_gap(rows, n);
     if (!isnan(gap))
         fprintf(f, "gjf and baoab draw the same normals and differ only at O((eta dt)^3) in their damping and noise "
@@ -710,16 +724,10 @@ static void s_write_case_md(FILE *f, const s_row *rows, int n, double load0, dou
         }
         fputc('\n', f);
     }
-    uint64_t excluded = 0, flagged = 0;
-    double cpu = 0;
-    for (int i = 0; i < n; i++) {
-        excluded += rows[i].N - rows[i].n_ok;
-        flagged += rows[i].n_flagged;
-        cpu += rows[i].cpu_s;
-    }
+    const s_totals tot = s_sum_rows(rows, n);
     fprintf(f, "\nCurves left out (failed, no contact, early or no detachment): %llu; flagged (kept if only a "
                "recontact): %llu. CPU in all: %.0f s.\n",
-            (unsigned long long)excluded, (unsigned long long)flagged, cpu);
+            (unsigned long long)tot.excluded, (unsigned long long)tot.flagged, tot.cpu_s);
 }
 
 static int s_emit_cases(const char *dir, const char *stem, const s_row *rows, int n, double load0, double load1)
