@@ -9,9 +9,11 @@ Runs: paper-fig4 in free_run (~0.1 s per curve).
 """
 import json
 import os
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -314,24 +316,52 @@ def test_listen_h5_equals_cli(fig4, tmp_path):
 
 
 def test_listen_skips_run_in_progress(tmp_path):
-    """A run already going when listen subscribes (a paced 0.5 s tune) is skipped, not written with its
-    beginning missing; the next run is recorded whole."""
+    """A run already going when listen subscribes (a paced tune) is skipped, not written with its beginning
+    missing; the next run is recorded whole. No timing margin: the tune lasts 20 s (1 s paced at speed
+    0.05: ~1 MB of the daemon's memory a second) and the test waits on conditions, so a loaded machine only
+    makes it slower: listen is started once the tune has published a data block (a later subscriber joins
+    it mid-run), and the tune is aborted once listen has said it skips it."""
     d = Daemon("--preset", "paper-fig4")
+    lp = None
     try:
-        d.client.tune(duration_s=0.5)
-        time.sleep(0.2)
+        d.client.set(speed=0.05)
+        with Stream(d.pub) as s:  # in place (its greeting heartbeat) before the tune starts
+            rid = d.client.tune(duration_s=1.0)["run_id"]
+            deadline = time.monotonic() + 60
+            for topic, p in s.messages(deadline=deadline):
+                if topic == "data" and p[0].run_id == rid:
+                    break  # blocks of the tune are out: a subscriber from now on has missed its start
         out = tmp_path / "mid.csv"
         lp = subprocess.Popen([VAFM_CLI, "listen", "--endpoint", d.rep, "--pub", d.pub, "--out", str(out)],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert "subscribed" in lp.stderr.readline()
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        lines = queue.Queue()
+        reader = threading.Thread(target=lambda: [lines.put(ln) for ln in lp.stderr] + [lines.put(None)],
+                                  daemon=True)
+        reader.start()
+        err = []
+        skipped = f"run {rid} was in progress when listen subscribed: skipped"
+        while not err or skipped not in err[-1]:  # listen's stderr, until it has skipped the tune
+            ln = lines.get(timeout=60)
+            assert ln is not None, "listen exited before it skipped the tune: " + "".join(err)
+            err.append(ln)
+        assert "subscribed" in err[0], err
+        st = d.client.status()
+        assert st["state"] == "running" and st["run_id"] == rid, f"the tune ended before listen skipped it: {st}"
+        d.client.abort()
         d.client.wait_idle()
-        d.client.set(free_run=True)
+        d.client.set(free_run=True, speed=1)
         d.client.curve(index=0)
-        _, err = lp.communicate(timeout=60)
-        assert lp.returncode == 0 and "run 1 was in progress when listen subscribed: skipped" in err, err
+        rc = lp.wait(timeout=60)
+        while (ln := lines.get(timeout=10)) is not None:  # the rest of its stderr
+            err.append(ln)
+        err = "".join(err)
+        assert rc == 0 and rid == 1 and "run 1 was in progress when listen subscribed: skipped" in err, err
         got = read_csv(out.read_text(), CSV_HEADER + ",vDeflection_V,run_id")
         assert np.all(got[:, 7] == 2) and np.array_equal(got[:, 3], cli_samples(0)[:, 3])
     finally:
+        if lp is not None and lp.poll() is None:
+            lp.kill()
+            lp.wait()
         assert d.stop() == 0
 
 
