@@ -9,8 +9,8 @@ usage: bench_instrument.py VAFMD OUTDIR    (writes OUTDIR/bench_instrument.csv a
 - engage -> feedback: the force spread at full rate (decimation 1, point samples, 20000 points) against the
   free lever's thermal bound sqrt(k kT) and the detector floor k InvOLS noise_V_rms (contact stiffens the
   lever, so the in-contact thermal spread lies below the bound);
-- a move under feedback: the error signal's RMS during moves at two speeds (the daemon's sample is flat:
-  no topography to follow yet);
+- moves under feedback across a dome (ctrl_sample) at 2, 5 and 20 um/s: the following error (the support's
+  height above the known surface, and the force error) against the integral loop's lag slope v tau;
 - a crash, a Z-range saturation and an engage timeout, each produced and its event and status reported.
 """
 import os
@@ -82,6 +82,67 @@ def engage(c, s):
     return ev
 
 
+def dome(exe, passes=3):
+    """Moves under feedback across a dome (ctrl_sample), as tests/test_ctrl.c's test_move_dome does in the
+    core: the dome at x = 10 um (5 um base radius, 0.5 um high: a spherical cap of radius (a^2 + h^2) / 2h =
+    25.25 um, slope a / sqrt(R_s^2 - a^2) = 0.2020 at its foot), the tip engaged at x = 0, then `passes`
+    crossings from x = 3 to 17 um and back at each speed, every controller sample on `live` (monitor_rate_Hz
+    = fs: decimation 1). The following error is the change of the support's height above the known surface
+    (H - surface_m, H = motor_z_m - piezo_z_m) since the crossing began; an integral loop of time constant
+    tau lags a surface rising at slope v by slope v tau. Also the feedback's force error (error_N), which is
+    k times that lag when the contact is much stiffer than the lever. Medians over the passes."""
+    p, c, pub = start(exe)
+    s = Stream(pub, live=True)
+    a, h, xc = 5e-6, 0.5e-6, 10e-6
+    c.set({"ctrl_sample": f"pattern=dome,center_x_m={xc!r},radius_m={a!r},height_m={h!r}"})
+    engage(c, s)
+    v = c.get("k_N_per_m", "sample_rate_Hz", "ctrl_fb_tau_s", "ctrl_fb_i_m_per_N_s")
+    k, fs = v["k_N_per_m"], v["sample_rate_Hz"]
+    # the loop's time constant: the setting's, else from the integral gain (I = 1 / (k tau)), else the
+    # default of 10 samples (docs/instrument.md)
+    tau = v["ctrl_fb_tau_s"] or (1 / (k * v["ctrl_fb_i_m_per_N_s"]) if v["ctrl_fb_i_m_per_N_s"] else 10 / fs)
+    Rs = (a * a + h * h) / (2 * h)
+    slope = a / np.sqrt(Rs * Rs - a * a)
+    c.set({"monitor_rate_Hz": fs, "speed": 1})
+
+    def move(x, v_xy):
+        c.move(x, 0, speed_m_per_s=v_xy)
+        ch = {n: [] for n in ("motor_z_m", "piezo_z_m", "surface_m", "error_N", "state")}
+        for t, m in s.messages(deadline=time.monotonic() + 120):
+            if t == "live":
+                for n in ch:
+                    ch[n].extend(m[1][n])
+            if t == "event" and m.get("source") == "ctrl" and m["kind"] == "moved":
+                break
+        return {n: np.array(x) for n, x in ch.items()}
+
+    move(3e-6, 20e-6)
+    drain(s, 0.3)
+    rows, x = [], 3e-6
+    for v_xy in (2e-6, 5e-6, 20e-6):
+        err_h, err_f, top, npts, engaged = [], [], [], 0, True
+        for i in range(passes):
+            x = 20e-6 - x  # across the dome: 3 -> 17 um, 17 -> 3 um
+            ch = move(x, v_xy)
+            g = ch["motor_z_m"] - ch["piezo_z_m"] - ch["surface_m"]
+            err_h.append(np.abs(g - g[0]).max())
+            err_f.append(np.abs(ch["error_N"]).max())
+            top.append(ch["surface_m"].max())
+            npts += len(g)
+            engaged &= bool(np.all(ch["state"] == 2))
+            drain(s, 0.3)
+        pred = slope * v_xy * tau
+        dropped = c.status()["ctrl"]["live"].get("dropped")
+        rows.append(("move over a dome", f"under feedback, {v_xy * 1e6:g} um/s, slope {slope:.4f}, tau {tau * 1e3:g} ms",
+                     f"max following error {np.median(err_h) * 1e9:.3f} nm (slope v tau {pred * 1e9:.3f} nm), "
+                     f"max force error {np.median(err_f) * 1e12:.1f} pN (k slope v tau {k * pred * 1e12:.1f} pN)",
+                     f"medians of {passes} crossings, {npts} live points at {fs:g} Hz, top {np.median(top) * 1e9:.1f} nm, "
+                     f"engaged throughout {engaged}, dropped {dropped}"))
+    stop(p, c)
+    s.close()
+    return rows
+
+
 def main(exe, out):
     rows = []
     p, c, pub = start(exe)
@@ -136,20 +197,6 @@ def main(exe, out):
                  f"mean {f.mean() * 1e9:.4f} nN, sd {f.std() * 1e12:.2f} pN",
                  f"free-lever thermal bound {thermal * 1e12:.2f} pN, detector floor {det * 1e12:.2f} pN, "
                  f"both {np.hypot(thermal, det) * 1e12:.2f} pN"))
-    # move under feedback on the flat sample: error RMS vs lateral speed
-    c.set({"monitor_rate_Hz": 1000, "speed": 1})
-    for i, v_xy in enumerate((2e-6, 20e-6)):
-        c.move(2e-6 * (1 - 2 * (i % 2)), 0, speed_m_per_s=v_xy)
-        e = []
-        t_end = time.monotonic() + 60
-        for t, m in s.messages(deadline=t_end):
-            if t == "live":
-                e.extend(m[1]["error_N"])
-            if t == "event" and m.get("source") == "ctrl" and m["kind"] == "moved":
-                break
-        e = np.array(e)
-        rows.append(("move", f"under feedback, flat sample, {v_xy * 1e6:g} um/s",
-                     f"error RMS {np.sqrt(np.mean(e * e)) * 1e12:.2f} pN", f"{len(e)} points at 1 kHz"))
     # failures: a Z-range saturation (setpoint beyond the pull-off: the loop retracts to 0), a crash, a timeout
     c.set({"speed": 50, "monitor_rate_Hz": 100})
     sp = c.get("ctrl_setpoint", "ctrl_setpoint_unit", "ctrl_setpoint_relative")
@@ -177,6 +224,8 @@ def main(exe, out):
                  f"status last_fail={c.status()['ctrl']['last_fail']}"))
     stop(p, c)
     s.close()
+
+    rows += dome(exe)
 
     os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, "bench_instrument.csv"), "w") as fh:
