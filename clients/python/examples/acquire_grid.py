@@ -174,7 +174,7 @@ def recorded_pulloff(run):
 def pulloff_bounds(scene):
     """How far below the true pull-off (run.end's `pulloff_spring_N`, the lever's most tensile spring force
     at any integration step) the recorded one (the most tensile output sample) may lie: (lo, hi, ramp,
-    thermal, detector), N.
+    thermal, detector) in N.
 
     An output sample is the mean (antialias mean) or the last (point) of the spring forces of its interval,
     plus the detector's noise, so it exceeds the true pull-off by the noise alone (lo = -4 sigma_det,
@@ -216,10 +216,11 @@ def check_materials(saved):
         true.setdefault(sample["material"], []).append(run.end["result"]["pulloff_spring_N"])
         scenes.setdefault(sample["material"], run.start["scene"])
     # N = the material's grid points (3x3 grid: 6 of a, 3 of b); d = true - recorded pull-off per point, s
-    # its sample standard deviation (measured ~5 pN, pulloff_bounds). The mean of d must lie within the
-    # ramp's mean offset k v / fs (a uniform rupture phase) less 3 s / sqrt(N) and that plus the thermal
-    # peak's sigma_th plus 3 s / sqrt(N) (default scene, 3x3 grid: [7.6, 32.7] pN for N = 6 of a with s =
-    # 2.0 pN, [5.5, 34.8] pN for N = 3 of b with s = 2.6 pN; measured 16.7 and 17.0 pN)
+    # its sample standard deviation (measured ~5 pN, pulloff_bounds), at least the ramp's own spread
+    # k v / fs / sqrt(12) (the uniform rupture phase: 2.9 pN). The mean of d must lie within the ramp's
+    # mean offset k v / fs less 3 s / sqrt(N) and that plus the thermal peak's sigma_th plus 3 s / sqrt(N)
+    # (default scene, 3x3 grid: [6.5, 33.8] pN for N = 6 of a, [5.0, 35.3] pN for N = 3 of b; measured
+    # 16.7 and 17.0 pN). A single point has no mean to speak of: the per-curve check (check_truth) only.
     for mat in sorted(set(rec) | set(true)):
         r, t = rec.get(mat, []), true.get(mat, [])
         if len(r) != len(t):
@@ -228,8 +229,10 @@ def check_materials(saved):
         n = len(r)
         d = [ti - ri for ri, ti in zip(r, t)]
         mean_r, mean_t, mean_d = sum(r) / n, sum(t) / n, sum(d) / n
-        s = math.sqrt(sum((v - mean_d) ** 2 for v in d) / (n - 1)) if n > 1 else 0.0
+        if n < 2:
+            continue
         _, _, ramp, thermal, det = pulloff_bounds(scenes[mat])
+        s = max(math.sqrt(sum((v - mean_d) ** 2 for v in d) / (n - 1)), ramp / math.sqrt(12))
         lo = ramp - 3 * s / math.sqrt(n) - 4 * det
         hi = ramp + thermal + 3 * s / math.sqrt(n) + 4 * det
         print(f"material {mat}: N = {n}, mean pull-off {mean_r * 1e9:.4f} nN, true {mean_t * 1e9:.4f} nN: "
