@@ -93,53 +93,56 @@ def dome(exe, passes=3):
     k times that lag when the contact is much stiffer than the lever. Medians over the passes."""
     p, c, pub = start(exe)
     s = Stream(pub, live=True)
-    a, h, xc = 5e-6, 0.5e-6, 10e-6
-    c.set({"ctrl_sample": f"pattern=dome,center_x_m={xc!r},radius_m={a!r},height_m={h!r}"})
-    engage(c, s)
-    v = c.get("k_N_per_m", "sample_rate_Hz", "ctrl_fb_tau_s", "ctrl_fb_i_m_per_N_s")
-    k, fs = v["k_N_per_m"], v["sample_rate_Hz"]
-    # the loop's time constant: the setting's, else from the integral gain (I = 1 / (k tau)), else the
-    # default of 10 samples (docs/instrument.md)
-    tau = v["ctrl_fb_tau_s"] or (1 / (k * v["ctrl_fb_i_m_per_N_s"]) if v["ctrl_fb_i_m_per_N_s"] else 10 / fs)
-    Rs = (a * a + h * h) / (2 * h)
-    slope = a / np.sqrt(Rs * Rs - a * a)
-    c.set({"monitor_rate_Hz": fs, "speed": 1})
+    try:
+        a, h, xc = 5e-6, 0.5e-6, 10e-6
+        c.set({"ctrl_sample": f"pattern=dome,center_x_m={xc!r},radius_m={a!r},height_m={h!r}"})
+        engage(c, s)
+        v = c.get("k_N_per_m", "sample_rate_Hz", "ctrl_fb_tau_s", "ctrl_fb_i_m_per_N_s")
+        k, fs = v["k_N_per_m"], v["sample_rate_Hz"]
+        # the loop's time constant: the setting's, else from the integral gain (I = 1 / (k tau)), else the
+        # default of 10 samples (docs/instrument.md)
+        tau = v["ctrl_fb_tau_s"] or (1 / (k * v["ctrl_fb_i_m_per_N_s"]) if v["ctrl_fb_i_m_per_N_s"] else 10 / fs)
+        Rs = (a * a + h * h) / (2 * h)
+        slope = a / np.sqrt(Rs * Rs - a * a)
+        c.set({"monitor_rate_Hz": fs, "speed": 1})
 
-    def move(x, v_xy):
-        c.move(x, 0, speed_m_per_s=v_xy)
-        ch = {n: [] for n in ("motor_z_m", "piezo_z_m", "surface_m", "error_N", "state")}
-        for t, m in s.messages(deadline=time.monotonic() + 120):
-            if t == "live":
-                for n in ch:
-                    ch[n].extend(m[1][n])
-            if t == "event" and m.get("source") == "ctrl" and m["kind"] == "moved":
-                break
-        return {n: np.array(x) for n, x in ch.items()}
+        def move(x, v_xy):
+            c.move(x, 0, speed_m_per_s=v_xy)
+            ch = {n: [] for n in ("motor_z_m", "piezo_z_m", "surface_m", "error_N", "state")}
+            for t, m in s.messages(deadline=time.monotonic() + 120):
+                if t == "live":
+                    for n in ch:
+                        ch[n].extend(m[1][n])
+                if t == "event" and m.get("source") == "ctrl" and m["kind"] == "moved":
+                    break
+            return {n: np.array(x) for n, x in ch.items()}
 
-    move(3e-6, 20e-6)
-    drain(s, 0.3)
-    rows, x = [], 3e-6
-    for v_xy in (2e-6, 5e-6, 20e-6):
-        err_h, err_f, top, npts, engaged = [], [], [], 0, True
-        for i in range(passes):
-            x = 20e-6 - x  # across the dome: 3 -> 17 um, 17 -> 3 um
-            ch = move(x, v_xy)
-            g = ch["motor_z_m"] - ch["piezo_z_m"] - ch["surface_m"]
-            err_h.append(np.abs(g - g[0]).max())
-            err_f.append(np.abs(ch["error_N"]).max())
-            top.append(ch["surface_m"].max())
-            npts += len(g)
-            engaged &= bool(np.all(ch["state"] == 2))
-            drain(s, 0.3)
-        pred = slope * v_xy * tau
-        dropped = c.status()["ctrl"]["live"].get("dropped")
-        rows.append(("move over a dome", f"under feedback, {v_xy * 1e6:g} um/s, slope {slope:.4f}, tau {tau * 1e3:g} ms",
-                     f"max following error {np.median(err_h) * 1e9:.3f} nm (slope v tau {pred * 1e9:.3f} nm), "
-                     f"max force error {np.median(err_f) * 1e12:.1f} pN (k slope v tau {k * pred * 1e12:.1f} pN)",
-                     f"medians of {passes} crossings, {npts} live points at {fs:g} Hz, top {np.median(top) * 1e9:.1f} nm, "
-                     f"engaged throughout {engaged}, dropped {dropped}"))
-    stop(p, c)
-    s.close()
+        move(3e-6, 20e-6)
+        drain(s, 0.3)
+        rows, x = [], 3e-6
+        for v_xy in (2e-6, 5e-6, 20e-6):
+            err_h, err_f, top, npts, engaged = [], [], [], 0, True
+            for i in range(passes):
+                x = 20e-6 - x  # across the dome: 3 -> 17 um, 17 -> 3 um
+                ch = move(x, v_xy)
+                g = ch["motor_z_m"] - ch["piezo_z_m"] - ch["surface_m"]
+                err_h.append(np.abs(g - g[0]).max())
+                err_f.append(np.abs(ch["error_N"]).max())
+                top.append(ch["surface_m"].max())
+                npts += len(g)
+                engaged &= bool(np.all(ch["state"] == 2))
+                drain(s, 0.3)
+            pred = slope * v_xy * tau
+            dropped = c.status()["ctrl"]["live"].get("dropped")
+            rows.append(("move over a dome",
+                         f"under feedback, {v_xy * 1e6:g} um/s, slope {slope:.4f}, tau {tau * 1e3:g} ms",
+                         f"max following error {np.median(err_h) * 1e9:.3f} nm (slope v tau {pred * 1e9:.3f} nm), "
+                         f"max force error {np.median(err_f) * 1e12:.1f} pN (k slope v tau {k * pred * 1e12:.1f} pN)",
+                         f"medians of {passes} crossings, {npts} live points at {fs:g} Hz, "
+                         f"top {np.median(top) * 1e9:.1f} nm, engaged throughout {engaged}, dropped {dropped}"))
+    finally:  # also on an error: no daemon left behind
+        stop(p, c)
+        s.close()
     return rows
 
 

@@ -782,37 +782,40 @@ def test_move_over_a_dome_follows_the_surface():
     the integral loop's lag slope v tau (tau = 10 samples = 1 ms), within 5 %: measured 1.010 and 4.030 nm
     against 1.010 and 4.040 nm (noise-free detector, deterministic lag)."""
     d = Daemon()
-    s = live_sub(d)
-    while recv(s)[0] != "heartbeat":  # the greeting: the subscription is in place
-        pass
-    a, h = 5e-6, 0.5e-6
-    spec = f"pattern=dome,center_x_m=1e-05,radius_m={a!r},height_m={h!r}"
-    assert d.cmd({"cmd": "set", "values": {"ctrl_sample": spec, "speed": 1000}})["status"] == "ok"
-    fs = d.cmd({"cmd": "get", "names": ["sample_rate_Hz"]})["values"]["sample_rate_Hz"]
-    assert d.cmd({"cmd": "engage"})["status"] == "ok"
-    assert wait_event(s, ["engaged", "engage_failed", "crash"], 60)["kind"] == "engaged"
-    assert d.cmd({"cmd": "move", "x_m": 3e-6, "y_m": 0, "speed_m_per_s": 20e-6})["status"] == "ok"
-    wait_event(s, ["moved"])
-    assert d.cmd({"cmd": "set", "values": {"speed": 1, "monitor_rate_Hz": fs}})["status"] == "ok"
-    Rs = (a * a + h * h) / (2 * h)
-    slope, tau = a / np.sqrt(Rs * Rs - a * a), 10 / fs
-    for x, v in ((17e-6, 5e-6), (3e-6, 20e-6)):
-        assert d.cmd({"cmd": "move", "x_m": x, "y_m": 0, "speed_m_per_s": v})["status"] == "ok"
-        ch = {n: [] for n in ("motor_z_m", "piezo_z_m", "surface_m", "state")}
-        while True:
-            t, m = recv(s)
-            if t == "live":
-                for n in ch:
-                    ch[n].extend(m[1][n])
-            if t == "event" and m.get("source") == "ctrl" and m["kind"] == "moved":
-                break
-        ch = {n: np.array(c) for n, c in ch.items()}
-        g = ch["motor_z_m"] - ch["piezo_z_m"] - ch["surface_m"]
-        err_max, pred = np.abs(g - g[0]).max(), slope * v * tau
-        print(f"over a dome at {v * 1e6:g} um/s: top {ch['surface_m'].max():.4g} m, max following error "
-              f"{err_max:.4g} m (slope v tau {pred:.4g} m), {len(g)} points")
-        assert abs(ch["surface_m"].max() - h) < 1e-3 * h and np.all(ch["state"] == 2)  # over the top, engaged
-        assert len(g) >= 0.9 * 14e-6 / v * fs, "live points were lost"
-        assert abs(err_max / pred - 1) < 0.05, (err_max, pred)
-    assert d.cmd({"cmd": "status"})["ctrl"]["live"]["dropped"] == 0
-    d.stop()
+    try:
+        s = live_sub(d)
+        while recv(s)[0] != "heartbeat":  # the greeting: the subscription is in place
+            pass
+        a, h = 5e-6, 0.5e-6
+        spec = f"pattern=dome,center_x_m=1e-05,radius_m={a!r},height_m={h!r}"
+        assert d.cmd({"cmd": "set", "values": {"ctrl_sample": spec, "speed": 1000}})["status"] == "ok"
+        fs = d.cmd({"cmd": "get", "names": ["sample_rate_Hz"]})["values"]["sample_rate_Hz"]
+        assert d.cmd({"cmd": "engage"})["status"] == "ok"
+        assert wait_event(s, ["engaged", "engage_failed", "crash"], 60)["kind"] == "engaged"
+        assert d.cmd({"cmd": "move", "x_m": 3e-6, "y_m": 0, "speed_m_per_s": 20e-6})["status"] == "ok"
+        wait_event(s, ["moved"])
+        assert d.cmd({"cmd": "set", "values": {"speed": 1, "monitor_rate_Hz": fs}})["status"] == "ok"
+        Rs = (a * a + h * h) / (2 * h)
+        slope, tau = a / np.sqrt(Rs * Rs - a * a), 10 / fs
+        for x, v in ((17e-6, 5e-6), (3e-6, 20e-6)):
+            assert d.cmd({"cmd": "move", "x_m": x, "y_m": 0, "speed_m_per_s": v})["status"] == "ok"
+            ch = {n: [] for n in ("motor_z_m", "piezo_z_m", "surface_m", "state")}
+            while True:
+                t, m = recv(s)
+                if t == "live":
+                    for n in ch:
+                        ch[n].extend(m[1][n])
+                if t == "event" and m.get("source") == "ctrl" and m["kind"] == "moved":
+                    break
+            ch = {n: np.array(c) for n, c in ch.items()}
+            g = ch["motor_z_m"] - ch["piezo_z_m"] - ch["surface_m"]
+            err_max, pred = np.abs(g - g[0]).max(), slope * v * tau
+            print(f"over a dome at {v * 1e6:g} um/s: top {ch['surface_m'].max():.4g} m, max following error "
+                  f"{err_max:.4g} m (slope v tau {pred:.4g} m), {len(g)} points")
+            assert abs(ch["surface_m"].max() - h) < 1e-3 * h, "not over the top"
+            assert np.all(ch["state"] == 2), "not engaged throughout"
+            assert len(g) >= 0.9 * 14e-6 / v * fs, "live points were lost"
+            assert abs(err_max / pred - 1) < 0.05, (err_max, pred)
+        assert d.cmd({"cmd": "status"})["ctrl"]["live"]["dropped"] == 0
+    finally:
+        d.stop()
