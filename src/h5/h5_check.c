@@ -154,11 +154,7 @@ done:
         *data = NULL;
     }
     free(unit);
-    if (t >= 0)
-        H5Tclose(t);
-    if (sp >= 0)
-        H5Sclose(sp);
-    H5Oclose(o);
+    VAFM_H5I_CLOSE(t, sp, o);
     return rc;
 }
 
@@ -464,12 +460,7 @@ static int s_truth(s_ctx *x)
                     vafm_h5i_err(x->err, rc = VAFM_EFORMAT, "/", "[V4] %s: /: attribute '%s' lacks the field '%s'",
                                  x->path, names[i], vafm_h5i_row_field(j));
         }
-        if (sp >= 0)
-            H5Sclose(sp);
-        if (t >= 0)
-            H5Tclose(t);
-        if (a >= 0)
-            H5Aclose(a);
+        VAFM_H5I_CLOSE(sp, t, a);
     }
     for (size_t i = 0; i < nn; i++)
         free(names[i]);

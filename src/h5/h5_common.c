@@ -268,6 +268,24 @@ void vafm_h5i_quiet_end(const vafm_h5i_quiet *q)
     H5Eset_auto2(H5E_DEFAULT, q->fn, q->data);
 }
 
+void vafm_h5i_close_ids(const hid_t *ids, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        if (ids[i] < 0)
+            continue;
+        switch (H5Iget_type(ids[i])) {
+        case H5I_ATTR: H5Aclose(ids[i]); break;
+        case H5I_DATASPACE: H5Sclose(ids[i]); break;
+        case H5I_DATATYPE: H5Tclose(ids[i]); break;
+        case H5I_DATASET: H5Dclose(ids[i]); break;
+        case H5I_GROUP: H5Gclose(ids[i]); break;
+        case H5I_GENPROP_LST: H5Pclose(ids[i]); break;
+        case H5I_FILE: H5Fclose(ids[i]); break;
+        default: break;
+        }
+    }
+}
+
 static void s_verr(vafm_error *err, int code, const char *object, const char *suffix, const char *fmt,
                    va_list ap)
 {
@@ -410,13 +428,7 @@ int vafm_h5i_attr_get(hid_t loc, const char *name, vafm_h5i_val *v)
         rc = 0; /* other classes: refused by the callers */
     }
 done:
-    if (mt >= 0)
-        H5Tclose(mt);
-    if (t >= 0)
-        H5Tclose(t);
-    if (sp >= 0)
-        H5Sclose(sp);
-    H5Aclose(a);
+    VAFM_H5I_CLOSE(mt, t, sp, a);
     if (rc)
         vafm_h5i_val_free(v);
     return rc;

@@ -125,6 +125,12 @@ typedef struct vafm_h5i_quiet {
 void vafm_h5i_quiet_begin(vafm_h5i_quiet *q);
 void vafm_h5i_quiet_end(const vafm_h5i_quiet *q);
 
+/** Close each id of ids[0..n) that is open (>= 0) with the close call of its kind (attribute, dataspace,
+ *  datatype, dataset, group, property list, file), in order; the ids of a function's way out. */
+void vafm_h5i_close_ids(const hid_t *ids, size_t n);
+#define VAFM_H5I_CLOSE(...)                                                                               \
+    vafm_h5i_close_ids((const hid_t[]){__VA_ARGS__}, sizeof((const hid_t[]){__VA_ARGS__}) / sizeof(hid_t))
+
 /** Fill err: code, object path (err->field) and message. */
 void vafm_h5i_err(vafm_error *err, int code, const char *object, const char *fmt, ...) VAFM_H5_PRINTF(4, 5);
 /** The innermost message on HDF5's error stack into buf (unchanged when the stack is empty). Take it right

@@ -95,11 +95,7 @@ static int s_dataset(hid_t f, const char *path, const char *name, int *ny, int *
             rc = VAFM_EIO;
         }
     }
-    if (ty >= 0)
-        H5Tclose(ty);
-    if (sp >= 0)
-        H5Sclose(sp);
-    H5Dclose(d);
+    VAFM_H5I_CLOSE(ty, sp, d);
     return rc;
 }
 

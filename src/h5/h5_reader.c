@@ -139,13 +139,7 @@ static int s_rows_one(hid_t file, const char *name, vafm_h5i_row **rows, size_t 
     *n += (size_t)m;
     rc = 0;
 done:
-    if (mt >= 0)
-        H5Tclose(mt);
-    if (t >= 0)
-        H5Tclose(t);
-    if (sp >= 0)
-        H5Sclose(sp);
-    H5Aclose(a);
+    VAFM_H5I_CLOSE(mt, t, sp, a);
     return rc;
 }
 
@@ -387,11 +381,7 @@ static int s_read_channel(hid_t g, const char *path, const char *gname, const ch
     rc = 0;
 done:
     vafm_h5i_val_free(&unit);
-    if (t >= 0)
-        H5Tclose(t);
-    if (sp >= 0)
-        H5Sclose(sp);
-    H5Oclose(o);
+    VAFM_H5I_CLOSE(t, sp, o);
     return rc;
 }
 

@@ -97,12 +97,7 @@ static int s_write_rows(hid_t file, const char *name, const vafm_h5i_row *rows, 
 done:
     if (a >= 0 && H5Aclose(a) < 0)
         rc = -1;
-    if (sp >= 0)
-        H5Sclose(sp);
-    if (mt >= 0)
-        H5Tclose(mt);
-    if (ft >= 0)
-        H5Tclose(ft);
+    VAFM_H5I_CLOSE(sp, mt, ft);
     return rc;
 }
 
@@ -711,12 +706,7 @@ static int s_write_channel(vafm_h5_writer *w, hid_t g, const vafm_h5i_chan *ch, 
 done:
     if (d >= 0 && H5Dclose(d) < 0)
         rc = -1;
-    if (dapl >= 0)
-        H5Pclose(dapl);
-    if (dcpl >= 0)
-        H5Pclose(dcpl);
-    if (sp >= 0)
-        H5Sclose(sp);
+    VAFM_H5I_CLOSE(dapl, dcpl, sp);
     return rc;
 }
 
