@@ -429,12 +429,6 @@ done:
     return rc;
 }
 
-static int s_u64_cmp(const void *a, const void *b)
-{
-    uint64_t p = *(const uint64_t *)a, q = *(const uint64_t *)b;
-    return p < q ? -1 : p > q;
-}
-
 /* V4: the ground-truth table. */
 static int s_truth(s_ctx *x)
 {
@@ -625,7 +619,7 @@ static int s_check(s_ctx *x)
                          "[L4] %s: /: root object '%s': only groups named 0, 1, 2, ... may sit at the root", path, l.v[i]);
             goto done;
         }
-    qsort(num, l.n, sizeof *num, s_u64_cmp);
+    qsort(num, l.n, sizeof *num, vafm_h5i_u64_cmp);
     for (size_t i = 0; i < l.n; i++)
         if (num[i] != i) {
             vafm_h5i_err(x->err, rc = VAFM_EFORMAT, "/", "[L4] %s: /: curve group %zu is missing (groups are numbered 0..%zu)",

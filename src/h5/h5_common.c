@@ -654,6 +654,25 @@ int vafm_h5i_group_name(const char *name, uint64_t *out)
     return 1;
 }
 
+int vafm_h5i_u64_cmp(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+size_t vafm_h5i_u64_lower_bound(const uint64_t *v, size_t n, uint64_t key)
+{
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (v[mid] < key)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
 const char *vafm_h5i_rule_segment(const uint8_t *seg, size_t n, int64_t count, int list, size_t *at)
 {
     /* L12: a force-distance curve (count absent or 2) labels 0 approach, 1 retract, 2 dwell; a curve of

@@ -196,6 +196,10 @@ int vafm_h5i_time_ok(const char *s);
 int vafm_h5i_json_object_ok(const char *s);
 /** Canonical curve-group name: "0" or [1-9][0-9]* below 2^63. @return 1 and *out, or 0. */
 int vafm_h5i_group_name(const char *name, uint64_t *out);
+/** qsort order of uint64_t (curve-group numbers). */
+int vafm_h5i_u64_cmp(const void *a, const void *b);
+/** The first index of ascending v[0..n) whose value is not below key (n when none). */
+size_t vafm_h5i_u64_lower_bound(const uint64_t *v, size_t n, uint64_t key);
 
 /** Channel rules shared by the writer (before writing) and the checker (after reading). Each returns
  *  NULL when the rule holds, else a static description of the rule, with *at the first bad sample. */

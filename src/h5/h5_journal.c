@@ -93,14 +93,7 @@ static void s_pages_free(s_pages *p)
 
 static size_t s_pages_find(const s_pages *p, uint64_t page, int *found)
 {
-    size_t lo = 0, hi = p->n;
-    while (lo < hi) {
-        size_t mid = lo + (hi - lo) / 2;
-        if (p->idx[mid] < page)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
+    size_t lo = vafm_h5i_u64_lower_bound(p->idx, p->n, page);
     *found = lo < p->n && p->idx[lo] == page;
     return lo;
 }

@@ -549,12 +549,6 @@ done:
 
 /* ---- reader --------------------------------------------------------------------------------------- */
 
-static int s_u64_cmp(const void *a, const void *b)
-{
-    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
-    return x < y ? -1 : x > y;
-}
-
 static int s_root_string(hid_t file, const char *path, const char *name, int required, char **out, vafm_error *err)
 {
     *out = NULL;
@@ -743,7 +737,7 @@ static int s_reader_open(vafm_h5_reader *r, const char *path, vafm_error *err)
         }
     }
     r->n = links.n;
-    qsort(r->groups, r->n, sizeof *r->groups, s_u64_cmp);
+    qsort(r->groups, r->n, sizeof *r->groups, vafm_h5i_u64_cmp);
 done:
     vafm_h5i_names_free(&links);
     return rc;
@@ -813,14 +807,7 @@ int vafm_h5_reader_find(const vafm_h5_reader *r, uint64_t group, size_t *i)
 {
     if (!r || !i)
         return VAFM_EINVAL;
-    size_t lo = 0, hi = r->n; /* groups are held in ascending order of their numbers */
-    while (lo < hi) {
-        size_t mid = lo + (hi - lo) / 2;
-        if (r->groups[mid] < group)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
+    size_t lo = vafm_h5i_u64_lower_bound(r->groups, r->n, group); /* groups are held in ascending order */
     if (lo >= r->n || r->groups[lo] != group)
         return VAFM_ENOTFOUND;
     *i = lo;
