@@ -439,8 +439,7 @@ static int s_truth(s_ctx *x)
     int rc = 0;
     int nf = vafm_h5i_row_nfields_of(x->format_minor);
     for (size_t i = 0; i < nn && !rc; i++) {
-        hid_t a = H5Aopen(x->file, names[i], H5P_DEFAULT);
-        hid_t t = a >= 0 ? H5Aget_type(a) : -1, sp = a >= 0 ? H5Aget_space(a) : -1;
+        hid_t t, sp, a = vafm_h5i_attr_open(x->file, names[i], &t, &sp);
         if (t < 0 || sp < 0) {
             vafm_h5i_err_hdf5(x->err, rc = VAFM_EFORMAT, "/", "[V4] %s: /: attribute '%s' cannot be read", x->path,
                               names[i]);

@@ -342,6 +342,14 @@ void vafm_h5i_err_hdf5(vafm_error *err, int code, const char *object, const char
 
 /* ---- attributes ----------------------------------------------------------------------------------- */
 
+hid_t vafm_h5i_attr_open(hid_t loc, const char *name, hid_t *t, hid_t *sp)
+{
+    hid_t a = H5Aopen(loc, name, H5P_DEFAULT);
+    *t = a >= 0 ? H5Aget_type(a) : -1;
+    *sp = a >= 0 ? H5Aget_space(a) : -1;
+    return a;
+}
+
 void vafm_h5i_val_free(vafm_h5i_val *v)
 {
     free(v->s);
@@ -352,11 +360,10 @@ int vafm_h5i_attr_get(hid_t loc, const char *name, vafm_h5i_val *v)
 {
     memset(v, 0, sizeof *v);
     v->cls = H5T_NO_CLASS;
-    hid_t a = H5Aopen(loc, name, H5P_DEFAULT);
+    hid_t t, sp, mt = -1, a = vafm_h5i_attr_open(loc, name, &t, &sp);
     if (a < 0)
         return -1;
     int rc = -1;
-    hid_t t = H5Aget_type(a), sp = H5Aget_space(a), mt = -1;
     if (t < 0 || sp < 0)
         goto done;
     v->cls = H5Tget_class(t);

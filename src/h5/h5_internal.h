@@ -173,6 +173,9 @@ typedef struct vafm_h5i_val {
     int integral;      /* the numeric value is an integer */
 } vafm_h5i_val;
 
+/** Open attribute `name` of loc with its datatype and dataspace (the caller closes the three).
+ *  @return the attribute, *t and *sp (each −1 where HDF5 failed), or −1: nothing opened, *t = *sp = −1. */
+hid_t vafm_h5i_attr_open(hid_t loc, const char *name, hid_t *t, hid_t *sp);
 /** Read attribute `name` of loc into v (v->s to be freed with vafm_h5i_val_free). @return 0, or −1 if
  *  HDF5 failed (absent attribute, damage); the error stays on HDF5's stack for vafm_h5i_err_hdf5. */
 int vafm_h5i_attr_get(hid_t loc, const char *name, vafm_h5i_val *v);

@@ -94,11 +94,10 @@ static int s_rows_one(hid_t file, const char *name, vafm_h5i_row **rows, size_t 
                       const char **why)
 {
     *why = NULL;
-    hid_t a = H5Aopen(file, name, H5P_DEFAULT);
+    hid_t t, sp, mt = -1, a = vafm_h5i_attr_open(file, name, &t, &sp);
     if (a < 0)
         return -1;
     int rc = -1;
-    hid_t t = H5Aget_type(a), sp = H5Aget_space(a), mt = -1;
     if (t < 0 || sp < 0)
         goto done;
     if (H5Tget_class(t) != H5T_COMPOUND) {
