@@ -31,21 +31,17 @@ typedef struct s_ctx {
     vafm_h5_meta grid0;   /* curve 0's grid attributes (V5) */
 } s_ctx;
 
-#define FAIL(rule, obj, ...)                                                                    \
+/* Refuse under a rule of protocol/hdf5.md: report through vafm_h5i_err, or vafm_h5i_err_hdf5 to append HDF5's
+ * reason (its detail is cut shorter, to leave that reason room). */
+#define S_FAIL_VIA(report, cap, rule, obj, ...)                                                 \
     do {                                                                                        \
-        char m_[280];                                                                           \
+        char m_[cap];                                                                           \
         snprintf(m_, sizeof m_, __VA_ARGS__);                                                   \
-        vafm_h5i_err(x->err, VAFM_EFORMAT, obj, "[%s] %s: %s: %s", rule, x->path, obj, m_);     \
+        report(x->err, VAFM_EFORMAT, obj, "[%s] %s: %s: %s", rule, x->path, obj, m_);           \
         return VAFM_EFORMAT;                                                                    \
     } while (0)
-
-#define FAIL_H5(rule, obj, ...)                                                                 \
-    do {                                                                                        \
-        char m_[240];                                                                           \
-        snprintf(m_, sizeof m_, __VA_ARGS__);                                                   \
-        vafm_h5i_err_hdf5(x->err, VAFM_EFORMAT, obj, "[%s] %s: %s: %s", rule, x->path, obj, m_); \
-        return VAFM_EFORMAT;                                                                    \
-    } while (0)
+#define FAIL(rule, obj, ...) S_FAIL_VIA(vafm_h5i_err, 280, rule, obj, __VA_ARGS__)
+#define FAIL_H5(rule, obj, ...) S_FAIL_VIA(vafm_h5i_err_hdf5, 240, rule, obj, __VA_ARGS__)
 
 /* A scalar variable-length string attribute; *out (malloc'd) receives its value. */
 static int s_vlen_str(s_ctx *x, const char *rule, hid_t loc, const char *obj, const char *name, char **out)
