@@ -7,6 +7,7 @@
 #include "record/scene_value.h"
 #include "record/scene.h"
 #include "record/record.h"
+#include "record/json_num.h"
 #include "vafm/segments.h"
 #include <inttypes.h>
 #include <float.h>
@@ -321,84 +322,20 @@ static int s_key_allowed(int kind, const char *key)
     return strstr(keys, pat) != NULL;
 }
 
-/* The JSON object key whose value ends near byte `pos` of buf: the last "key": before it. */
-static void s_key_before(const void *buf, size_t pos, char *key, size_t len)
-{
-    const char *b = buf;
-    size_t i = pos;
-    while (i > 0 && b[i - 1] != ':')
-        i--;
-    if (i == 0)
-        return;
-    size_t end = i - 1;
-    while (end > 0 && (b[end - 1] == ' ' || b[end - 1] == '\t' || b[end - 1] == '\n' || b[end - 1] == '\r'))
-        end--;
-    if (end == 0 || b[end - 1] != '"')
-        return;
-    size_t start = end - 1;
-    while (start > 0 && b[start - 1] != '"')
-        start--;
-    size_t n = end - 1 - start;
-    if (start == 0 || n == 0 || n >= len)
-        return;
-    for (size_t k = 0; k < n; k++)
-        if ((unsigned char)b[start + k] < 0x20 || b[start + k] == '\\')
-            return;
-    memcpy(key, b + start, n);
-    key[n] = '\0';
-}
-
 /* A number of valid JSON text buf that underflows: a nonzero literal that the decoder reads as 0 or a
  * subnormal (|x| < DBL_MIN; jansson takes "1e-400" as 0 without a word, so set setpoint_N=1e-400 set 0).
  * @return 1 with e set (out_of_range, field = the key before it), else 0. */
 static int s_underflow(const char *b, size_t len, vafmd_err *e)
 {
-    int in_str = 0;
-    for (size_t i = 0; i < len; i++) {
-        char ch = b[i];
-        if (in_str) {
-            if (ch == '\\')
-                i++;
-            else if (ch == '"')
-                in_str = 0;
-            continue;
-        }
-        if (ch == '"') {
-            in_str = 1;
-            continue;
-        }
-        if (ch != '-' && (ch < '0' || ch > '9'))
-            continue; /* outside strings only numbers hold '-' and digits */
-        size_t j = i, exp_at = 0;
-        int nonzero = 0;
-        for (; j < len && b[j] && strchr("+-.0123456789eE", b[j]); j++) {
-            if ((b[j] == 'e' || b[j] == 'E') && !exp_at)
-                exp_at = j;
-            nonzero |= !exp_at && b[j] >= '1' && b[j] <= '9';
-        }
-        if (nonzero) {
-            char small[64], *t = j - i < sizeof small ? small : malloc(j - i + 1);
-            if (t) {
-                memcpy(t, b + i, j - i);
-                t[j - i] = '\0';
-                double x = strtod(t, NULL);
-                if (fabs(x) < DBL_MIN) {
-                    char key[64] = "";
-                    s_key_before(b, i, key, sizeof key);
-                    vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, key, "the number %.40s%s%s%s%s underflows: a nonzero value "
-                                  "must be at least %.17g in magnitude (it would read as %g)", t,
-                                  j - i > 40 ? "..." : "", key[0] ? " of '" : "", key, key[0] ? "'" : "", DBL_MIN, x);
-                    if (t != small)
-                        free(t);
-                    return 1;
-                }
-                if (t != small)
-                    free(t);
-            }
-        }
-        i = j - 1;
-    }
-    return 0;
+    char key[64], lit[42];
+    size_t line;
+    double x;
+    if (!vafm_rec_json_underflow(b, len, 1, key, sizeof key, lit, sizeof lit, &line, &x))
+        return 0;
+    vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, key, "the number %.40s%s%s%s%s underflows: a nonzero value must be at least "
+                  "%.17g in magnitude (it would read as %g)", lit, strlen(lit) > 40 ? "..." : "", key[0] ? " of '" : "",
+                  key, key[0] ? "'" : "", DBL_MIN, x);
+    return 1;
 }
 
 int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
@@ -416,7 +353,8 @@ int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
             /* valid JSON, a number beyond doubles or 64-bit integers: out of range, not malformed; the
              * field is the key just before it */
             char key[64] = "";
-            s_key_before(buf, jerr.position >= 0 && (size_t)jerr.position < len ? (size_t)jerr.position : len, key, sizeof key);
+            vafm_rec_json_key_before(buf, jerr.position >= 0 && (size_t)jerr.position < len ? (size_t)jerr.position : len, 1,
+                                     key, sizeof key);
             vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, key, "the number %s%s%sat line %d, column %d is out of range (beyond "
                           "64-bit integers or double precision)", key[0] ? "of '" : "", key, key[0] ? "' " : "",
                           jerr.line, jerr.column);

@@ -7,12 +7,11 @@
 
 #include "record/json_num.h"
 
-/* The key the value at b[pos] belongs to ("key": value), or "" (an array element, or a key with escapes). */
-static void s_key_before(const char *b, size_t pos, char *key, size_t len)
+void vafm_rec_json_key_before(const char *b, size_t pos, int enclosing, char *key, size_t len)
 {
     key[0] = '\0';
     size_t i = pos;
-    while (i > 0 && b[i - 1] != ':' && b[i - 1] != ',' && b[i - 1] != '[' && b[i - 1] != '{')
+    while (i > 0 && b[i - 1] != ':' && (enclosing || (b[i - 1] != ',' && b[i - 1] != '[' && b[i - 1] != '{')))
         i--;
     if (i == 0 || b[i - 1] != ':')
         return;
@@ -34,8 +33,8 @@ static void s_key_before(const char *b, size_t pos, char *key, size_t len)
     key[k] = '\0';
 }
 
-int vafm_rec_json_underflow(const char *b, size_t n, char *key, size_t keylen, char *lit, size_t litlen, size_t *line,
-                            double *as)
+int vafm_rec_json_underflow(const char *b, size_t n, int enclosing, char *key, size_t keylen, char *lit, size_t litlen,
+                            size_t *line, double *as)
 {
     int in_str = 0;
     size_t ln = 1;
@@ -74,7 +73,7 @@ int vafm_rec_json_underflow(const char *b, size_t n, char *key, size_t keylen, c
             }
             if (s && fabs(x) < DBL_MIN) {
                 if (keylen)
-                    s_key_before(b, i, key, keylen);
+                    vafm_rec_json_key_before(b, i, enclosing, key, keylen);
                 if (litlen) {
                     size_t l = strlen(s) < litlen ? strlen(s) : litlen - 1;
                     memcpy(lit, s, l);

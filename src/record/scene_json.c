@@ -241,7 +241,7 @@ int vafm_scene_load_file(vafm_params *p, const char *path, char *preset, size_t 
     char key[64], lit[48];
     size_t line;
     double x;
-    int uf = vafm_rec_json_underflow(text, n, key, sizeof key, lit, sizeof lit, &line, &x);
+    int uf = vafm_rec_json_underflow(text, n, 0, key, sizeof key, lit, sizeof lit, &line, &x);
     free(text);
     if (uf) {
         snprintf(what, sizeof what, "line %zu: %s%s%sthe number %s underflows: a nonzero value must be at least %.17g "

@@ -107,7 +107,7 @@ static int s_underflow(const char *text, vafm_error *err)
     char key[48], lit[48], f[64], msg[200];
     size_t line;
     double x;
-    if (!vafm_rec_json_underflow(text, strlen(text), key, sizeof key, lit, sizeof lit, &line, &x))
+    if (!vafm_rec_json_underflow(text, strlen(text), 0, key, sizeof key, lit, sizeof lit, &line, &x))
         return 0;
     snprintf(f, sizeof f, "segments%s%s", key[0] ? "." : "", key);
     snprintf(msg, sizeof msg, "line %zu: the number %s underflows: a nonzero value must be at least %.17g in magnitude "
