@@ -371,6 +371,22 @@ int vafmd_cmd_decode(const void *buf, size_t len, vafmd_cmd *c, vafmd_err *e)
     return rc;
 }
 
+#define S_TYPE(t) (1u << (t)) /* JSON types (JSON_*) as a mask */
+#define S_NUMBER (S_TYPE(JSON_INTEGER) | S_TYPE(JSON_REAL))
+#define S_BOOLEAN (S_TYPE(JSON_TRUE) | S_TYPE(JSON_FALSE))
+
+/* The optional argument `name` of a request into *v (NULL: absent). A value of a JSON type outside `types`
+ * is wrong_type, "\"name\" must be <what>". @return 0, or -1 with e set. */
+static int s_opt(json_t *root, const char *name, unsigned types, const char *what, json_t **v, vafmd_err *e)
+{
+    *v = json_object_get(root, name);
+    if (*v && !(types & S_TYPE(json_typeof(*v)))) {
+        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, name, "\"%s\" must be %s", name, what);
+        return -1;
+    }
+    return 0;
+}
+
 /* replay: path (required), curves, speed, loop (protocol/wire.md, "replay"). */
 static int s_decode_replay(json_t *root, vafmd_cmd *c, vafmd_err *e)
 {
@@ -417,11 +433,9 @@ static int s_decode_replay(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         c->replay_curves = v;
     }
-    if ((v = json_object_get(root, "speed")) != NULL) {
-        if (!json_is_number(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "speed", "\"speed\" must be a number");
-            return -1;
-        }
+    if (s_opt(root, "speed", S_NUMBER, "a number", &v, e))
+        return -1;
+    if (v) {
         const s_setting *f = s_setting_find("speed");
         double x = json_number_value(v);
         if (!(x >= f->min && x <= f->max)) {
@@ -489,11 +503,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
     }
     c->kind = kind;
-    if ((v = json_object_get(root, "names")) != NULL) {
-        if (!json_is_array(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "names", "\"names\" must be an array of strings");
-            return -1;
-        }
+    if (s_opt(root, "names", S_TYPE(JSON_ARRAY), "an array of strings", &v, e))
+        return -1;
+    if (v) {
         size_t i;
         json_t *n;
         json_array_foreach(v, i, n) if (!json_is_string(n))
@@ -503,27 +515,17 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         c->names = v;
     }
-    if ((v = json_object_get(root, "info")) != NULL) {
-        if (!json_is_boolean(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "info", "\"info\" must be true or false");
-            return -1;
-        }
+    if (s_opt(root, "info", S_BOOLEAN, "true or false", &v, e))
+        return -1;
+    if (v)
         c->info = json_is_true(v);
-    }
-    if ((v = json_object_get(root, "preset")) != NULL) {
-        if (!json_is_string(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "preset", "\"preset\" must be a preset name (string)");
-            return -1;
-        }
+    if (s_opt(root, "preset", S_TYPE(JSON_STRING), "a preset name (string)", &v, e))
+        return -1;
+    if (v)
         c->preset = json_string_value(v);
-    }
-    if ((v = json_object_get(root, "values")) != NULL) {
-        if (!json_is_object(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "values", "\"values\" must be an object {name: value}");
-            return -1;
-        }
-        c->values = v;
-    }
+    if (s_opt(root, "values", S_TYPE(JSON_OBJECT), "an object {name: value}", &v, e))
+        return -1;
+    c->values = v;
     if (kind == VAFMD_CMD_SET && !c->preset && !c->values) {
         vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "values", "'set' needs \"values\" and/or \"preset\"");
         return -1;
@@ -538,11 +540,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         c->has_index = 1;
         c->index = (uint64_t)json_integer_value(v);
     }
-    if ((v = json_object_get(root, "client_run_id")) != NULL) {
-        if (!json_is_string(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "client_run_id", "\"client_run_id\" must be a string");
-            return -1;
-        }
+    if (s_opt(root, "client_run_id", S_TYPE(JSON_STRING), "a string", &v, e))
+        return -1;
+    if (v) {
         size_t n = json_string_length(v);
         if (n < 1 || n > VAFMD_CLIENT_RUN_ID_MAX || strlen(json_string_value(v)) != n) {
             vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "client_run_id",
@@ -551,12 +551,10 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         memcpy(c->client_run_id, json_string_value(v), n + 1);
     }
-    if ((v = json_object_get(root, "segments")) != NULL) { /* curve: a segment list (vafm/segments.h) */
-        if (!json_is_array(v) && !json_is_object(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "segments", "\"segments\" must be an array of segments (or "
-                          "{\"segments\": [...]}), as `vafm run --segments` reads them");
-            return -1;
-        }
+    if (s_opt(root, "segments", S_TYPE(JSON_ARRAY) | S_TYPE(JSON_OBJECT), "an array of segments (or {\"segments\": "
+              "[...]}), as `vafm run --segments` reads them", &v, e))
+        return -1;
+    if (v) { /* curve: a segment list (vafm/segments.h) */
         json_t *w = json_is_array(v) ? json_pack("{s:O}", "segments", v) : json_incref(v);
         char *text = w ? json_dumps(w, JSON_COMPACT) : NULL;
         json_decref(w);
@@ -573,11 +571,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
             return -1;
         }
     }
-    if ((v = json_object_get(root, "duration_s")) != NULL) {
-        if (!json_is_number(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "duration_s", "\"duration_s\" must be a number (s)");
-            return -1;
-        }
+    if (s_opt(root, "duration_s", S_NUMBER, "a number (s)", &v, e))
+        return -1;
+    if (v) {
         const vafm_param_info *f = vafm_params_field_find("tune_duration_s");
         double x = json_number_value(v);
         if (f && !(x >= f->min && x <= f->max)) {
@@ -653,19 +649,15 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     if (kind == VAFMD_CMD_LOG) {
         static const char *const flags[] = { "overwrite", "resume", "stop" };
         int *dst[] = { &c->log_overwrite, &c->log_resume, &c->log_stop };
-        for (int i = 0; i < 3; i++)
-            if ((v = json_object_get(root, flags[i])) != NULL) {
-                if (!json_is_boolean(v)) {
-                    vafmd_err_set(e, VAFMD_E_WRONG_TYPE, flags[i], "\"%s\" must be true or false", flags[i]);
-                    return -1;
-                }
-                *dst[i] = json_is_true(v);
-            }
-        if ((v = json_object_get(root, "path")) != NULL) {
-            if (!json_is_string(v)) {
-                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "path", "\"path\" must be a file name (string)");
+        for (int i = 0; i < 3; i++) {
+            if (s_opt(root, flags[i], S_BOOLEAN, "true or false", &v, e))
                 return -1;
-            }
+            if (v)
+                *dst[i] = json_is_true(v);
+        }
+        if (s_opt(root, "path", S_TYPE(JSON_STRING), "a file name (string)", &v, e))
+            return -1;
+        if (v) {
             size_t n = json_string_length(v);
             if (n < 1 || n > VAFMD_LOG_PATH_MAX || strlen(json_string_value(v)) != n) {
                 vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "path", "\"path\" must have 1 to %d characters (no NUL)",
@@ -694,13 +686,10 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
          kind == VAFMD_CMD_FEEDBACK) && vafmd_live_decode(root, c, e))
         return -1;
     if (kind == VAFMD_CMD_FAULTS) { /* the plan itself is checked by vafmd_faults_decode (faults.c) */
-        if ((v = json_object_get(root, "clear")) != NULL) {
-            if (!json_is_boolean(v)) {
-                vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "clear", "\"clear\" must be true or false");
-                return -1;
-            }
+        if (s_opt(root, "clear", S_BOOLEAN, "true or false", &v, e))
+            return -1;
+        if (v)
             c->fault_clear = json_is_true(v);
-        }
         if ((v = json_object_get(root, "plan")) != NULL) {
             if (c->fault_clear) {
                 vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "clear", "\"clear\": true takes no \"plan\" (a plan replaces the "
