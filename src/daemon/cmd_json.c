@@ -387,6 +387,19 @@ static int s_opt(json_t *root, const char *name, unsigned types, const char *wha
     return 0;
 }
 
+/* Same for an argument that counts from 0: an integer >= 0. A negative integer has the right type but not the
+ * right value (out_of_range, wire.md §2.2), another type is wrong_type; both "\"name\" must be <what>". */
+static int s_opt_from0(json_t *root, const char *name, const char *what, json_t **v, vafmd_err *e)
+{
+    *v = json_object_get(root, name);
+    if (*v && (!json_is_integer(*v) || json_integer_value(*v) < 0)) {
+        vafmd_err_set(e, json_is_integer(*v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, name, "\"%s\" must be %s",
+                      name, what);
+        return -1;
+    }
+    return 0;
+}
+
 /* replay: path (required), curves, speed, loop (protocol/wire.md, "replay"). */
 static int s_decode_replay(json_t *root, vafmd_cmd *c, vafmd_err *e)
 {
@@ -530,13 +543,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "values", "'set' needs \"values\" and/or \"preset\"");
         return -1;
     }
-    if ((v = json_object_get(root, "index")) != NULL) {
-        if (!json_is_integer(v) || json_integer_value(v) < 0) {
-            /* the type is right for a negative integer, its value is not (wire.md §2.2) */
-            vafmd_err_set(e, json_is_integer(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "index",
-                          "\"index\" must be an integer in [0, 2^63-1]");
-            return -1;
-        }
+    if (s_opt_from0(root, "index", "an integer in [0, 2^63-1]", &v, e))
+        return -1;
+    if (v) {
         c->has_index = 1;
         c->index = (uint64_t)json_integer_value(v);
     }
@@ -629,12 +638,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
                           VAFMD_CAMPAIGN_POINTS_MAX);
             return -1;
         }
-        if ((v = json_object_get(root, "first_index")) != NULL) {
-            if (!json_is_integer(v) || json_integer_value(v) < 0) {
-                vafmd_err_set(e, json_is_integer(v) ? VAFMD_E_OUT_OF_RANGE : VAFMD_E_WRONG_TYPE, "first_index",
-                              "\"first_index\" must be an integer >= 0");
-                return -1;
-            }
+        if (s_opt_from0(root, "first_index", "an integer >= 0", &v, e))
+            return -1;
+        if (v) {
             c->camp_first = (uint64_t)json_integer_value(v);
             if (c->camp_first >= points * c->camp_n) {
                 vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "first_index", "first_index = %" PRIu64 " is beyond the "
