@@ -221,9 +221,27 @@ int main(int argc, char **argv)
     int free_run = 0, curve_required = 0, nanonis_remote = 0, nanonis_curve = 0;
     char nanonis_buf[300];
     char rep_buf[512], pub_buf[512];
+    /* the options after -h/--help and --version: a switch sets its flag, the others take a value */
+    const struct {
+        const char *name;
+        int *flag;
+        const char **value;
+    } opts[] = {
+        { "--free-run", &free_run, NULL },
+        { "--curve-required", &curve_required, NULL },
+        { "--nanonis", NULL, &nanonis },
+        { "--nanonis-allow-remote", &nanonis_remote, NULL },
+        { "--nanonis-with-curve", &nanonis_curve, NULL },
+        { "--rep", NULL, &rep_ep },
+        { "--pub", NULL, &pub_ep },
+        { "--config", NULL, &config },
+        { "--preset", NULL, &preset },
+        { "--speed", NULL, &speed },
+        { "--sensitivity", NULL, &sens },
+        { "--hwm", NULL, &hwm },
+    };
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
-        const char **dst = NULL;
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
             fputs(s_usage, stdout);
             for (int k = 0; k < VAFMD_CMD_N; k++)
@@ -234,36 +252,18 @@ int main(int argc, char **argv)
         } else if (!strcmp(a, "--version")) {
             printf("vafmd %s (library %s)\n", VAFMD_VERSION, vafm_version());
             return 0;
-        } else if (!strcmp(a, "--free-run"))
-            free_run = 1;
-        else if (!strcmp(a, "--curve-required"))
-            curve_required = 1;
-        else if (!strcmp(a, "--nanonis"))
-            dst = &nanonis;
-        else if (!strcmp(a, "--nanonis-allow-remote"))
-            nanonis_remote = 1;
-        else if (!strcmp(a, "--nanonis-with-curve"))
-            nanonis_curve = 1;
-        else if (!strcmp(a, "--rep"))
-            dst = &rep_ep;
-        else if (!strcmp(a, "--pub"))
-            dst = &pub_ep;
-        else if (!strcmp(a, "--config"))
-            dst = &config;
-        else if (!strcmp(a, "--preset"))
-            dst = &preset;
-        else if (!strcmp(a, "--speed"))
-            dst = &speed;
-        else if (!strcmp(a, "--sensitivity"))
-            dst = &sens;
-        else if (!strcmp(a, "--hwm"))
-            dst = &hwm;
-        else
+        }
+        size_t k = 0;
+        while (k < sizeof opts / sizeof opts[0] && strcmp(a, opts[k].name))
+            k++;
+        if (k == sizeof opts / sizeof opts[0])
             return s_usage_error("unknown option '%s'", a);
-        if (dst) {
+        if (opts[k].flag)
+            *opts[k].flag = 1;
+        if (opts[k].value) {
             if (i + 1 >= argc)
                 return s_usage_error("option '%s' needs a value", a);
-            *dst = argv[++i];
+            *opts[k].value = argv[++i];
         }
     }
     vafm_preset_apply(&d.scene, VAFM_TOOLS_DEFAULT_PRESET, NULL); /* an instrument, not the paper's scene */
