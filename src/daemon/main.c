@@ -395,23 +395,20 @@ int main(int argc, char **argv)
         }
     }
     json_t *vals = json_object();
-    if (speed) {
+    const struct {
+        const char *text, *name, *bad;
+    } nums[] = { { speed, "speed", "--speed '%s' is not a number" },
+                 { sens, "sensitivity_m_per_V", "--sensitivity '%s' is not a number" } };
+    for (size_t k = 0; k < sizeof nums / sizeof nums[0]; k++) {
+        if (!nums[k].text)
+            continue;
         char *end;
-        double x = strtod(speed, &end);
-        if (*end || end == speed) {
+        double x = strtod(nums[k].text, &end);
+        if (*end || end == nums[k].text) {
             json_decref(live_vals);
-            return s_usage_error("--speed '%s' is not a number", speed);
+            return s_usage_error(nums[k].bad, nums[k].text);
         }
-        json_object_set_new(vals, "speed", json_real(x));
-    }
-    if (sens) {
-        char *end;
-        double x = strtod(sens, &end);
-        if (*end || end == sens) {
-            json_decref(live_vals);
-            return s_usage_error("--sensitivity '%s' is not a number", sens);
-        }
-        json_object_set_new(vals, "sensitivity_m_per_V", json_real(x));
+        json_object_set_new(vals, nums[k].name, json_real(x));
     }
     if (free_run)
         json_object_set_new(vals, "free_run", json_true());
