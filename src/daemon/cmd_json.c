@@ -387,6 +387,18 @@ static int s_opt(json_t *root, const char *name, unsigned types, const char *wha
     return 0;
 }
 
+/* Same for a required argument: absent, it is missing_field with the message `missing`. */
+static int s_need(json_t *root, const char *name, unsigned types, const char *what, const char *missing, json_t **v,
+                  vafmd_err *e)
+{
+    if (!json_object_get(root, name)) {
+        *v = NULL;
+        vafmd_err_set(e, VAFMD_E_MISSING_FIELD, name, "%s", missing);
+        return -1;
+    }
+    return s_opt(root, name, types, what, v, e);
+}
+
 /* Same for an argument that counts from 0: an integer >= 0. A negative integer has the right type but not the
  * right value (out_of_range, wire.md §2.2), another type is wrong_type; both "\"name\" must be <what>". */
 static int s_opt_from0(json_t *root, const char *name, const char *what, json_t **v, vafmd_err *e)
@@ -403,16 +415,11 @@ static int s_opt_from0(json_t *root, const char *name, const char *what, json_t 
 /* replay: path (required), curves, speed, loop (protocol/wire.md, "replay"). */
 static int s_decode_replay(json_t *root, vafmd_cmd *c, vafmd_err *e)
 {
-    json_t *v = json_object_get(root, "path");
-    if (!v) {
-        vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "path", "'replay' needs \"path\": the HDF5 file to replay");
+    json_t *v;
+    if (s_need(root, "path", S_TYPE(JSON_STRING), "a file name (string)", "'replay' needs \"path\": the HDF5 file to "
+               "replay", &v, e))
         return -1;
-    }
-    size_t n = json_is_string(v) ? json_string_length(v) : 0;
-    if (!json_is_string(v)) {
-        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "path", "\"path\" must be a file name (string)");
-        return -1;
-    }
+    size_t n = json_string_length(v);
     if (n < 1 || n > VAFMD_LOG_PATH_MAX || strlen(json_string_value(v)) != n) {
         vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "path", "\"path\" must have 1 to %d characters (no NUL)",
                       VAFMD_LOG_PATH_MAX);
@@ -485,15 +492,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
      * §2.2), so c keeps the request (and id) even when decoding fails; vafmd_cmd_free releases it */
     c->root = json_incref(root);
     c->id = json_object_get(root, "id");
-    json_t *cmd = json_object_get(root, "cmd");
-    if (!cmd) {
-        vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "cmd", "the request has no \"cmd\"");
+    json_t *cmd;
+    if (s_need(root, "cmd", S_TYPE(JSON_STRING), "a string", "the request has no \"cmd\"", &cmd, e))
         return -1;
-    }
-    if (!json_is_string(cmd)) {
-        vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "cmd", "\"cmd\" must be a string");
-        return -1;
-    }
     int kind = -1;
     for (int i = 0; i < VAFMD_CMD_N; i++)
         if (!strcmp(json_string_value(cmd), s_commands[i].name) && strlen(s_commands[i].name) == json_string_length(cmd))
@@ -594,15 +595,9 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         c->duration_s = x;
     }
     if (kind == VAFMD_CMD_CAMPAIGN) {
-        v = json_object_get(root, "n");
-        if (!v) {
-            vafmd_err_set(e, VAFMD_E_MISSING_FIELD, "n", "'campaign' needs \"n\" (curves per grid point)");
+        if (s_need(root, "n", S_TYPE(JSON_INTEGER), "an integer (curves per grid point)", "'campaign' needs \"n\" "
+                   "(curves per grid point)", &v, e))
             return -1;
-        }
-        if (!json_is_integer(v)) {
-            vafmd_err_set(e, VAFMD_E_WRONG_TYPE, "n", "\"n\" must be an integer (curves per grid point)");
-            return -1;
-        }
         if (json_integer_value(v) < 1 || json_integer_value(v) > 1000000000) {
             vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "n", "n = %" JSON_INTEGER_FORMAT " is outside [1, 1e9]",
                           json_integer_value(v));
