@@ -211,6 +211,19 @@ static int s_curve_config(vafmd *d, const json_t *secret, const json_t *pub, con
     return 0;
 }
 
+/* A true/false key of the --config file: true sets *flag (a switch given on the command line stays set).
+ * @return 0, or -1 (said on stderr) when it is not a boolean. */
+static int s_config_flag(const json_t *cfg, const char *key, const char *config, int *flag)
+{
+    json_t *v = json_object_get(cfg, key);
+    if (v && !json_is_boolean(v)) {
+        fprintf(stderr, "vafmd: config '%s': \"%s\" must be true or false\n", config, key);
+        return -1;
+    }
+    *flag |= json_is_true(v);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     static vafmd d;
@@ -294,13 +307,9 @@ int main(int argc, char **argv)
             json_decref(cfg);
             return 2;
         }
-        if ((v = json_object_get(cfg, "curve_required")) != NULL) {
-            if (!json_is_boolean(v)) {
-                fprintf(stderr, "vafmd: config '%s': \"curve_required\" must be true or false\n", config);
-                json_decref(cfg);
-                return 2;
-            }
-            curve_required |= json_is_true(v);
+        if (s_config_flag(cfg, "curve_required", config, &curve_required)) {
+            json_decref(cfg);
+            return 2;
         }
         if ((v = json_object_get(cfg, "nanonis")) != NULL) { /* the Nanonis port (docs/nanonis.md) */
             if (json_is_string(v) && strlen(json_string_value(v)) < sizeof nanonis_buf)
@@ -315,21 +324,10 @@ int main(int argc, char **argv)
             if (!nanonis) /* the flag wins */
                 nanonis = nanonis_buf;
         }
-        if ((v = json_object_get(cfg, "nanonis_allow_remote")) != NULL) {
-            if (!json_is_boolean(v)) {
-                fprintf(stderr, "vafmd: config '%s': \"nanonis_allow_remote\" must be true or false\n", config);
-                json_decref(cfg);
-                return 2;
-            }
-            nanonis_remote |= json_is_true(v);
-        }
-        if ((v = json_object_get(cfg, "nanonis_with_curve")) != NULL) {
-            if (!json_is_boolean(v)) {
-                fprintf(stderr, "vafmd: config '%s': \"nanonis_with_curve\" must be true or false\n", config);
-                json_decref(cfg);
-                return 2;
-            }
-            nanonis_curve |= json_is_true(v);
+        if (s_config_flag(cfg, "nanonis_allow_remote", config, &nanonis_remote) ||
+            s_config_flag(cfg, "nanonis_with_curve", config, &nanonis_curve)) {
+            json_decref(cfg);
+            return 2;
         }
         if (s_curve_config(&d, json_object_get(cfg, "curve_secret_key"), json_object_get(cfg, "curve_public_key"),
                            json_object_get(cfg, "curve_clients"))) {
