@@ -399,6 +399,17 @@ static int s_need(json_t *root, const char *name, unsigned types, const char *wh
     return s_opt(root, name, types, what, v, e);
 }
 
+/* A string argument v (`name`) holds 1 to max characters and no NUL, else out_of_range. @return 0 or -1. */
+static int s_text_len(const json_t *v, const char *name, int max, vafmd_err *e)
+{
+    size_t n = json_string_length(v);
+    if (n < 1 || n > (size_t)max || strlen(json_string_value(v)) != n) {
+        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, name, "\"%s\" must have 1 to %d characters (no NUL)", name, max);
+        return -1;
+    }
+    return 0;
+}
+
 /* Same for an argument that counts from 0: an integer >= 0. A negative integer has the right type but not the
  * right value (out_of_range, wire.md §2.2), another type is wrong_type; both "\"name\" must be <what>". */
 static int s_opt_from0(json_t *root, const char *name, const char *what, json_t **v, vafmd_err *e)
@@ -417,14 +428,8 @@ static int s_decode_replay(json_t *root, vafmd_cmd *c, vafmd_err *e)
 {
     json_t *v;
     if (s_need(root, "path", S_TYPE(JSON_STRING), "a file name (string)", "'replay' needs \"path\": the HDF5 file to "
-               "replay", &v, e))
+               "replay", &v, e) || s_text_len(v, "path", VAFMD_LOG_PATH_MAX, e))
         return -1;
-    size_t n = json_string_length(v);
-    if (n < 1 || n > VAFMD_LOG_PATH_MAX || strlen(json_string_value(v)) != n) {
-        vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "path", "\"path\" must have 1 to %d characters (no NUL)",
-                      VAFMD_LOG_PATH_MAX);
-        return -1;
-    }
     c->replay_path = json_string_value(v);
     if ((v = json_object_get(root, "curves")) != NULL) {
         int ok = json_is_string(v) && json_string_length(v) >= 1 && json_string_length(v) <= 4096 &&
@@ -552,15 +557,10 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
     }
     if (s_opt(root, "client_run_id", S_TYPE(JSON_STRING), "a string", &v, e))
         return -1;
-    if (v) {
-        size_t n = json_string_length(v);
-        if (n < 1 || n > VAFMD_CLIENT_RUN_ID_MAX || strlen(json_string_value(v)) != n) {
-            vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "client_run_id",
-                          "\"client_run_id\" must have 1 to %d characters (no NUL)", VAFMD_CLIENT_RUN_ID_MAX);
-            return -1;
-        }
-        memcpy(c->client_run_id, json_string_value(v), n + 1);
-    }
+    if (v && s_text_len(v, "client_run_id", VAFMD_CLIENT_RUN_ID_MAX, e))
+        return -1;
+    if (v)
+        memcpy(c->client_run_id, json_string_value(v), json_string_length(v) + 1);
     if (s_opt(root, "segments", S_TYPE(JSON_ARRAY) | S_TYPE(JSON_OBJECT), "an array of segments (or {\"segments\": "
               "[...]}), as `vafm run --segments` reads them", &v, e))
         return -1;
@@ -658,15 +658,10 @@ int vafmd_cmd_decode_json(json_t *root, vafmd_cmd *c, vafmd_err *e)
         }
         if (s_opt(root, "path", S_TYPE(JSON_STRING), "a file name (string)", &v, e))
             return -1;
-        if (v) {
-            size_t n = json_string_length(v);
-            if (n < 1 || n > VAFMD_LOG_PATH_MAX || strlen(json_string_value(v)) != n) {
-                vafmd_err_set(e, VAFMD_E_OUT_OF_RANGE, "path", "\"path\" must have 1 to %d characters (no NUL)",
-                              VAFMD_LOG_PATH_MAX);
-                return -1;
-            }
+        if (v && s_text_len(v, "path", VAFMD_LOG_PATH_MAX, e))
+            return -1;
+        if (v)
             c->log_path = json_string_value(v);
-        }
         if (c->log_stop && (c->log_path || c->log_overwrite || c->log_resume)) {
             vafmd_err_set(e, VAFMD_E_UNKNOWN_FIELD, c->log_path ? "path" : c->log_overwrite ? "overwrite" : "resume",
                           "'log' with \"stop\": true takes no other argument");
