@@ -211,6 +211,17 @@ static int s_curve_config(vafmd *d, const json_t *secret, const json_t *pub, con
     return 0;
 }
 
+/* Close the sockets and the context when the set-up fails after they were made. @return 1, main's exit status. */
+static int s_sockets_close(vafmd *d)
+{
+    if (d->auth.zap)
+        zmq_close(d->auth.zap);
+    zmq_close(d->rep);
+    zmq_close(d->pub);
+    zmq_ctx_term(d->zctx);
+    return 1;
+}
+
 /* A true/false key of the --config file: true sets *flag (a switch given on the command line stays set).
  * @return 0, or -1 (said on stderr) when it is not a boolean. */
 static int s_config_flag(const json_t *cfg, const char *key, const char *config, int *flag)
@@ -478,12 +489,7 @@ int main(int argc, char **argv)
     /* CURVE: the ZAP handler is bound before the sockets, so that no handshake finds it missing */
     if (d.auth.on && (vafmd_auth_bind(&d) || vafmd_auth_secure(&d, d.rep) || vafmd_auth_secure(&d, d.pub))) {
         fprintf(stderr, "vafmd: cannot set up CURVE security: %s\n", zmq_strerror(errno));
-        if (d.auth.zap)
-            zmq_close(d.auth.zap);
-        zmq_close(d.rep);
-        zmq_close(d.pub);
-        zmq_ctx_term(d.zctx);
-        return 1;
+        return s_sockets_close(&d);
     }
     /* ZeroMQ binds to interfaces and addresses, not host names: tcp://localhost:P is bound as 127.0.0.1 */
     char rep_bind[4200], pub_bind[4200];
@@ -496,12 +502,7 @@ int main(int argc, char **argv)
                  : zmq_bind(d.pub, VAFMD_NANONIS_PUB_EP) ? VAFMD_NANONIS_PUB_EP : NULL;
     if (failed) {
         fprintf(stderr, "vafmd: cannot bind %s: %s\n", failed, zmq_strerror(errno));
-        if (d.auth.zap)
-            zmq_close(d.auth.zap);
-        zmq_close(d.rep);
-        zmq_close(d.pub);
-        zmq_ctx_term(d.zctx);
-        return 1;
+        return s_sockets_close(&d);
     }
     vafmd_ring_init(&d.ring, d.ring_store, sizeof(vafmd_sim_cmd), VAFMD_RING_CAP);
     /* Test hooks (tests/test_daemon.py, log overflow): a smaller log ring ($VAFMD_TEST_LOG_RING, a power of
