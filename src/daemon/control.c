@@ -28,8 +28,11 @@
 #include "daemon/control_int.h"
 
 
-static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
+/* The handlers of commands.def share one signature; *quit is set by `shutdown` (below). */
+
+static json_t *s_cmd_hello(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
+    (void)quit, (void)e;
     json_t *r = s_ok(c);
     json_object_set_new(r, "protocol_version", json_integer(VAFM_WIRE_PROTOCOL_VERSION));
     json_object_set_new(r, "daemon", json_string("vafmd"));
@@ -52,8 +55,9 @@ static json_t *s_hello(const vafmd *d, const vafmd_cmd *c)
     return r;
 }
 
-static json_t *s_presets(const vafmd_cmd *c)
+static json_t *s_cmd_presets(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
+    (void)d, (void)quit, (void)e;
     json_t *r = s_ok(c), *a = json_array();
     for (int i = 0; i < vafm_preset_count(); i++)
         json_array_append_new(a, json_pack("{s:s,s:s}", "name", vafm_preset_name(i), "description",
@@ -89,8 +93,9 @@ static json_t *s_log_report(vafmd *d)
     return o;
 }
 
-static json_t *s_log(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
+static json_t *s_cmd_log(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
+    (void)quit;
     vafmd_log *L = &d->log;
     int st = atomic_load_explicit(&L->state, memory_order_acquire);
     if (s_busy(d)) {
@@ -297,8 +302,9 @@ static void s_fault_note(vafmd *d, vafmd_fault_rec *fr)
         nanosleep(&(struct timespec){ 0, 1000000 }, NULL);
 }
 
-static json_t *s_status(vafmd *d, const vafmd_cmd *c)
+static json_t *s_cmd_status(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
+    (void)quit, (void)e;
     const vafmd_shared *sh = &d->sh;
     json_t *r = s_ok(c);
     int busy = s_busy(d);
@@ -352,13 +358,7 @@ static json_t *s_status(vafmd *d, const vafmd_cmd *c)
 }
 
 
-/* ---- the handlers of commands.def: one signature; *quit is set by `shutdown` ---------------------- */
-
-static json_t *s_cmd_hello(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
-{
-    (void)quit, (void)e;
-    return s_hello(d, c);
-}
+/* ---- the other handlers of commands.def ----------------------------------------------------------- */
 
 static json_t *s_cmd_get(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
@@ -403,12 +403,6 @@ static json_t *s_cmd_set(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
     return r;
 }
 
-static json_t *s_cmd_presets(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
-{
-    (void)d, (void)quit, (void)e;
-    return s_presets(c);
-}
-
 /* curve, tune and replay: one start each */
 static json_t *s_cmd_start(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
 {
@@ -435,18 +429,6 @@ static json_t *s_cmd_abort(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e
     json_object_set_new(r, "run_id", json_integer((json_int_t)(st == VAFMD_RUNNING ? atomic_load(&d->sh.run_id)
                                                                                : d->pending_run_id)));
     return r;
-}
-
-static json_t *s_cmd_status(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
-{
-    (void)quit, (void)e;
-    return s_status(d, c);
-}
-
-static json_t *s_cmd_log(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
-{
-    (void)quit;
-    return s_log(d, c, e);
 }
 
 static json_t *s_cmd_shutdown(vafmd *d, const vafmd_cmd *c, int *quit, vafmd_err *e)
