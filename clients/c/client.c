@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* C client of vafmd (include/vafm/client.h, protocol/wire.md). */
 #include "vafm/client.h"
+#include "core/err_fill.h"
 
 #include <errno.h>
 #include <jansson.h>
@@ -39,13 +40,9 @@ static int s_apply_curve(const vafm_client *c, void *sock)
 
 static void s_err(vafm_error *err, int code, const char *field, const char *fmt, ...)
 {
-    if (!err)
-        return;
-    err->code = code;
-    snprintf(err->field, sizeof err->field, "%s", field ? field : "");
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    vafm_err_vset(err, code, field, fmt, ap);
     va_end(ap);
 }
 

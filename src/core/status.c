@@ -2,6 +2,7 @@
 #include <stdarg.h>
 #include <stdio.h>
 #include "vafm/common.h"
+#include "core/err_fill.h"
 #include "core/internal.h"
 #include "vafm/version.h"
 
@@ -42,13 +43,9 @@ unsigned vafm_version_api(void)
 
 void vafm_err_set(vafm_error *err, int code, const char *field, const char *fmt, ...)
 {
-    if (!err)
-        return;
-    err->code = code;
-    snprintf(err->field, sizeof err->field, "%s", field ? field : "");
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    vafm_err_vset(err, code, field, fmt, ap);
     va_end(ap);
 }
 
