@@ -8,6 +8,7 @@
  */
 #include <float.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -115,6 +116,33 @@ static int s_underflow(const char *text, vafm_error *err)
     return s_err(err, f, "%s: %s", f, msg);
 }
 
+/* The keys of a segment object, in the order the "unknown key" message lists them: a number (null allowed:
+ * s_real), a name of a '|'-separated list (s_enum), the trigger object, or the label (an integer). */
+enum { S_REAL, S_ENUM, S_TRIGGER, S_LABEL };
+typedef struct s_key {
+    const char *name;
+    int kind;
+    size_t offset;       /* of the double (S_REAL) or int (S_ENUM) in vafm_segment_spec */
+    const char *choices; /* S_ENUM */
+} s_key;
+#define S_AT(field) offsetof(vafm_segment_spec, field)
+static const s_key s_keys[] = {
+    { "kind", S_ENUM, S_AT(kind), "extend|retract|pause|modulate" },
+    { "speed_m_per_s", S_REAL, S_AT(speed_m_per_s), NULL },
+    { "distance_m", S_REAL, S_AT(distance_m), NULL },
+    { "trigger", S_TRIGGER, 0, NULL },
+    { "end", S_ENUM, S_AT(end), "travel|detach|start" },
+    { "duration_s", S_REAL, S_AT(duration_s), NULL },
+    { "mode", S_ENUM, S_AT(pause_mode), "height|force" },
+    { "hold_force_N", S_REAL, S_AT(hold_force_N), NULL },
+    { "feedback_s", S_REAL, S_AT(feedback_s), NULL },
+    { "amplitude_m", S_REAL, S_AT(amplitude_m), NULL },
+    { "frequency_Hz", S_REAL, S_AT(frequency_Hz), NULL },
+    { "sample_rate_Hz", S_REAL, S_AT(sample_rate_Hz), NULL },
+    { "label", S_LABEL, S_AT(label), NULL },
+};
+#define S_NKEYS (sizeof s_keys / sizeof s_keys[0])
+
 int vafm_segments_from_json(const char *text, vafm_segment_spec *out, size_t cap, size_t *n, vafm_error *err)
 {
     if (err)
@@ -157,38 +185,25 @@ int vafm_segments_from_json(const char *text, vafm_segment_spec *out, size_t cap
         json_t *v;
         json_object_foreach(o, key, v) {
             snprintf(f, sizeof f, "%s.%s", pre, key);
-            if (!strcmp(key, "kind"))
-                rc = s_enum(v, "extend|retract|pause|modulate", f, &g->kind, err);
-            else if (!strcmp(key, "speed_m_per_s"))
-                rc = s_real(v, f, &g->speed_m_per_s, err);
-            else if (!strcmp(key, "distance_m"))
-                rc = s_real(v, f, &g->distance_m, err);
-            else if (!strcmp(key, "trigger"))
+            const s_key *k = s_keys;
+            while (k < s_keys + S_NKEYS && strcmp(key, k->name))
+                k++;
+            if (k == s_keys + S_NKEYS) {
+                char known[256] = "";
+                for (k = s_keys; k < s_keys + S_NKEYS; k++)
+                    snprintf(known + strlen(known), sizeof known - strlen(known), "%s%s", k == s_keys ? "" : ", ",
+                             k->name);
+                rc = s_err(err, f, "%s: unknown key (known: %s)", f, known);
+            } else if (k->kind == S_REAL)
+                rc = s_real(v, f, (double *)((char *)g + k->offset), err);
+            else if (k->kind == S_ENUM)
+                rc = s_enum(v, k->choices, f, (int *)((char *)g + k->offset), err);
+            else if (k->kind == S_TRIGGER)
                 rc = s_trigger(v, g, pre, err);
-            else if (!strcmp(key, "end"))
-                rc = s_enum(v, "travel|detach|start", f, &g->end, err);
-            else if (!strcmp(key, "duration_s"))
-                rc = s_real(v, f, &g->duration_s, err);
-            else if (!strcmp(key, "mode"))
-                rc = s_enum(v, "height|force", f, &g->pause_mode, err);
-            else if (!strcmp(key, "hold_force_N"))
-                rc = s_real(v, f, &g->hold_force_N, err);
-            else if (!strcmp(key, "feedback_s"))
-                rc = s_real(v, f, &g->feedback_s, err);
-            else if (!strcmp(key, "amplitude_m"))
-                rc = s_real(v, f, &g->amplitude_m, err);
-            else if (!strcmp(key, "frequency_Hz"))
-                rc = s_real(v, f, &g->frequency_Hz, err);
-            else if (!strcmp(key, "sample_rate_Hz"))
-                rc = s_real(v, f, &g->sample_rate_Hz, err);
-            else if (!strcmp(key, "label")) {
-                if (!json_is_integer(v) || json_integer_value(v) < -1 || json_integer_value(v) > 254)
-                    rc = s_err(err, f, "%s: want an integer from -1 to 254%s", f, "");
-                else
-                    g->label = (int)json_integer_value(v);
-            } else
-                rc = s_err(err, f, "%s: unknown key (known: kind, speed_m_per_s, distance_m, trigger, end, duration_s, "
-                           "mode, hold_force_N, feedback_s, amplitude_m, frequency_Hz, sample_rate_Hz, label)%s", f, "");
+            else if (!json_is_integer(v) || json_integer_value(v) < -1 || json_integer_value(v) > 254)
+                rc = s_err(err, f, "%s: want an integer from -1 to 254%s", f, ""); /* label */
+            else
+                g->label = (int)json_integer_value(v);
             if (rc)
                 break;
         }
