@@ -11,6 +11,7 @@
 #include <errno.h>
 #include <float.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -56,16 +57,27 @@ static const char *s_type_name(const json_t *v)
     }
 }
 
-static void s_fail(vafm_error *err, int code, const char *field, const char *path, const char *what)
+/* Fill err with code, field and "<path>: <reason>", the reason formatted from fmt (at most the message's size).
+ * @return code. */
+#if defined(__GNUC__)
+__attribute__((format(printf, 5, 6)))
+#endif
+static int s_fail(vafm_error *err, int code, const char *field, const char *path, const char *fmt, ...)
 {
     if (!err)
-        return;
+        return code;
+    char what[sizeof err->message];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(what, sizeof what, fmt, ap);
+    va_end(ap);
     err->code = code;
     snprintf(err->field, sizeof err->field, "%s", field);
     /* The file name is cut rather than the reason when the two do not fit. */
     int room = (int)sizeof err->message - (int)strlen(what) - 3;
     if (snprintf(err->message, sizeof err->message, "%.*s: %s", room > 16 ? room : 16, path, what) < 0)
         err->message[0] = '\0';
+    return code;
 }
 
 const char *vafm_scene_value_text(const vafm_param_info *info, const json_t *v, char *buf, size_t len)
@@ -123,27 +135,19 @@ void vafm_scene_json_allowed(const vafm_param_info *info, char *buf, size_t len)
 
 static int s_apply_key(vafm_params *p, const char *path, const char *key, const json_t *v, vafm_error *err)
 {
-    char what[sizeof err->message];
     const vafm_param_info *info = vafm_params_field_find(key);
-    if (!info) {
-        snprintf(what, sizeof what, "unknown key '%.64s' (not a parameter; see vafm --help)", key);
-        s_fail(err, VAFM_ENOTFOUND, key, path, what);
-        return VAFM_ENOTFOUND;
-    }
+    if (!info)
+        return s_fail(err, VAFM_ENOTFOUND, key, path, "unknown key '%.64s' (not a parameter; see vafm --help)", key);
     char text[256], allowed[160];
     if (!vafm_scene_value_text(info, v, text, sizeof text)) {
         vafm_scene_json_allowed(info, allowed, sizeof allowed);
-        snprintf(what, sizeof what, "key '%s' is %s, but must be %s", key, s_type_name(v), allowed);
-        s_fail(err, VAFM_EINVAL, key, path, what);
-        return VAFM_EINVAL;
+        return s_fail(err, VAFM_EINVAL, key, path, "key '%s' is %s, but must be %s", key, s_type_name(v), allowed);
     }
     vafm_error e;
     memset(&e, 0, sizeof e);
     int r = vafm_params_set(p, key, text, &e);
-    if (r) {
-        snprintf(what, sizeof what, "key '%s': %.200s", key, e.message);
-        s_fail(err, r, key, path, what);
-    }
+    if (r)
+        s_fail(err, r, key, path, "key '%s': %.200s", key, e.message);
     return r;
 }
 
@@ -153,21 +157,14 @@ static int s_apply_preset(vafm_params *p, const char *path, const json_t *root, 
     const json_t *v = json_object_get(root, "preset");
     if (!v)
         return 0;
-    char what[sizeof err->message];
-    if (!json_is_string(v)) {
-        snprintf(what, sizeof what, "key 'preset' is %s, but must be a preset name (see vafm presets)",
-                 s_type_name(v));
-        s_fail(err, VAFM_EINVAL, "preset", path, what);
-        return VAFM_EINVAL;
-    }
+    if (!json_is_string(v))
+        return s_fail(err, VAFM_EINVAL, "preset", path, "key 'preset' is %s, but must be a preset name (see vafm presets)",
+                      s_type_name(v));
     vafm_error e;
     memset(&e, 0, sizeof e);
     int r = vafm_preset_apply(p, json_string_value(v), &e);
-    if (r) {
-        snprintf(what, sizeof what, "key 'preset': %.200s", e.message);
-        s_fail(err, r, "preset", path, what);
-        return r;
-    }
+    if (r)
+        return s_fail(err, r, "preset", path, "key 'preset': %.200s", e.message);
     if (preset)
         snprintf(preset, preset_len, "%s", json_string_value(v));
     return 0;
@@ -177,13 +174,9 @@ static int s_apply_preset(vafm_params *p, const char *path, const json_t *root, 
 static int s_apply_root(vafm_params *p, const char *path, json_t *root, char *preset, size_t preset_len,
                         vafm_error *err)
 {
-    char what[sizeof err->message];
-    if (!json_is_object(root)) {
-        snprintf(what, sizeof what, "a scene file must hold one JSON object {\"name\": value, ...}, not %s",
-                 s_type_name(root));
-        s_fail(err, VAFM_EFORMAT, "scene", path, what);
-        return VAFM_EFORMAT;
-    }
+    if (!json_is_object(root))
+        return s_fail(err, VAFM_EFORMAT, "scene", path, "a scene file must hold one JSON object {\"name\": value, ...}, "
+                      "not %s", s_type_name(root));
     int r = s_apply_preset(p, path, root, preset, preset_len, err);
     const char *key;
     json_t *v;
@@ -200,19 +193,13 @@ int vafm_scene_load_file(vafm_params *p, const char *path, char *preset, size_t 
 {
     if (preset && preset_len)
         preset[0] = '\0';
-    char what[sizeof err->message];
     struct stat st;
-    if (stat(path, &st) == 0 && !S_ISREG(st.st_mode)) { /* a FIFO would block the read forever */
-        s_fail(err, VAFM_EIO, "scene", path,
-               S_ISDIR(st.st_mode) ? "is a directory, not a JSON scene file" : "is not a regular file (a FIFO, device or socket)");
-        return VAFM_EIO;
-    }
-    if (stat(path, &st) == 0 && (uintmax_t)st.st_size > VAFM_SCENE_MAX_FILE_BYTES) {
-        snprintf(what, sizeof what, "is %ju bytes, larger than a scene file can be (%u bytes)", (uintmax_t)st.st_size,
-                 VAFM_SCENE_MAX_FILE_BYTES);
-        s_fail(err, VAFM_EIO, "scene", path, what);
-        return VAFM_EIO;
-    }
+    if (stat(path, &st) == 0 && !S_ISREG(st.st_mode)) /* a FIFO would block the read forever */
+        return s_fail(err, VAFM_EIO, "scene", path, "%s", S_ISDIR(st.st_mode) ? "is a directory, not a JSON scene file"
+                                                         : "is not a regular file (a FIFO, device or socket)");
+    if (stat(path, &st) == 0 && (uintmax_t)st.st_size > VAFM_SCENE_MAX_FILE_BYTES)
+        return s_fail(err, VAFM_EIO, "scene", path, "is %ju bytes, larger than a scene file can be (%u bytes)",
+                      (uintmax_t)st.st_size, VAFM_SCENE_MAX_FILE_BYTES);
     /* read whole (bounded), so that the number literals can be checked as written */
     FILE *f = fopen(path, "rb");
     char *text = f ? malloc((size_t)VAFM_SCENE_MAX_FILE_BYTES + 1) : NULL;
@@ -222,20 +209,18 @@ int vafm_scene_load_file(vafm_params *p, const char *path, char *preset, size_t 
         fclose(f);
     if (bad || n > VAFM_SCENE_MAX_FILE_BYTES) {
         if (n > VAFM_SCENE_MAX_FILE_BYTES)
-            snprintf(what, sizeof what, "is larger than a scene file can be (%u bytes)", VAFM_SCENE_MAX_FILE_BYTES);
+            s_fail(err, VAFM_EIO, "scene", path, "is larger than a scene file can be (%u bytes)", VAFM_SCENE_MAX_FILE_BYTES);
         else
-            snprintf(what, sizeof what, "cannot read the scene file: %.200s", text || !f ? strerror(en) : "out of memory");
+            s_fail(err, VAFM_EIO, "scene", path, "cannot read the scene file: %.200s",
+                   text || !f ? strerror(en) : "out of memory");
         free(text);
-        s_fail(err, VAFM_EIO, "scene", path, what);
         return VAFM_EIO;
     }
     json_error_t je;
     json_t *root = json_loadb(text, n, JSON_REJECT_DUPLICATES, &je);
     if (!root) {
         free(text);
-        snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
-        s_fail(err, VAFM_EFORMAT, "scene", path, what);
-        return VAFM_EFORMAT;
+        return s_fail(err, VAFM_EFORMAT, "scene", path, "line %d, column %d: %.200s", je.line, je.column, je.text);
     }
     /* a nonzero number that underflows reads as 0 (or a subnormal): refused, as the CLI's and vafmd's */
     char key[64], lit[48];
@@ -244,9 +229,9 @@ int vafm_scene_load_file(vafm_params *p, const char *path, char *preset, size_t 
     int uf = vafm_rec_json_underflow(text, n, 0, key, sizeof key, lit, sizeof lit, &line, &x);
     free(text);
     if (uf) {
-        snprintf(what, sizeof what, "line %zu: %s%s%sthe number %s underflows: a nonzero value must be at least %.17g "
-                 "in magnitude (it would read as %g)", line, key, key[0] ? ": " : "", "", lit, DBL_MIN, x);
-        s_fail(err, VAFM_EINVAL, key[0] ? key : "scene", path, what);
+        s_fail(err, VAFM_EINVAL, key[0] ? key : "scene", path, "line %zu: %s%s%sthe number %s underflows: a nonzero "
+               "value must be at least %.17g in magnitude (it would read as %g)", line, key, key[0] ? ": " : "", "", lit,
+               DBL_MIN, x);
         json_decref(root);
         return VAFM_EINVAL;
     }
@@ -257,14 +242,10 @@ int vafm_scene_load_file(vafm_params *p, const char *path, char *preset, size_t 
 
 int vafm_scene_parse(vafm_params *p, const char *text, const char *origin, vafm_error *err)
 {
-    char what[sizeof err->message];
     json_error_t je;
     json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &je);
-    if (!root) {
-        snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
-        s_fail(err, VAFM_EFORMAT, "scene", origin, what);
-        return VAFM_EFORMAT;
-    }
+    if (!root)
+        return s_fail(err, VAFM_EFORMAT, "scene", origin, "line %d, column %d: %.200s", je.line, je.column, je.text);
     int r = s_apply_root(p, origin, root, NULL, 0, err);
     json_decref(root);
     return r;
@@ -304,15 +285,13 @@ static int s_grid_list(const json_t *root, const char *key, double **out, size_t
 int vafm_scene_grid_parse(const char *text, const char *origin, vafm_scene_grid *g, vafm_error *err)
 {
     memset(g, 0, sizeof *g);
-    char what[sizeof err->message];
     json_error_t je;
     json_t *root = json_loads(text, JSON_REJECT_DUPLICATES, &je);
     if (!root || !json_is_object(root)) {
         if (root)
-            snprintf(what, sizeof what, "the grid is %s, not a JSON object", s_type_name(root));
+            s_fail(err, VAFM_EFORMAT, "grid", origin, "the grid is %s, not a JSON object", s_type_name(root));
         else
-            snprintf(what, sizeof what, "line %d, column %d: %.200s", je.line, je.column, je.text);
-        s_fail(err, VAFM_EFORMAT, "grid", origin, what);
+            s_fail(err, VAFM_EFORMAT, "grid", origin, "line %d, column %d: %.200s", je.line, je.column, je.text);
         json_decref(root);
         return VAFM_EFORMAT;
     }
@@ -332,9 +311,8 @@ int vafm_scene_grid_parse(const char *text, const char *origin, vafm_scene_grid 
     }
     json_decref(root);
     if (bad) {
-        snprintf(what, sizeof what, "grid key '%s' is not %s", bad,
-                 strcmp(bad, "curves_per_point") ? "a list of numbers" : "an integer >= 1");
-        s_fail(err, VAFM_EFORMAT, bad, origin, what);
+        s_fail(err, VAFM_EFORMAT, bad, origin, "grid key '%s' is not %s", bad,
+               strcmp(bad, "curves_per_point") ? "a list of numbers" : "an integer >= 1");
         vafm_scene_grid_free(g);
         return VAFM_EFORMAT;
     }
@@ -356,8 +334,7 @@ int vafm_scene_from_h5(const vafm_h5_reader *r, const char *path, vafm_params *p
         memset(g, 0, sizeof *g);
     vafm_h5_provenance pv;
     if (!r || vafm_h5_reader_provenance(r, &pv) || !pv.is_vafm || !pv.scene_json) {
-        s_fail(err, VAFM_ENOTFOUND, "vafm scene", path ? path : "(file)", "records no vafm scene (not a vafm file)");
-        return VAFM_ENOTFOUND;
+        return s_fail(err, VAFM_ENOTFOUND, "vafm scene", path ? path : "(file)", "records no vafm scene (not a vafm file)");
     }
     char origin[1100];
     snprintf(origin, sizeof origin, "%s: 'vafm scene'", path ? path : "(file)");
