@@ -155,17 +155,27 @@ uint64_t vafm_client_gaps(const vafm_client *c)
     return c ? c->gaps : 0;
 }
 
+/* A table from the wire's words (error codes, topics) to this library's numbers. */
+typedef struct s_word {
+    const char *name;
+    int value;
+} s_word;
+
+/* The value of the n-byte word w in t[0..len), or dflt. */
+static int s_word_find(const s_word *t, size_t len, const void *w, size_t n, int dflt)
+{
+    for (size_t i = 0; i < len; i++)
+        if (strlen(t[i].name) == n && !memcmp(t[i].name, w, n))
+            return t[i].value;
+    return dflt;
+}
+
 static int s_map_code(const char *code)
 {
-    static const struct {
-        const char *name;
-        int rc;
-    } map[] = {{"not_found", VAFM_ENOTFOUND}, {"state", VAFM_ESTATE},         {"busy", VAFM_ESTATE},
-               {"not_implemented", VAFM_ENOTSUP}, {"internal", VAFM_EIO}};
-    for (size_t i = 0; i < sizeof map / sizeof map[0]; i++)
-        if (!strcmp(code, map[i].name))
-            return map[i].rc;
-    return VAFM_EINVAL; /* every other code names a bad request */
+    static const s_word map[] = { { "not_found", VAFM_ENOTFOUND }, { "state", VAFM_ESTATE }, { "busy", VAFM_ESTATE },
+                                  { "not_implemented", VAFM_ENOTSUP }, { "internal", VAFM_EIO } };
+    /* every other code names a bad request */
+    return s_word_find(map, sizeof map / sizeof map[0], code, strlen(code), VAFM_EINVAL);
 }
 
 /* Receive one whole message (all frames) into a malloc'ed NUL-terminated buffer of its first frame. */
@@ -437,14 +447,10 @@ int vafm_client_receive(vafm_client *c, vafm_client_msg *msg, int timeout_ms, va
     size_t tl = zmq_msg_size(&f[0]);
     snprintf(msg->topic, sizeof msg->topic, "%.*s", (int)(tl < sizeof msg->topic ? tl : sizeof msg->topic - 1),
              (const char *)zmq_msg_data(&f[0]));
-    static const struct {
-        const char *topic;
-        int kind;
-    } kinds[] = {{"data", VAFM_MSG_DATA},   {"run.start", VAFM_MSG_RUN_START}, {"run.end", VAFM_MSG_RUN_END},
-                 {"event", VAFM_MSG_EVENT}, {"heartbeat", VAFM_MSG_HEARTBEAT}};
-    for (size_t k = 0; k < sizeof kinds / sizeof kinds[0]; k++)
-        if (tl == strlen(kinds[k].topic) && !memcmp(zmq_msg_data(&f[0]), kinds[k].topic, tl))
-            msg->kind = kinds[k].kind;
+    static const s_word kinds[] = { { "data", VAFM_MSG_DATA },   { "run.start", VAFM_MSG_RUN_START },
+                                    { "run.end", VAFM_MSG_RUN_END }, { "event", VAFM_MSG_EVENT },
+                                    { "heartbeat", VAFM_MSG_HEARTBEAT } };
+    msg->kind = s_word_find(kinds, sizeof kinds / sizeof kinds[0], zmq_msg_data(&f[0]), tl, VAFM_MSG_OTHER);
     if (msg->kind == VAFM_MSG_OTHER) { /* a newer topic (campaign.end...): keep its body text, unparsed */
         if (nf >= 2 && (msg->json = malloc(zmq_msg_size(&f[1]) + 1)) != NULL) {
             memcpy(msg->json, zmq_msg_data(&f[1]), zmq_msg_size(&f[1]));
