@@ -29,8 +29,13 @@ typedef struct s_field {
     int choice;    /* enum s_choice for CHOICE fields */
 } s_field;
 
-#define REAL(name, unit, lo, hi, doc) \
-    { { #name, VAFM_PARAM_REAL, unit, lo, hi, NULL, doc }, offsetof(vafm_params, name), S_NONE }
+/* A field of vafm_params by its member name: its kind, unit, range (BOOL 0-1, CHOICE none) and doc. */
+#define S_FIELD(name, kind, unit, lo, hi, choices, sel, doc) \
+    { { #name, kind, unit, lo, hi, choices, doc }, offsetof(vafm_params, name), sel }
+#define REAL(name, unit, lo, hi, doc) S_FIELD(name, VAFM_PARAM_REAL, unit, lo, hi, NULL, S_NONE, doc)
+#define INT(name, unit, lo, hi, doc) S_FIELD(name, VAFM_PARAM_INT, unit, lo, hi, NULL, S_NONE, doc)
+#define BOOL(name, doc) S_FIELD(name, VAFM_PARAM_BOOL, "", 0, 1, NULL, S_NONE, doc)
+#define CHOICE(name, sel, choices, doc) S_FIELD(name, VAFM_PARAM_CHOICE, "", 0, 0, choices, sel, doc)
 
 static const s_field s_fields[] = {
     REAL(E_star_Pa, "Pa", 1e3, 1e13, "contact modulus E* of tip and sample"),
@@ -47,13 +52,11 @@ static const s_field s_fields[] = {
     REAL(v_approach_m_per_s, "m/s", 1e-12, 1e3, "piezo approach speed"),
     REAL(v_retract_m_per_s, "m/s", 1e-12, 1e3, "piezo retract speed"),
     REAL(start_height_m, "m", -1e-3, 1e-3, "piezo height at t = 0 above the contact point (negative: pressed in)"),
-    { { "start_in_contact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
-        "start with the tip in adhesive contact at equilibrium (a retract-only curve can then start anywhere "
-        "above the instability, e.g. with a height trigger just below start_height_m)" },
-      offsetof(vafm_params, start_in_contact), S_NONE },
-    { { "trigger", VAFM_PARAM_CHOICE, "", 0, 0, "force|height",
-        "what ends the approach: the filtered force reaching setpoint_N, or the piezo reaching trigger_height_m" },
-      offsetof(vafm_params, trigger), S_TRIGGER },
+    BOOL(start_in_contact,
+         "start with the tip in adhesive contact at equilibrium (a retract-only curve can then start anywhere "
+         "above the instability, e.g. with a height trigger just below start_height_m)"),
+    CHOICE(trigger, S_TRIGGER, "force|height",
+           "what ends the approach: the filtered force reaching setpoint_N, or the piezo reaching trigger_height_m"),
     REAL(setpoint_N, "N", 0, 1, "force trigger: repulsive force that ends the approach"),
     REAL(trigger_height_m, "m", -1e-3, 1e-3, "height trigger: piezo height that ends the approach"),
     REAL(z_range_m, "m", 0, 1e-2, "approach travel limit (0: automatic)"),
@@ -63,39 +66,33 @@ static const s_field s_fields[] = {
     REAL(ramp_size_m, "m", 0, 1e-3,
          "ramp size (z length) of a fixed symmetric ramp: the approach travels at most this far, the retract "
          "returns to the start height (0: adaptive ramp, ending retract_margin_m after the detachment)"),
-    { { "ramp_start", VAFM_PARAM_CHOICE, "", 0, 0, "surface|trigger",
-        "fixed ramp: start start_height_m above the surface, or ramp_size_m above the quasi-static trigger point" },
-      offsetof(vafm_params, ramp_start), S_RAMP_START },
+    CHOICE(ramp_start, S_RAMP_START, "surface|trigger",
+           "fixed ramp: start start_height_m above the surface, or ramp_size_m above the quasi-static trigger point"),
     REAL(ramp_rate_Hz, "Hz", 0, 1e6,
          "ramp rate: one approach and one retract of ramp_size_m per period, speeds 2*ramp_size*rate (0: speeds)"),
     REAL(extend_time_s, "s", 0, 1e5, "extend (approach) time of ramp_size_m: sets v_approach (0: the speed)"),
     REAL(retract_time_s, "s", 0, 1e5, "retract time of ramp_size_m: sets v_retract (0: the speed)"),
-    { { "segment_samples", VAFM_PARAM_INT, "samples", 0, 16777216, NULL,
-        "samples per approach of ramp_size_m: sets sample_rate_Hz (0: sample_rate_Hz)" },
-      offsetof(vafm_params, segment_samples), S_NONE },
-    { { "setpoint_mode", VAFM_PARAM_CHOICE, "", 0, 0, "absolute|relative",
-        "force trigger: absolute, or relative to the baseline of the approach's first 64 samples" },
-      offsetof(vafm_params, setpoint_mode), S_SETPOINT_MODE },
+    INT(segment_samples, "samples", 0, 16777216,
+        "samples per approach of ramp_size_m: sets sample_rate_Hz (0: sample_rate_Hz)"),
+    CHOICE(setpoint_mode, S_SETPOINT_MODE, "absolute|relative",
+           "force trigger: absolute, or relative to the baseline of the approach's first 64 samples"),
     REAL(setpoint_V, "V", 0, 100,
          "force trigger in volts of deflection signal: setpoint_N = k*InvOLS*V (absolute: V less "
          "baseline_offset_V) (0: setpoint_N)"),
-    { { "dwell_mode", VAFM_PARAM_CHOICE, "", 0, 0, "height|force",
-        "dwell at constant height (piezo still) or constant force (feedback on the deflection)" },
-      offsetof(vafm_params, dwell_mode), S_DWELL_MODE },
+    CHOICE(dwell_mode, S_DWELL_MODE, "height|force",
+           "dwell at constant height (piezo still) or constant force (feedback on the deflection)"),
     REAL(dwell_feedback_s, "s", 0, 1e3,
          "constant-force dwell: time constant of the feedback loop (0: 10 sample intervals; else >= 2)"),
     REAL(sample_rate_Hz, "Hz", 1e-3, 1e10, "output sample rate"),
-    { { "antialias", VAFM_PARAM_CHOICE, "", 0, 0, "mean|point",
-        "output samples: mean over the sample interval (box-car anti-alias) or point samples" },
-      offsetof(vafm_params, antialias), S_ANTIALIAS },
+    CHOICE(antialias, S_ANTIALIAS, "mean|point",
+           "output samples: mean over the sample interval (box-car anti-alias) or point samples"),
     REAL(tune_duration_s, "s", 0, 1e5, "thermal tune: recorded duration"),
     REAL(tune_rate_Hz, "Hz", 0, 1e10,
          "thermal tune: sample rate (0: automatic: sample_rate_Hz, raised to the first 1-2-5 value >= 4 f0 so the "
          "resonance shows)"),
     { { "integrator", VAFM_PARAM_CHOICE, "", 0, 0, VAFM_INTEGRATOR_CHOICES, VAFM_INTEGRATOR_DOC }, 0, S_INTEGRATOR },
-    { { "noise", VAFM_PARAM_CHOICE, "", 0, 0, "gaussian|uniform",
-        "random force distribution: gaussian, or uniform of matched variance (the paper's Eq. 7)" },
-      offsetof(vafm_params, noise), S_NOISE },
+    CHOICE(noise, S_NOISE, "gaussian|uniform",
+           "random force distribution: gaussian, or uniform of matched variance (the paper's Eq. 7)"),
     REAL(dt_s, "s", 0, 1,
          "time step (0: automatic from omega_dt, as the paper's Eq. 8); rounded down to a whole fraction of the "
          "sample interval"),
@@ -108,23 +105,17 @@ static const s_field s_fields[] = {
     REAL(near_barrier_kT, "", 1, 1e6,
          "adaptive step: the spring is near the instability when the quasi-static barrier is below this many "
          "k_BT (or within 10% of the quasi-static pull-off force)"),
-    { { "free_exact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
-        "propagate the free cantilever exactly (linear SDE) instead of plain steps" },
-      offsetof(vafm_params, free_exact), S_NONE },
-    { { "contact_table", VAFM_PARAM_BOOL, "", 0, 1, NULL,
-        "tabulate the JKR branch for the step (relative error < 1e-13) instead of a Newton solve per step" },
-      offsetof(vafm_params, contact_table), S_NONE },
-    { { "well_exact", VAFM_PARAM_BOOL, "", 0, 1, NULL,
-        "far from the pull-off instability, propagate the deep contact well exactly (linearised about the "
-        "moving equilibrium, one step per sample) instead of integrator steps" },
-      offsetof(vafm_params, well_exact), S_NONE },
-    { { "seed", VAFM_PARAM_SEED, "", 0, 18446744073709551615.0, NULL,
-        "random seed: (seed, curve index) reproduces a curve bit for bit" },
-      offsetof(vafm_params, seed), S_NONE },
+    BOOL(free_exact, "propagate the free cantilever exactly (linear SDE) instead of plain steps"),
+    BOOL(contact_table,
+         "tabulate the JKR branch for the step (relative error < 1e-13) instead of a Newton solve per step"),
+    BOOL(well_exact,
+         "far from the pull-off instability, propagate the deep contact well exactly (linearised about the "
+         "moving equilibrium, one step per sample) instead of integrator steps"),
+    S_FIELD(seed, VAFM_PARAM_SEED, "", 0, 18446744073709551615.0, NULL, S_NONE,
+            "random seed: (seed, curve index) reproduces a curve bit for bit"),
     REAL(sensitivity_m_per_V, "m/V", 1e-12, 1e-3, "deflection sensitivity (InvOLS): vDeflection = deflection / it"),
     REAL(noise_V_rms, "V", 0, 10, "detector: white noise floor of the deflection signal (0: none)"),
-    { { "adc_bits", VAFM_PARAM_INT, "bits", 0, 24, NULL, "detector: ADC resolution (0: no ADC, else 4-24)" },
-      offsetof(vafm_params, adc_bits), S_NONE },
+    INT(adc_bits, "bits", 0, 24, "detector: ADC resolution (0: no ADC, else 4-24)"),
     REAL(adc_range_V, "V", 1e-3, 100, "detector: ADC full range, peak to peak (codes saturate beyond it)"),
     REAL(baseline_offset_V, "V", -100, 100, "detector: offset of the deflection signal"),
     REAL(drift_V_per_s, "V/s", -100, 100, "artefact: linear drift of the deflection signal's baseline"),
