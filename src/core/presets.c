@@ -46,18 +46,24 @@ static void s_common(vafm_params *p)
     p->mains_Hz = 50.0;
 }
 
+/* A paper scene: its reduced values r in SI on the frame E*, R and m = 1e-12 kg. */
+static void s_paper(vafm_params *p, double E_star_Pa, double R_m, const vafm_reduced *r)
+{
+    s_common(p);
+    p->E_star_Pa = E_star_Pa;
+    p->R_m = R_m;
+    p->m_kg = 1e-12;
+    vafm_units_from_reduced(p, r);
+}
+
 /* The paper's Fig. 1/2 scene: m̃ = 5e-5, ṽ = 1e-4, k̃ = 2e-5, k_BT̃ = 5e-8, γ̃ = 1.2e-4 with
  * E* = 20 GPa, R = 15.7 nm, m = 1e-12 kg (k = 6.28 mN/m, v = 196 nm/s, T ≈ 280 K; the paper rounds
  * to 6.3 mN/m and quotes 288.4 K: reduced values are kept exact here). */
 static void s_fill_fig1(vafm_params *p)
 {
-    s_common(p);
-    p->E_star_Pa = 20e9;
-    p->R_m = 15.7e-9;
-    p->m_kg = 1e-12;
-    vafm_reduced r = { .m = 5e-5, .k = 2e-5, .kT = 5e-8, .gamma = 1.2e-4,
-                       .v_approach = 1e-4, .v_retract = 1e-4 };
-    vafm_units_from_reduced(p, &r);
+    const vafm_reduced r = { .m = 5e-5, .k = 2e-5, .kT = 5e-8, .gamma = 1.2e-4,
+                             .v_approach = 1e-4, .v_retract = 1e-4 };
+    s_paper(p, 20e9, 15.7e-9, &r);
     p->start_height_m = 20e-9;
     p->setpoint_N = 1e-9;
     p->trigger_height_m = -100e-9;
@@ -70,13 +76,9 @@ static void s_fill_fig1(vafm_params *p)
  * with E* = 1 GPa, R = 16 nm, m = 1e-12 kg (so ṽ = 1e-5 … 0.5 maps to 64 nm/s … 3.2 mm/s). */
 static void s_fill_fig4(vafm_params *p)
 {
-    s_common(p);
-    p->E_star_Pa = 1e9;
-    p->R_m = 16e-9;
-    p->m_kg = 1e-12;
-    vafm_reduced r = { .m = 0.01, .k = 0.1, .kT = 0.01, .gamma = 0.229,
-                       .v_approach = 1e-3, .v_retract = 1e-3 };
-    vafm_units_from_reduced(p, &r);
+    const vafm_reduced r = { .m = 0.01, .k = 0.1, .kT = 0.01, .gamma = 0.229,
+                             .v_approach = 1e-3, .v_retract = 1e-3 };
+    s_paper(p, 1e9, 16e-9, &r);
     const vafm_scale sc = vafm_units_scale(p);
     p->start_height_m = vafm_scale_length_si(&sc, 2.0);
     p->setpoint_N = vafm_scale_force_si(&sc, 0.5 * (3.0 * M_PI * r.gamma / 2.0));
