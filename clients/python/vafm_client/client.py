@@ -70,7 +70,30 @@ def _apply_curve(sock, curve):
 _IDEMPOTENT = {"hello", "get", "status", "presets"}
 
 
-class Client:
+class _Endpoint:
+    """A socket of ours (`sock`) on a ZeroMQ context, the caller's or our own; a context manager. close()
+    closes the socket and terminates the context if it is ours."""
+
+    def __init__(self, context):
+        self._own_ctx = context is None
+        self.ctx = context or zmq.Context()
+        self.sock = None
+
+    def close(self):
+        if self.sock is not None:
+            self.sock.close(0)
+            self.sock = None
+        if self._own_ctx:
+            self.ctx.term()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class Client(_Endpoint):
     """Commands over a REQ socket. Every method returns the reply dict or raises DaemonError/TransportError.
 
     Lazy pirate: a lost reply (no reply within `timeout`) closes and reopens the REQ socket and resends the
@@ -87,9 +110,7 @@ class Client:
         self.busy_retries = busy_retries
         self.log = []  # (time.monotonic(), text) of every timeout, reopen and retry
         self._run_ids = 0
-        self._own_ctx = context is None
-        self.ctx = context or zmq.Context()
-        self.sock = None
+        super().__init__(context)
         self._open()
 
     def _open(self):
@@ -99,19 +120,6 @@ class Client:
         self.sock.setsockopt(zmq.LINGER, 0)
         _apply_curve(self.sock, self._curve_keys)
         self.sock.connect(self.endpoint)
-
-    def close(self):
-        if self.sock is not None:
-            self.sock.close(0)
-            self.sock = None
-        if self._own_ctx:
-            self.ctx.term()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
     @staticmethod
     def idempotent(obj):
@@ -341,7 +349,7 @@ class Run:
             self.time_s = (np.arange(n) + off) / fs
 
 
-class Stream:
+class Stream(_Endpoint):
     """The sample stream over a SUB socket. Subscribes at construction and waits for the daemon's greeting
     heartbeat, so a run started afterwards is seen from its first message. Counts lost data blocks (gaps in
     seq) in `gaps`."""
@@ -354,8 +362,7 @@ class Stream:
         self.endpoint, self.timeout, self.stall_s, self.live = endpoint, timeout, stall_s, live
         self.session = None  # the publisher's session (heartbeats, data headers): a change is a restart
         self.reports = []    # detected faults: dicts with "kind" gap|truncated|restart|stall|dropout|saturate
-        self._own_ctx = context is None
-        self.ctx = context or zmq.Context()
+        super().__init__(context)
         self.sock = self.ctx.socket(zmq.SUB)
         self.sock.setsockopt(zmq.LINGER, 0)
         if rcvhwm is not None:
@@ -374,17 +381,6 @@ class Stream:
         except BaseException:
             self.close()
             raise
-
-    def close(self):
-        self.sock.close(0)
-        if self._own_ctx:
-            self.ctx.term()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
     def _session(self, new):
         """A session seen (heartbeat, data header): None, or the restart it reveals (also reported)."""
