@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 from vafm_client import Stream, load_h5  # noqa: E402
-from vafm_client.spawn import add_endpoint_args, connect, plt_agg  # noqa: E402
+from vafm_client.spawn import add_endpoint_args, connect, plt_agg, save_png  # noqa: E402
 
 OBSERVABLES = (  # run.end result keys: what each means (physics notes, "what pull-off force means")
     ("pulloff_sampled_N", "N", "most tensile output sample of the retract (what an AFM user reads)"),
@@ -142,9 +142,7 @@ def main(argv=None):
     ax.legend(fontsize=8)
     axt.set_xlabel("time (ms)")
     axt.set_title("the same samples in time: approach, then retract", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    print(f"PNG: {png}")
+    save_png(fig, png)
     return 1 if failed else 0
 
 

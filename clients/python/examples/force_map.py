@@ -25,6 +25,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 from vafm_client import load_h5  # noqa: E402
+from vafm_client.spawn import plt_agg, save_png  # noqa: E402
 
 
 def hertz_fit(tip, force, R):
@@ -106,9 +107,7 @@ def main(argv=None):
         with open(a.json, "w") as fh:
             json.dump({"nx": nx, "ny": ny, "materials": summary}, fh, indent=1)
 
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plt_agg()
     ext = [v * 1e6 for v in f.map_extent]
     rows = [("modulus E*, kPa", E_true, E_rec, 1e-3), ("adhesion (pull-off), nN", F_true, F_rec, 1e9),
             ("surface height, nm", h_true, z_rec, 1e9)]
@@ -127,9 +126,7 @@ def main(argv=None):
             fig.colorbar(im, ax=ax, shrink=0.8)
     spec = f.map_spec or {}
     fig.suptitle(f"{os.path.basename(a.file)}: {nx} x {ny} pixels, pattern {spec.get('pattern', '?')}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(a.png, dpi=90)
-    print(f"PNG: {a.png}")
+    save_png(fig, a.png, dpi=90)
     return 0
 
 

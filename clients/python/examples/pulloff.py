@@ -17,6 +17,7 @@ import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 from vafm_client import Client, Stream  # noqa: E402
+from vafm_client.spawn import plt_agg, save_png  # noqa: E402
 
 
 def main(argv=None):
@@ -61,9 +62,7 @@ def main(argv=None):
               f"max = {v.max() * 1e9:.4f} nN")
     if a.png:
         try:
-            import matplotlib
-            matplotlib.use("Agg")  # no display needed
-            import matplotlib.pyplot as plt
+            plt = plt_agg()
         except ImportError:
             print("matplotlib not available (Debian: python3-matplotlib): no figure", file=sys.stderr)
             return 0
@@ -78,9 +77,7 @@ def main(argv=None):
         ax2.hist(np.array(spring) * 1e9, bins=max(5, int(math.sqrt(len(spring)))))
         ax2.set_xlabel("pull-off force (nN, spring)")
         ax2.set_ylabel("curves")
-        fig.tight_layout()
-        fig.savefig(a.png, dpi=100)
-        print(f"figure written to {a.png}")
+        save_png(fig, a.png, dpi=100, say="figure written to {}")
     return 0
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 from vafm_client import DaemonError, Stream  # noqa: E402
-from vafm_client.spawn import add_endpoint_args, connect, plt_agg  # noqa: E402
+from vafm_client.spawn import add_endpoint_args, connect, plt_agg, save_png  # noqa: E402
 
 
 def floats(text):
@@ -203,9 +203,7 @@ def main(argv=None):
     ax.set_ylabel("probability density")
     ax.set_title("pull-off force distribution (cf. the paper's Fig. 3)")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(a.png, dpi=110)
-    print(f"PNG: {os.path.abspath(a.png)}")
+    save_png(fig, os.path.abspath(a.png))
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(results, fh, indent=1)

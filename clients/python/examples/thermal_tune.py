@@ -28,7 +28,7 @@ import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 from vafm_client import Stream  # noqa: E402
-from vafm_client.spawn import add_endpoint_args, connect, plt_agg  # noqa: E402
+from vafm_client.spawn import add_endpoint_args, connect, plt_agg, save_png  # noqa: E402
 from vafm_client.tune import K_B, fit_tune, sampled_psd, sho_psd  # noqa: E402  (the fit, shared with vafm web)
 
 
@@ -95,9 +95,7 @@ def main(argv=None):
     ax.set_ylabel("PSD (m²/Hz)")
     ax.set_title(f"thermal tune: k relative error {fit['k'] / k_cfg - 1:+.2%}")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(a.png, dpi=110)
-    print(f"PNG: {os.path.abspath(a.png)}")
+    save_png(fig, os.path.abspath(a.png))
     return 0
 
 

@@ -115,3 +115,10 @@ def plt_agg():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def save_png(fig, path, dpi=110, say="PNG: {}"):
+    """Lay the figure out, write it to path and print where (say, formatted with the path)."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    print(say.format(path))
