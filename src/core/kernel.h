@@ -139,6 +139,19 @@ static inline void s_khot_store(vafm_kernel *K, const vafm_khot *h, long steps)
     K->steps += (uint64_t)steps;
 }
 
+/** The end of every step, given the spring force fs = k(u_spr − u) at the new position: the force on the
+ *  body, the output sample's accumulators, the most tensile spring force and the count of contact steps. */
+static inline void s_khot_account(vafm_khot *h, double fs)
+{
+    h->f = fs - h->Fc;
+    h->acc_u += h->u;
+    h->acc_uspr += h->u_spr;
+    h->acc_n++;
+    if (fs < h->fs_min)
+        h->fs_min = fs;
+    h->steps_contact += (uint64_t)h->in_contact;
+}
+
 /** The tail of every step, on the loop's local hot state. */
 static inline void s_khot_post_move(const vafm_kernel *K, const vafm_jkr_table *jtab, vafm_khot *h)
 {
@@ -166,14 +179,7 @@ static inline void s_khot_post_move(const vafm_kernel *K, const vafm_jkr_table *
         else
             h->Fc = K->cforce(&K->contact, h->u, &h->s, NULL);
     }
-    const double fs = VAFM_SPRING_FORCE(K->k, h->u_spr, h->u);
-    h->f = fs - h->Fc;
-    h->acc_u += h->u;
-    h->acc_uspr += h->u_spr;
-    h->acc_n++;
-    if (fs < h->fs_min)
-        h->fs_min = fs;
-    h->steps_contact += (uint64_t)h->in_contact;
+    s_khot_account(h, VAFM_SPRING_FORCE(K->k, h->u_spr, h->u));
 }
 
 /* ---- per-state step loops ----------------------------------------------------------------------
@@ -327,14 +333,7 @@ static VAFM_KALWAYS void s_khot_post_move_k(const vafm_kernel *K, const vafm_kin
     } else {
         h->Fc = 0.0;
     }
-    const double fs = VAFM_SPRING_FORCE(v->k, h->u_spr, h->u);
-    h->f = fs - h->Fc;
-    h->acc_u += h->u;
-    h->acc_uspr += h->u_spr;
-    h->acc_n++;
-    if (fs < h->fs_min)
-        h->fs_min = fs;
-    h->steps_contact += (uint64_t)h->in_contact;
+    s_khot_account(h, VAFM_SPRING_FORCE(v->k, h->u_spr, h->u));
 }
 
 /** Set the step-size dependent coefficients of both contact states. */
