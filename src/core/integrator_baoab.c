@@ -23,46 +23,35 @@ static void s_prepare(vafm_kernel *K)
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
 }
 
-/* The step loop of one contact state (kind: VAFM_KLOOP_*, a constant); c holds that state's coefficients. */
-static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
+/* The constants of a run in one contact state; c holds that state's coefficients. */
+typedef struct s_consts {
+    double half_dt, half_dt_m, vref;
+    int thermal;
+    vafm_kcoef c;
+} s_consts;
+
+static VAFM_KALWAYS s_consts s_consts_load(const vafm_kernel *K)
 {
-    const double dt = K->dt, half_dt = 0.5 * dt, half_dt_m = 0.5 * dt / K->m;
-    const int thermal = K->thermal;
     const vafm_kcoef c = K->co[K->in_contact];
-    const double vref = K->v_spr / c.eta_tot;
-    vafm_kinv v;
-    s_kinv_load(K, &v);
-    vafm_khot h;
-    s_khot_load(K, &h);
-    long i = 0;
-    while (i < n) {
-        h.w += half_dt_m * h.f;
-        h.u += half_dt * h.w;
-        h.w = vref + c.ou_c1 * (h.w - vref);
-        if (thermal)
-            h.w += c.ou_c3 * s_kernel_noise(K);
-        h.u += half_dt * h.w;
-        s_khot_post_move_k(K, &v, &h, kind);
-        h.w += half_dt_m * h.f;
-        i++;
-        if (h.event)
-            break;
-    }
-    s_khot_store(K, &h, i);
-    return i;
+    return (s_consts){ .half_dt = 0.5 * K->dt, .half_dt_m = 0.5 * K->dt / K->m, .vref = K->v_spr / c.eta_tot,
+    .thermal = K->thermal, .c = c };
 }
 
-VAFM_KERNEL_RUN_PER_LOOP(s_loop)
+static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_kinv *v, vafm_khot *h, const int kind)
+{
+    h->w += q->half_dt_m * h->f;
+    h->u += q->half_dt * h->w;
+    h->w = q->vref + q->c.ou_c1 * (h->w - q->vref);
+    if (q->thermal)
+        h->w += q->c.ou_c3 * s_kernel_noise(K);
+    h->u += q->half_dt * h->w;
+    s_khot_post_move_k(K, v, h, kind);
+    h->w += q->half_dt_m * h->f;
+}
 
-static const vafm_integrator_type s_type = {
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_baoab,
     .name = "baoab",
     .description = "BAOAB splitting (Leimkuhler & Matthews 2013): exact harmonic <x^2> for omega*dt < 2",
     .overdamped = 0,
     .stability_limit = 2.0,
-    .prepare = s_prepare,
-    .run = s_run,
-    .set_dt = s_set_dt,
-    .batch_lanes = 0,
-};
-
-const vafm_integrator_type *const vafm_integrator_baoab = &s_type;
+    .batch_lanes = 0)

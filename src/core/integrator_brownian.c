@@ -20,43 +20,32 @@ static void s_prepare(vafm_kernel *K)
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
 }
 
-/* The step loop of one contact state (kind: VAFM_KLOOP_*, a constant); c holds that state's coefficients. */
-static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
+/* The constants of a run in one contact state; c holds that state's coefficients. */
+typedef struct s_consts {
+    double dt, inv_dt, drift;
+    int thermal;
+    vafm_kcoef c;
+} s_consts;
+
+static VAFM_KALWAYS s_consts s_consts_load(const vafm_kernel *K)
 {
-    const double dt = K->dt, inv_dt = 1.0 / dt, drift = K->m * K->v_spr;
-    const int thermal = K->thermal;
-    const vafm_kcoef c = K->co[K->in_contact];
-    vafm_kinv v;
-    s_kinv_load(K, &v);
-    vafm_khot h;
-    s_khot_load(K, &h);
-    long i = 0;
-    while (i < n) {
-        double du = dt / c.zeta * (h.f + drift);
-        if (thermal)
-            du += c.bd_sig * s_kernel_noise(K);
-        h.u += du;
-        h.w = du * inv_dt;
-        s_khot_post_move_k(K, &v, &h, kind);
-        i++;
-        if (h.event)
-            break;
-    }
-    s_khot_store(K, &h, i);
-    return i;
+    return (s_consts){ .dt = K->dt, .inv_dt = 1.0 / K->dt, .drift = K->m * K->v_spr, .thermal = K->thermal,
+    .c = K->co[K->in_contact] };
 }
 
-VAFM_KERNEL_RUN_PER_LOOP(s_loop)
+static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_kinv *v, vafm_khot *h, const int kind)
+{
+    double du = q->dt / q->c.zeta * (h->f + q->drift);
+    if (q->thermal)
+        du += q->c.bd_sig * s_kernel_noise(K);
+    h->u += du;
+    h->w = du * q->inv_dt;
+    s_khot_post_move_k(K, v, h, kind);
+}
 
-static const vafm_integrator_type s_type = {
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_brownian,
     .name = "brownian",
     .description = "overdamped Euler-Maruyama (the paper's Eq. 12): friction zeta = m*eta only",
     .overdamped = 1,
     .stability_limit = 2.0,
-    .prepare = s_prepare,
-    .run = s_run,
-    .set_dt = s_set_dt,
-    .batch_lanes = 0,
-};
-
-const vafm_integrator_type *const vafm_integrator_brownian = &s_type;
+    .batch_lanes = 0)

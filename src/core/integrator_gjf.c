@@ -26,43 +26,32 @@ static void s_prepare(vafm_kernel *K)
     K->f = K->k * (K->u_spr - K->u) - K->Fc;
 }
 
-/* The step loop of one contact state (kind: VAFM_KLOOP_*, a constant); c holds that state's coefficients. */
-static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
+/* The constants of a run in one contact state; c holds that state's coefficients. */
+typedef struct s_consts {
+    double dt, half_dt_m, inv_m, drift;
+    int thermal;
+    vafm_kcoef c;
+} s_consts;
+
+static VAFM_KALWAYS s_consts s_consts_load(const vafm_kernel *K)
 {
-    const double dt = K->dt, half_dt_m = 0.5 * dt / K->m, inv_m = 1.0 / K->m;
-    const double drift = K->m * K->v_spr;
-    const int thermal = K->thermal;
-    const vafm_kcoef c = K->co[K->in_contact];
-    vafm_kinv v;
-    s_kinv_load(K, &v);
-    vafm_khot h;
-    s_khot_load(K, &h);
-    long i = 0;
-    while (i < n) {
-        const double f = h.f + drift;
-        const double beta = thermal ? c.gjf_sig * s_kernel_noise(K) : 0.0;
-        h.u = VAFM_GJF_MOVE(h.u, h.w, f, beta, c.gjf_b, dt, half_dt_m * dt, half_dt_m); /* core/gjf_step.h */
-        s_khot_post_move_k(K, &v, &h, kind);
-        h.w = VAFM_GJF_KICK(h.w, f, h.f, beta, c.gjf_a, half_dt_m, drift, c.gjf_b * inv_m);
-        i++;
-        if (h.event)
-            break;
-    }
-    s_khot_store(K, &h, i);
-    return i;
+    return (s_consts){ .dt = K->dt, .half_dt_m = 0.5 * K->dt / K->m, .inv_m = 1.0 / K->m, .drift = K->m * K->v_spr,
+    .thermal = K->thermal, .c = K->co[K->in_contact] };
 }
 
-VAFM_KERNEL_RUN_PER_LOOP(s_loop)
+static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_kinv *v, vafm_khot *h, const int kind)
+{
+    const vafm_kcoef *c = &q->c;
+    const double f = h->f + q->drift;
+    const double beta = q->thermal ? c->gjf_sig * s_kernel_noise(K) : 0.0;
+    h->u = VAFM_GJF_MOVE(h->u, h->w, f, beta, c->gjf_b, q->dt, q->half_dt_m * q->dt, q->half_dt_m); /* core/gjf_step.h */
+    s_khot_post_move_k(K, v, h, kind);
+    h->w = VAFM_GJF_KICK(h->w, f, h->f, beta, c->gjf_a, q->half_dt_m, q->drift, c->gjf_b * q->inv_m);
+}
 
-static const vafm_integrator_type s_type = {
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_gjf,
     .name = "gjf",
     .description = "Gronbech-Jensen & Farago 2013 Langevin (default): exact harmonic <x^2> for omega*dt < 2",
     .overdamped = 0,
     .stability_limit = 2.0,
-    .prepare = s_prepare,
-    .run = s_run,
-    .set_dt = s_set_dt,
-    .batch_lanes = 8, /* batch.c: AVX-512 8, AVX2 4 lanes */
-};
-
-const vafm_integrator_type *const vafm_integrator_gjf = &s_type;
+    .batch_lanes = 8) /* batch.c: AVX-512 8, AVX2 4 lanes */

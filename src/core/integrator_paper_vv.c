@@ -33,53 +33,42 @@ static void s_prepare(vafm_kernel *K)
     K->f = s_total(K, &K->co[K->in_contact], f, K->w);
 }
 
-/* The step loop of one contact state (kind: VAFM_KLOOP_*, a constant). The total force after a step is
- * built with the coefficients of the state after it (c, or on a contact change the new state's). */
-static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)
+/* The constants of a run in one contact state; c holds that state's coefficients. */
+typedef struct s_consts {
+    double dt, half_dt_m, drift;
+    int thermal;
+    vafm_kcoef c;
+} s_consts;
+
+static VAFM_KALWAYS s_consts s_consts_load(const vafm_kernel *K)
 {
-    const double dt = K->dt, half_dt_m = 0.5 * dt / K->m;
-    const double drift = K->m * K->v_spr;
-    const int thermal = K->thermal;
-    const vafm_kcoef c = K->co[K->in_contact];
-    vafm_kinv v;
-    s_kinv_load(K, &v);
-    vafm_khot h;
-    s_khot_load(K, &h);
-    long i = 0;
-    while (i < n) {
-        h.w += half_dt_m * h.f; /* h.f holds the total force of the last evaluation */
-        h.u += dt * h.w;
-        s_khot_post_move_k(K, &v, &h, kind);
-        if (h.event) {
-            h.f = s_total(K, &K->co[h.in_contact], h.f, h.w);
-            h.w += half_dt_m * h.f;
-            i++;
-            break;
-        }
-        /* s_total() on the loop's constants */
-        double ft = h.f - c.zeta * h.w + drift;
-        if (thermal)
-            ft += c.vv_sig * s_kernel_noise(K);
-        h.f = ft;
-        h.w += half_dt_m * h.f;
-        i++;
-    }
-    s_khot_store(K, &h, i);
-    return i;
+    return (s_consts){ .dt = K->dt, .half_dt_m = 0.5 * K->dt / K->m, .drift = K->m * K->v_spr,
+    .thermal = K->thermal, .c = K->co[K->in_contact] };
 }
 
-VAFM_KERNEL_RUN_PER_LOOP(s_loop)
+/* One step. The total force after it is built with the coefficients of the state after it (c, or on a
+ * contact change the new state's). */
+static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_kinv *v, vafm_khot *h, const int kind)
+{
+    h->w += q->half_dt_m * h->f; /* h->f holds the total force of the last evaluation */
+    h->u += q->dt * h->w;
+    s_khot_post_move_k(K, v, h, kind);
+    if (h->event) {
+        h->f = s_total(K, &K->co[h->in_contact], h->f, h->w);
+    } else {
+        /* s_total() on the loop's constants */
+        double ft = h->f - q->c.zeta * h->w + q->drift;
+        if (q->thermal)
+            ft += q->c.vv_sig * s_kernel_noise(K);
+        h->f = ft;
+    }
+    h->w += q->half_dt_m * h->f;
+}
 
-static const vafm_integrator_type s_type = {
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_paper_vv,
     .name = "paper-vv",
     .description = "the paper's velocity Verlet with per-step random force (Eq. 7 with noise=uniform); reference",
     .overdamped = 0,
     .stability_limit = 2.0,
-    .prepare = s_prepare,
-    .run = s_run,
-    .set_dt = s_set_dt,
     .batch_lanes = 0,
-    .eta_dt_limit = 2.0, /* its velocity half-kicks by (1 − η dt/2) change sign beyond */
-};
-
-const vafm_integrator_type *const vafm_integrator_paper_vv = &s_type;
+    .eta_dt_limit = 2.0) /* its velocity half-kicks by (1 − η dt/2) change sign beyond */

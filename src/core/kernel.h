@@ -336,6 +336,36 @@ static VAFM_KALWAYS void s_khot_post_move_k(const vafm_kernel *K, const vafm_kin
     s_khot_account(h, VAFM_SPRING_FORCE(v->k, h->u_spr, h->u));
 }
 
+/* A kernel integrator's step loop, run() and type, from what its file defines:
+ *   s_consts, s_consts_load(K)  the step's constants in the contact state a run starts in (copied into a
+ *                               local once a run, so that they stay in registers);
+ *   s_step(K, &q, &v, &h, kind) one step: moves h->u and h->w and calls s_khot_post_move_k() once;
+ *   s_prepare, s_set_dt         as in vafm_integrator_type.
+ * The loop runs at most n steps and ends after a step with a contact event; the hot state lives in a local
+ * and is stored back after. `var` is the type, with the designated initializers given (name, description, ...). */
+#define VAFM_KERNEL_INTEGRATOR(var, ...)                                                                           \
+    static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)                                      \
+    {                                                                                                            \
+        const s_consts q = s_consts_load(K);                                                                     \
+        vafm_kinv v;                                                                                             \
+        s_kinv_load(K, &v);                                                                                      \
+        vafm_khot h;                                                                                             \
+        s_khot_load(K, &h);                                                                                      \
+        long i = 0;                                                                                              \
+        while (i < n) {                                                                                          \
+            s_step(K, &q, &v, &h, kind);                                                                         \
+            i++;                                                                                                 \
+            if (h.event)                                                                                         \
+                break;                                                                                           \
+        }                                                                                                        \
+        s_khot_store(K, &h, i);                                                                                  \
+        return i;                                                                                                \
+    }                                                                                                            \
+    VAFM_KERNEL_RUN_PER_LOOP(s_loop)                                                                             \
+    static const vafm_integrator_type s_type = { .prepare = s_prepare, .run = s_run, .set_dt = s_set_dt,         \
+                                                 __VA_ARGS__ };                                                  \
+    const vafm_integrator_type *const var = &s_type;
+
 /** Set the step-size dependent coefficients of both contact states. */
 void vafm_kernel_set_dt(vafm_kernel *K, double dt);
 
