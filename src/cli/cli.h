@@ -166,6 +166,11 @@ int vafm_cli_parse_list(const char *opt, const char *field, const char *text, do
 double vafm_cli_grid_points(const vafm_campaign_spec *spec);
 int vafm_cli_report(const vafm_error *err, int code);
 int vafm_cli_resolve_scene(const vafm_cli_args *a, vafm_cli_scene *sc, int validate);
+
+/** A command that may run on MPI (vafm campaign, vafm map): start MPI under an MPI launcher or with --mpi
+ *  (plain runs never touch it), run body(a, mpi) (mpi NULL in a single process), finish MPI. @return the
+ *  exit status: body's, or vafm_cli_mpi_begin's when MPI could not start. */
+int vafm_cli_with_mpi(const vafm_cli_args *a, int (*body)(const vafm_cli_args *a, vafm_cli_mpi *mpi));
 void vafm_cli_print_provenance(FILE *o, const vafm_cli_scene *sc);
 void vafm_cli_progress_init(vafm_cli_progress *pg, const vafm_cli_args *a);
 int vafm_cli_progress_due(vafm_cli_progress *pg);

@@ -936,3 +936,13 @@ int vafm_cli_print_map(FILE *o, vafm_h5_reader *r)
     free(hgt);
     return 1;
 }
+
+/* MPI starts only under an MPI launcher or with --mpi: a plain `vafm campaign` or `vafm map` never touches it. */
+int vafm_cli_with_mpi(const vafm_cli_args *a, int (*body)(const vafm_cli_args *a, vafm_cli_mpi *mpi))
+{
+    vafm_cli_mpi *mpi = NULL;
+    int rc = vafm_cli_mpi_begin(a->on[O_MPI], &mpi);
+    if (!rc)
+        rc = body(a, mpi);
+    return vafm_cli_mpi_end(&mpi, rc);
+}

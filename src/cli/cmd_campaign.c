@@ -311,12 +311,7 @@ static int s_campaign(const vafm_cli_args *a, vafm_cli_mpi *mpi)
     return rc;
 }
 
-/* MPI starts only under an MPI launcher or with --mpi: plain `vafm campaign` never touches it. */
 int vafm_cli_cmd_campaign(const vafm_cli_args *a)
 {
-    vafm_cli_mpi *mpi = NULL;
-    int rc = vafm_cli_mpi_begin(a->on[O_MPI], &mpi);
-    if (!rc)
-        rc = s_campaign(a, mpi);
-    return vafm_cli_mpi_end(&mpi, rc);
+    return vafm_cli_with_mpi(a, s_campaign);
 }

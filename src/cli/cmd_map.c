@@ -180,12 +180,7 @@ static int s_map_run(const vafm_cli_args *a, vafm_cli_mpi *mpi, const vafm_map_g
     return rc;
 }
 
-/* MPI starts only under an MPI launcher or with --mpi: plain `vafm map` never touches it. */
 int vafm_cli_cmd_map(const vafm_cli_args *a)
 {
-    vafm_cli_mpi *mpi = NULL;
-    int rc = vafm_cli_mpi_begin(a->on[O_MPI], &mpi);
-    if (!rc)
-        rc = s_map(a, mpi);
-    return vafm_cli_mpi_end(&mpi, rc);
+    return vafm_cli_with_mpi(a, s_map);
 }
