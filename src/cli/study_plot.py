@@ -16,6 +16,26 @@ def read(outdir, name):
         return list(csv.DictReader(f))
 
 
+def save(fig, outdir, name, what):
+    """Write the figure to OUTDIR/name and list it in the report: "- `name`: what"."""
+    fig.tight_layout()
+    fig.savefig(os.path.join(outdir, name), dpi=110)
+    print("- `%s`: %s" % (name, what))
+
+
+DYNAMICS = ("langevin", "brownian")
+
+
+def values(rows, key):
+    """The values of column `key`, as numbers, sorted."""
+    return sorted({float(r[key]) for r in rows})
+
+
+def points(rows, dyn, key, value):
+    """The rows of dynamics `dyn` at `key` = value."""
+    return [r for r in rows if r["dynamics"] == dyn and float(r[key]) == value]
+
+
 def skewnorm_pdf(x, xi, om, al):
     z = (x - xi) / om
     return 2.0 / om * math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) * 0.5 * math.erfc(-al * z / math.sqrt(2))
@@ -58,23 +78,22 @@ def distribution(plt, outdir):
     ax[1].set_ylabel("probability density")
     ax[1].set_title("temperature dependence (Fig. 3); dashed: skew-normal fits")
     ax[1].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(os.path.join(outdir, "distribution.png"), dpi=110)
-    print("- `distribution.png`: histograms of `pulloff_spring_N` (nN; and / F_JKR per temperature) with the "
-          "skew-normal maximum-likelihood fits")
+    save(fig, outdir, "distribution.png",
+         "histograms of `pulloff_spring_N` (nN; and / F_JKR per temperature) with the "
+         "skew-normal maximum-likelihood fits")
 
 
 def velocity_athermal(plt, outdir):
     rows = read(outdir, "athermal.csv")
     fits = read(outdir, "athermal_fits.csv")
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
-    for i, dyn in enumerate(("langevin", "brownian")):
-        for k in sorted({float(r["k"]) for r in rows}):
-            pts = [r for r in rows if r["dynamics"] == dyn and float(r["k"]) == k]
+    for i, dyn in enumerate(DYNAMICS):
+        for k in values(rows, "k"):
+            pts = points(rows, dyn, "k", k)
             v = [float(r["v"]) for r in pts]
             f = [float(r["F0_spring_over_FJKR"]) for r in pts]
             line = ax[i].semilogx(v, f, "o", mfc="none", label="k = %g" % k)[0]
-            fit = next((x for x in fits if x["dynamics"] == dyn and float(x["k"]) == k), None)
+            fit = next(iter(points(fits, dyn, "k", k)), None)
             if fit and fit["converged"] == "1":
                 vs = logspace(math.log10(min(v)), math.log10(max(v)), 200)
                 a0 = float(fit["alpha0"])
@@ -89,27 +108,25 @@ def velocity_athermal(plt, outdir):
         ax[i].set_title("%s dynamics, T = 0 (dashed: Eq. 14 fits)" % dyn.capitalize())
         ax[i].legend(fontsize=8)
     ax[0].set_ylabel("F0 / F_JKR (pulloff_spring_N)")
-    fig.tight_layout()
-    fig.savefig(os.path.join(outdir, "velocity_athermal.png"), dpi=110)
-    print("- `velocity_athermal.png`: F̃₀/F_JKR (`pulloff_spring_N`, T = 0) against ṽ for each k̃, both dynamics, "
-          "with the Eq. 14 fits")
+    save(fig, outdir, "velocity_athermal.png",
+         "F̃₀/F_JKR (`pulloff_spring_N`, T = 0) against ṽ for each k̃, both dynamics, "
+         "with the Eq. 14 fits")
 
 
 def velocity_thermal(plt, outdir):
     rows = read(outdir, "thermal.csv")
     fits = read(outdir, "thermal_fits.csv")
     fig, ax = plt.subplots(2, 2, figsize=(11, 8), sharex=True)
-    for i, dyn in enumerate(("langevin", "brownian")):
+    for i, dyn in enumerate(DYNAMICS):
         for j, ob in enumerate(("spring", "detach")):
             a = ax[j][i]
-            for kT in sorted({float(r["kT"]) for r in rows}):
-                pts = [r for r in rows if r["dynamics"] == dyn and float(r["kT"]) == kT]
+            for kT in values(rows, "kT"):
+                pts = points(rows, dyn, "kT", kT)
                 v = [float(r["v"]) for r in pts]
                 ft = [float(r["Ft_" + ob]) for r in pts]
                 se = [float(r["se_Fp_" + ob]) for r in pts]
                 line = a.errorbar(v, ft, yerr=se, fmt="o", mfc="none", label="kT = %g" % kT)[0]
-                fit = next((x for x in fits if x["dynamics"] == dyn and float(x["kT"]) == kT
-                            and x["observable"] == ob), None)
+                fit = next((x for x in points(fits, dyn, "kT", kT) if x["observable"] == ob), None)
                 if fit and fit["converged"] == "1":
                     vs = logspace(math.log10(min(v)), math.log10(max(v)), 200)
                     if fit["log_only"] == "1":  # Eq. 15 not determined: a + b ln v
@@ -129,10 +146,9 @@ def velocity_thermal(plt, outdir):
             a.legend(fontsize=7)
     for a in ax[1]:
         a.set_xlabel("reduced speed v")
-    fig.tight_layout()
-    fig.savefig(os.path.join(outdir, "velocity_thermal.png"), dpi=110)
-    print("- `velocity_thermal.png`: F̃_t = F̃₀ − F̃_p against ṽ (top: `pulloff_spring_N`, the paper's observable; "
-          "bottom: `detach_force_N` with the MFPT theory, dotted), both dynamics, Eq. 15 fits dashed")
+    save(fig, outdir, "velocity_thermal.png",
+         "F̃_t = F̃₀ − F̃_p against ṽ (top: `pulloff_spring_N`, the paper's observable; "
+         "bottom: `detach_force_N` with the MFPT theory, dotted), both dynamics, Eq. 15 fits dashed")
 
 
 def hysteresis(plt, outdir):
@@ -152,10 +168,9 @@ def hysteresis(plt, outdir):
     ax.set_ylabel("force / F_JKR (positive repulsive)")
     ax.set_title("one loading-unloading curve (paper Fig. 1 scene)")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(os.path.join(outdir, "hysteresis.png"), dpi=110)
-    print("- `hysteresis.png`: output force samples (`force`, the user's observable) / F_JKR against the piezo "
-          "height / ũ₀, with the quasi-static equilibrium branch")
+    save(fig, outdir, "hysteresis.png",
+         "output force samples (`force`, the user's observable) / F_JKR against the piezo "
+         "height / ũ₀, with the quasi-static equilibrium branch")
 
 
 def main():
