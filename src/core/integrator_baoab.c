@@ -18,11 +18,6 @@ static void s_set_dt(vafm_kernel *K)
     }
 }
 
-static void s_prepare(vafm_kernel *K)
-{
-    K->f = K->k * (K->u_spr - K->u) - K->Fc;
-}
-
 /* The constants of a run in one contact state; c holds that state's coefficients. */
 typedef struct s_consts {
     double half_dt, half_dt_m, vref;
@@ -49,7 +44,7 @@ static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_ki
     h->w += q->half_dt_m * h->f;
 }
 
-VAFM_KERNEL_INTEGRATOR(vafm_integrator_baoab,
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_baoab, s_kernel_prepare,
     .name = "baoab",
     .description = "BAOAB splitting (Leimkuhler & Matthews 2013): exact harmonic <x^2> for omega*dt < 2",
     .overdamped = 0,

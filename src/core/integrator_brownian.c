@@ -15,11 +15,6 @@ static void s_set_dt(vafm_kernel *K)
     }
 }
 
-static void s_prepare(vafm_kernel *K)
-{
-    K->f = K->k * (K->u_spr - K->u) - K->Fc;
-}
-
 /* The constants of a run in one contact state; c holds that state's coefficients. */
 typedef struct s_consts {
     double dt, inv_dt, drift;
@@ -43,7 +38,7 @@ static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_ki
     s_khot_post_move_k(K, v, h, kind);
 }
 
-VAFM_KERNEL_INTEGRATOR(vafm_integrator_brownian,
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_brownian, s_kernel_prepare,
     .name = "brownian",
     .description = "overdamped Euler-Maruyama (the paper's Eq. 12): friction zeta = m*eta only",
     .overdamped = 1,

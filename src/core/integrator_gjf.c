@@ -21,11 +21,6 @@ static void s_set_dt(vafm_kernel *K)
     }
 }
 
-static void s_prepare(vafm_kernel *K)
-{
-    K->f = K->k * (K->u_spr - K->u) - K->Fc;
-}
-
 /* The constants of a run in one contact state; c holds that state's coefficients. */
 typedef struct s_consts {
     double dt, half_dt_m, inv_m, drift;
@@ -49,7 +44,7 @@ static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_ki
     h->w = VAFM_GJF_KICK(h->w, f, h->f, beta, c->gjf_a, q->half_dt_m, q->drift, c->gjf_b * q->inv_m);
 }
 
-VAFM_KERNEL_INTEGRATOR(vafm_integrator_gjf,
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_gjf, s_kernel_prepare,
     .name = "gjf",
     .description = "Gronbech-Jensen & Farago 2013 Langevin (default): exact harmonic <x^2> for omega*dt < 2",
     .overdamped = 0,

@@ -29,8 +29,7 @@ static void s_set_dt(vafm_kernel *K)
 
 static void s_prepare(vafm_kernel *K)
 {
-    double f = K->k * (K->u_spr - K->u) - K->Fc;
-    K->f = s_total(K, &K->co[K->in_contact], f, K->w);
+    K->f = s_total(K, &K->co[K->in_contact], s_kernel_force(K), K->w);
 }
 
 /* The constants of a run in one contact state; c holds that state's coefficients. */
@@ -65,7 +64,7 @@ static VAFM_KALWAYS void s_step(vafm_kernel *K, const s_consts *q, const vafm_ki
     h->w += q->half_dt_m * h->f;
 }
 
-VAFM_KERNEL_INTEGRATOR(vafm_integrator_paper_vv,
+VAFM_KERNEL_INTEGRATOR(vafm_integrator_paper_vv, s_prepare,
     .name = "paper-vv",
     .description = "the paper's velocity Verlet with per-step random force (Eq. 7 with noise=uniform); reference",
     .overdamped = 0,

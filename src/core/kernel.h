@@ -82,6 +82,18 @@ static inline double s_kernel_noise(vafm_kernel *K)
     return s_kernel_normal(K);
 }
 
+/** The conservative force on the body at its state: spring minus contact, k(u_spr − u) − F_c. */
+static inline double s_kernel_force(const vafm_kernel *K)
+{
+    return K->k * (K->u_spr - K->u) - K->Fc;
+}
+
+/** An integrator's prepare() whose step reads the conservative force from K->f (all but paper-vv's). */
+static inline void s_kernel_prepare(vafm_kernel *K)
+{
+    K->f = s_kernel_force(K);
+}
+
 /** Start the kernel's stream: stream `stream` of `seed`, nothing drawn ahead. */
 static inline void s_kernel_rng_init(vafm_kernel *K, uint64_t seed, uint64_t stream)
 {
@@ -340,10 +352,11 @@ static VAFM_KALWAYS void s_khot_post_move_k(const vafm_kernel *K, const vafm_kin
  *   s_consts, s_consts_load(K)  the step's constants in the contact state a run starts in (copied into a
  *                               local once a run, so that they stay in registers);
  *   s_step(K, &q, &v, &h, kind) one step: moves h->u and h->w and calls s_khot_post_move_k() once;
- *   s_prepare, s_set_dt         as in vafm_integrator_type.
+ *   s_set_dt                    as in vafm_integrator_type.
  * The loop runs at most n steps and ends after a step with a contact event; the hot state lives in a local
- * and is stored back after. `var` is the type, with the designated initializers given (name, description, ...). */
-#define VAFM_KERNEL_INTEGRATOR(var, ...)                                                                           \
+ * and is stored back after. `var` is the type, with prepare_fn as its prepare() (s_kernel_prepare when the step
+ * reads the conservative force) and the designated initializers given (name, description, ...). */
+#define VAFM_KERNEL_INTEGRATOR(var, prepare_fn, ...)                                                             \
     static VAFM_KALWAYS long s_loop(vafm_kernel *K, long n, const int kind)                                      \
     {                                                                                                            \
         const s_consts q = s_consts_load(K);                                                                     \
@@ -362,7 +375,7 @@ static VAFM_KALWAYS void s_khot_post_move_k(const vafm_kernel *K, const vafm_kin
         return i;                                                                                                \
     }                                                                                                            \
     VAFM_KERNEL_RUN_PER_LOOP(s_loop)                                                                             \
-    static const vafm_integrator_type s_type = { .prepare = s_prepare, .run = s_run, .set_dt = s_set_dt,         \
+    static const vafm_integrator_type s_type = { .prepare = prepare_fn, .run = s_run, .set_dt = s_set_dt,        \
                                                  __VA_ARGS__ };                                                  \
     const vafm_integrator_type *const var = &s_type;
 
