@@ -239,6 +239,34 @@ def test_zspectr_props_roundtrip(nd):
     c.close()
 
 
+def test_props_tables_refuse_whole_and_name_the_field(nd):
+    """The table-driven Get/Set pairs: a refused Set names the field, the value and the allowed range, and
+    stores nothing (not even its valid fields); each "no change" code keeps the value."""
+    c = Conn(nd.port)
+    before = {g: c.call(g)[0] for g in ("ZSpectr.RetractGet", "ZSpectr.TimingGet", "ZSpectr.PropsGet",
+                                        "Motor.FreqAmpGet", "ZCtrl.HomePropsGet", "FolMe.SpeedGet")}
+    refused = [("ZSpectr.RetractSet", u16(2) + f32(1e-9) + i32(0) + u16(5), "Comparison 5: must be 0 (>)"),
+               ("ZSpectr.RetractSet", u16(2) + f32(math.nan) + i32(0) + u16(1), "Threshold nan: must be a finite"),
+               ("ZSpectr.TimingSet", struct.pack(">7f", 1, 1, -3, 1, 1, 1, 1),
+                "Maximum slew rate (V/s) -3: must be a positive number"),
+               ("ZSpectr.TimingSet", struct.pack(">7f", 1, 1, 1, 1, 0, 1, 1), "Integration time (s) 0: must be in (0"),
+               ("ZSpectr.PropsSet", u16(2) + i32(7) + u16(1001) + u16(0) + u16(0) + u16(0),
+                "Number of sweeps 1001: must be in [1, 1000] (0: no change)"),
+               ("Motor.FreqAmpSet", f32(2e5) + f32(10) + u16(0), "Frequency (Hz) 200000: must be in (0, 1e5] Hz"),
+               ("ZCtrl.HomePropsSet", u16(2) + f32(1e-3), "Home position (m) 0.001: must be in [-1e-4, 1e-4] m"),
+               ("FolMe.SpeedSet", f32(1e-6) + u32(3), "Custom speed 3: must be 0 (the scan speed) or 1 (custom)")]
+    for name, body, want in refused:
+        b, st, desc = c.call(name, body, ok=False)
+        assert st == 1 and b == b"" and desc.startswith(want), (name, desc)
+    assert {g: c.call(g)[0] for g in before} == before  # nothing stored by a refused Set
+    c.call("ZSpectr.RetractSet", u16(2) + f32(3e-9) + i32(-1) + u16(2))  # off; signal, comparison: no change
+    assert struct.unpack(">HfiH", c.call("ZSpectr.RetractGet")[0]) == (0, pytest.approx(3e-9), 3, 0)
+    c.call("ZCtrl.HomePropsSet", u16(2) + f32(1e-8))  # relative
+    c.call("ZCtrl.HomePropsSet", u16(0) + f32(2e-8))  # mode: no change
+    assert struct.unpack(">Hf", c.call("ZCtrl.HomePropsGet")[0]) == (1, pytest.approx(2e-8))
+    c.close()
+
+
 def zspectr_start(c, get_data=1, base=b""):
     b, _, _ = c.call("ZSpectr.Start", u32(get_data) + i32(len(base)) + base)
     size, count = struct.unpack_from(">ii", b, 0)

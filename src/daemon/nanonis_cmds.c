@@ -130,6 +130,105 @@ int nnc_time(nnc_ctx *x, float v, const char *arg)
 
 int nnc_ping_only(nnc_ctx *x) { return nnc_args_done(x) ? NNC_FAIL : nnc_ping(x); }
 
+/* ---- table-driven Get and Set (nanonis_cmds.h) ------------------------------------------------------- */
+
+static int s_field_check(nnc_ctx *x, const nnc_field *f, int64_t iv, float fv)
+{
+    if (f->type == NNF_F32) {
+        float lo = (float)f->lo, hi = (float)f->hi, a = f->check == NNF_MAGNITUDE ? fabsf(fv) : fv;
+        int bad = !isfinite(fv) || (f->check != NNF_ANY && (a < lo || a > hi || (f->lo_open && a <= lo)));
+        if (bad)
+            snprintf(x->err, sizeof x->err, "%s %g: %s", f->name, (double)fv, f->must);
+        return bad ? NNC_FAIL : NNC_OK;
+    }
+    if (f->nc != NNF_NO_NC && iv == f->nc)
+        return NNC_OK;
+    if (f->check == NNF_SIGNAL)
+        return nnc_signal_index(x, (int32_t)iv, f->name);
+    if (f->check == NNF_RANGE && (iv < (int64_t)f->lo || iv > (int64_t)f->hi)) {
+        snprintf(x->err, sizeof x->err, "%s %lld: %s", f->name, (long long)iv, f->must);
+        return NNC_FAIL;
+    }
+    return NNC_OK;
+}
+
+int nnc_props_set(nnc_ctx *x)
+{
+    const nnc_props *p = x->cmd->arg;
+    int64_t iv[NNC_MAX_FIELDS] = { 0 };
+    float fv[NNC_MAX_FIELDS] = { 0 };
+    for (int i = 0; i < p->n; i++) {
+        const nnc_field *f = &p->fields[i];
+        switch (f->type) {
+        case NNF_U16: iv[i] = nn_get_u16(&x->r, f->name); break;
+        case NNF_U32: iv[i] = nn_get_u32(&x->r, f->name); break;
+        case NNF_I32: iv[i] = nn_get_i32(&x->r, f->name); break;
+        case NNF_F32: fv[i] = nn_get_f32(&x->r, f->name); break;
+        default: break; /* NNF_STRINGS: a Get's only */
+        }
+    }
+    if (nnc_args_done(x))
+        return NNC_FAIL;
+    for (int i = 0; i < p->n; i++)
+        if (p->fields[i].type != NNF_STRINGS && s_field_check(x, &p->fields[i], iv[i], fv[i]))
+            return NNC_FAIL;
+    int rc = nnc_ping(x);
+    if (rc)
+        return rc;
+    pthread_mutex_lock(p->mu);
+    for (int i = 0; i < p->n; i++) {
+        const nnc_field *f = &p->fields[i];
+        char *dst = (char *)p->base + f->off;
+        if (f->type == NNF_STRINGS || f->store == NNF_NONE)
+            continue;
+        if (f->type == NNF_F32) {
+            memcpy(dst, &fv[i], sizeof fv[i]);
+            continue;
+        }
+        if (f->nc != NNF_NO_NC && iv[i] == f->nc)
+            continue;
+        int v = f->store == NNF_IS1 ? iv[i] == 1 : f->store == NNF_IS2 ? iv[i] == 2
+                : f->store == NNF_MINUS1 ? (int)(iv[i] - 1) : (int)iv[i];
+        memcpy(dst, &v, sizeof v);
+    }
+    pthread_mutex_unlock(p->mu);
+    return NNC_OK;
+}
+
+int nnc_props_put(nnc_ctx *x, const nnc_props *p)
+{
+    pthread_mutex_lock(p->mu);
+    for (int i = 0; i < p->n; i++) {
+        const nnc_field *f = &p->fields[i];
+        const char *src = (const char *)p->base + f->off;
+        int v = 0;
+        float fl = 0;
+        if (f->type == NNF_F32)
+            memcpy(&fl, src, sizeof fl);
+        else if (f->type != NNF_STRINGS)
+            memcpy(&v, src, sizeof v);
+        switch (f->type) {
+        case NNF_U16: nn_put_u16(x->o, (uint16_t)v); break;
+        case NNF_U32: nn_put_u32(x->o, (uint32_t)v); break;
+        case NNF_I32: nn_put_i32(x->o, v); break;
+        case NNF_F32: nn_put_f32(x->o, fl); break;
+        default:
+            nn_put_i32(x->o, (int32_t)nn_strings_bytes(f->strings, (size_t)f->n_strings));
+            nn_put_i32(x->o, f->n_strings);
+            nn_put_strings(x->o, f->strings, (size_t)f->n_strings);
+            break;
+        }
+    }
+    pthread_mutex_unlock(p->mu);
+    return NNC_OK;
+}
+
+int nnc_props_get(nnc_ctx *x)
+{
+    int rc = nnc_ping(x);
+    return rc ? rc : nnc_props_put(x, x->cmd->arg);
+}
+
 /* ---- the dispatcher ------------------------------------------------------------------------------------ */
 
 static const struct {
@@ -175,8 +274,10 @@ int nn_dispatch(nn_conn *c, const char *name, const unsigned char *body, size_t 
         snprintf(x.err, sizeof x.err, "unknown command '%s': vafmd serves %zu Nanonis commands (docs/nanonis.md)",
                  safe, total);
         rc = NNC_FAIL;
-    } else
+    } else {
+        x.cmd = cmd;
         rc = cmd->fn(&x);
+    }
     if (rc == NNC_SILENT)
         return 1;
     if (rc == NNC_FAIL) {

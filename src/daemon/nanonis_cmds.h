@@ -29,8 +29,10 @@
 #define NNC_MAX_CHS 32
 
 /* ---- one request ------------------------------------------------------------------------------------- */
+struct nnc_cmd;
 typedef struct nnc_ctx {
     nn_conn *c;
+    const struct nnc_cmd *cmd; /* the row being served (its arg: a generic handler's table) */
     nn_rd r;
     nn_buf *o;
     char err[NNC_ERR];
@@ -39,11 +41,12 @@ typedef struct nnc_ctx {
 enum { NNC_OK = 0, NNC_FAIL = -1, NNC_SILENT = -2 };
 
 /* A table row. ret: the return arguments written zero on an error (i int32, I uint32, H uint16, f float32,
- * d float64). */
+ * d float64). arg: what a generic handler serves (nnc_props_get/set: an nnc_props). */
 typedef struct nnc_cmd {
     const char *name;
     int (*fn)(nnc_ctx *x);
     const char *ret;
+    const void *arg;
 } nnc_cmd;
 
 int nnc_fail(nnc_ctx *x, const char *fmt, const char *a); /* x->err = fmt % a: NNC_FAIL */
@@ -59,6 +62,55 @@ int nnc_signal_index(nnc_ctx *x, int32_t i, const char *arg);
 /* a flag of a Set: 0 no change, 1 on, 2 off (*dst 1 or 0; untouched for 0) */
 int nnc_flag(nnc_ctx *x, unsigned v, const char *arg, int *dst);
 int nnc_time(nnc_ctx *x, float v, const char *arg); /* a time in [0, 1000] s */
+
+/* ---- table-driven Get and Set ------------------------------------------------------------------------
+ * A module value group: its fields in the order of the command's arguments (Set) or return arguments
+ * (Get), each with its spec type, its range and the struct member it lives in (offsetof in the group's
+ * struct, under the group's mutex). nnc_props_set reads every argument, checks them in order (the first
+ * out of range is the error, naming the field and its range), pings the daemon (the request shows in its
+ * records; a fault plan applies), then stores them under the mutex; nnc_props_get pings, then writes the
+ * members under the mutex. Integer members are int, f32 members float. */
+enum nnc_ftype { NNF_U16 = 'H', NNF_U32 = 'I', NNF_I32 = 'i', NNF_F32 = 'f', NNF_STRINGS = 'S' };
+enum nnc_fcheck {
+    NNF_ANY = 0,  /* integer: any value; float: finite */
+    NNF_RANGE,    /* integer in [lo, hi], or the no-change code; float in [lo, hi] (lo_open: (lo, hi]) */
+    NNF_MAGNITUDE,/* float: |v| in [lo, hi] */
+    NNF_SIGNAL    /* integer: a signal index, or the no-change code */
+};
+enum nnc_fstore { NNF_SAME = 0, NNF_IS1, NNF_IS2, NNF_MINUS1, NNF_NONE }; /* the member = v, v == 1, v == 2,
+                                                                             v - 1, or not stored */
+#define NNF_NO_NC INT64_MIN /* no no-change code */
+typedef struct nnc_field {
+    char type;                      /* enum nnc_ftype */
+    const char *name;               /* the spec's argument name (errors name it) */
+    size_t off;                     /* offsetof the member (NNF_STRINGS: unused) */
+    char check, store, lo_open;     /* enum nnc_fcheck, enum nnc_fstore; lo_open: float lo excluded */
+    double lo, hi;
+    int64_t nc;                     /* integer: the no-change code (NNF_NO_NC: none) */
+    const char *must;               /* the error's tail after "NAME VALUE: " */
+    const char *const *strings;     /* NNF_STRINGS (Get): size (i32), count (i32), the strings */
+    int n_strings;
+} nnc_field;
+typedef struct nnc_props {
+    pthread_mutex_t *mu;
+    void *base;
+    const nnc_field *fields;
+    int n;
+} nnc_props;
+#define NNC_MAX_FIELDS 12
+/* Rows of a field table: T the group's struct type. */
+#define NNF_ROW(ty, T, nm, mem, chk, sto, lo_, hi_, nc_, must_)                                           \
+    { .type = (ty), .name = (nm), .off = offsetof(T, mem), .check = (chk), .store = (sto), .lo = (lo_),   \
+      .hi = (hi_), .nc = (nc_), .must = (must_) }
+#define NNF_FLAG(T, nm, mem) /* a Set's flag: 0 no change, 1 on, 2 off (the member 1 or 0) */              \
+    NNF_ROW(NNF_U16, T, nm, mem, NNF_RANGE, NNF_IS1, 1, 2, 0, "must be 0 (no change), 1 (on) or 2 (off)")
+#define NNF_F32(T, nm, mem, chk, lo_, hi_, must_)                                                          \
+    NNF_ROW(NNF_F32, T, nm, mem, chk, NNF_SAME, lo_, hi_, NNF_NO_NC, must_)
+#define NNF_TIME(T, nm, mem) NNF_F32(T, nm, mem, NNF_RANGE, 0, 1000, "must be in [0, 1000] s")
+#define NNF_STRS(list, count) { .type = NNF_STRINGS, .strings = (list), .n_strings = (count) }
+int nnc_props_get(nnc_ctx *x); /* x->cmd->arg: the nnc_props */
+int nnc_props_set(nnc_ctx *x);
+int nnc_props_put(nnc_ctx *x, const nnc_props *p); /* the Get's body alone (no ping) */
 
 /* ---- the signal table (nanonis_signals.c) -------------------------------------------------------------- */
 enum nnc_src { SRC_STREAM = 0, SRC_BIAS = 1, SRC_CTRL = 2 };

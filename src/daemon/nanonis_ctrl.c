@@ -17,6 +17,7 @@
  * frequency and amplitude, Z limits narrower than the piezo range (they bound ZCtrl.ZPosSet and Home only).
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <string.h>
 #include <time.h>
@@ -26,7 +27,7 @@
 #define S_WAIT_MAX_S 600.0 /* the longest wait ("wait indefinitely" included) */
 
 static pthread_mutex_t s_mu = PTHREAD_MUTEX_INITIALIZER;
-static struct {
+typedef struct s_values {
     float tip_lift_m;     /* ZCtrl.TipLift: Z goes up by it when the controller is switched off */
     int home_relative;    /* ZCtrl.HomeProps: 0 absolute, 1 relative */
     float home_m;
@@ -37,7 +38,15 @@ static struct {
     int folme_custom;
     float motor_freq_Hz, motor_amp_V;
     long long step_offset; /* Motor.StepCounterGet's reset: the controller's count at the last reset */
-} m = { .motor_freq_Hz = 1000.f, .motor_amp_V = 100.f };
+} s_values;
+static s_values m = { .motor_freq_Hz = 1000.f, .motor_amp_V = 100.f };
+
+/* The Get/Set pairs kept as values: each a table of its arguments (nanonis_cmds.h, nnc_props_get/set). */
+#define S_PROPS(name, ...)                                                                                   \
+    static const nnc_field name##_f[] = { __VA_ARGS__ };                                                     \
+    _Static_assert(sizeof name##_f / sizeof name##_f[0] <= NNC_MAX_FIELDS, #name ": too many fields");      \
+    static const nnc_props name = { &s_mu, &m, name##_f, (int)(sizeof name##_f / sizeof name##_f[0]) }
+
 
 /* ---- helpers ---------------------------------------------------------------------------------------- */
 
@@ -324,43 +333,8 @@ static int h_zc_status(nnc_ctx *x)
     return NNC_OK;
 }
 
-static int s_f32_set(nnc_ctx *x, const char *arg, float lo, float hi, const char *unit, float *dst)
-{
-    float v = nn_get_f32(&x->r, arg);
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (!isfinite(v) || v < lo || v > hi) {
-        snprintf(x->err, sizeof x->err, "%s %g: must be in [%g, %g] %s", arg, (double)v, (double)lo, (double)hi,
-                 unit);
-        return NNC_FAIL;
-    }
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&s_mu);
-    *dst = v;
-    pthread_mutex_unlock(&s_mu);
-    return NNC_OK;
-}
-
-static int s_f32_get(nnc_ctx *x, const float *src)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&s_mu);
-    nn_put_f32(x->o, *src);
-    pthread_mutex_unlock(&s_mu);
-    return NNC_OK;
-}
-
-static int h_zc_lift_set(nnc_ctx *x) { return s_f32_set(x, "TipLift (m)", -1e-4f, 1e-4f, "m", &m.tip_lift_m); }
-static int h_zc_lift_get(nnc_ctx *x) { return s_f32_get(x, &m.tip_lift_m); }
-static int h_zc_delay_set(nnc_ctx *x)
-{
-    return s_f32_set(x, "Z-Controller switch off delay (s)", 0.f, 1000.f, "s", &m.switch_off_delay_s);
-}
-static int h_zc_delay_get(nnc_ctx *x) { return s_f32_get(x, &m.switch_off_delay_s); }
+S_PROPS(s_lift, NNF_F32(s_values, "TipLift (m)", tip_lift_m, NNF_RANGE, -1e-4, 1e-4, "must be in [-0.0001, 0.0001] m"));
+S_PROPS(s_delay, NNF_TIME(s_values, "Z-Controller switch off delay (s)", switch_off_delay_s));
 
 static int h_zc_home(nnc_ctx *x)
 {
@@ -376,43 +350,9 @@ static int h_zc_home(nnc_ctx *x)
     return s_zpos(x, target, "the home position (m)");
 }
 
-static int h_zc_home_set(nnc_ctx *x)
-{
-    unsigned mode = nn_get_u16(&x->r, "Relative or Absolute");
-    float pos = nn_get_f32(&x->r, "Home position (m)");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (mode > 2) {
-        snprintf(x->err, sizeof x->err, "Relative or Absolute %u: must be 0 (no change), 1 (absolute) or 2 "
-                 "(relative)", mode);
-        return NNC_FAIL;
-    }
-    if (!isfinite(pos) || fabsf(pos) > 1e-4f) {
-        snprintf(x->err, sizeof x->err, "Home position (m) %g: must be in [-1e-4, 1e-4] m", (double)pos);
-        return NNC_FAIL;
-    }
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&s_mu);
-    if (mode)
-        m.home_relative = mode == 2;
-    m.home_m = pos;
-    pthread_mutex_unlock(&s_mu);
-    return NNC_OK;
-}
-
-static int h_zc_home_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&s_mu);
-    nn_put_u16(x->o, (uint16_t)m.home_relative);
-    nn_put_f32(x->o, m.home_m);
-    pthread_mutex_unlock(&s_mu);
-    return NNC_OK;
-}
+S_PROPS(s_home, NNF_ROW(NNF_U16, s_values, "Relative or Absolute", home_relative, NNF_RANGE, NNF_IS2, 1, 2, 0,
+                        "must be 0 (no change), 1 (absolute) or 2 (relative)"),
+        NNF_F32(s_values, "Home position (m)", home_m, NNF_RANGE, -1e-4, 1e-4, "must be in [-1e-4, 1e-4] m"));
 
 static double s_f64(nnc_ctx *x, const char *arg)
 {
@@ -577,43 +517,19 @@ static int h_mo_steps(nnc_ctx *x)
     return NNC_OK;
 }
 
+S_PROPS(s_freq, { .type = NNF_F32, .name = "Frequency (Hz)", .off = offsetof(s_values, motor_freq_Hz), .check = NNF_RANGE,
+          .lo_open = 1, .lo = 0, .hi = 1e5, .must = "must be in (0, 1e5] Hz" },
+        NNF_F32(s_values, "Amplitude (V)", motor_amp_V, NNF_RANGE, 0, 1000, "must be in [0, 1000] V"),
+        NNF_ROW(NNF_U16, s_values, "Axis", motor_freq_Hz, NNF_RANGE, NNF_NONE, 0, 3, NNF_NO_NC,
+                "must be 0 (all), 1 (X), 2 (Y) or 3 (Z)")); /* the axis: checked, not kept */
+static const nnc_props s_freq_get = { &s_mu, &m, s_freq_f, 2 }; /* the Get: frequency and amplitude */
+
 static int h_mo_freq_get(nnc_ctx *x)
 {
     if (x->r.n > 0) /* the spec's Axis; the public clients send none */
         (void)nn_get_u16(&x->r, "Axis");
     int rc = nnc_args_done(x) ? NNC_FAIL : nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&s_mu);
-    nn_put_f32(x->o, m.motor_freq_Hz);
-    nn_put_f32(x->o, m.motor_amp_V);
-    pthread_mutex_unlock(&s_mu);
-    return NNC_OK;
-}
-
-static int h_mo_freq_set(nnc_ctx *x)
-{
-    float f = nn_get_f32(&x->r, "Frequency (Hz)");
-    float a = nn_get_f32(&x->r, "Amplitude (V)");
-    unsigned axis = nn_get_u16(&x->r, "Axis");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (!isfinite(f) || f <= 0 || f > 1e5f)
-        return nnc_fail(x, "%s: must be in (0, 1e5] Hz", "Frequency (Hz)");
-    if (!isfinite(a) || a < 0 || a > 1000)
-        return nnc_fail(x, "%s: must be in [0, 1000] V", "Amplitude (V)");
-    if (axis > 3) {
-        snprintf(x->err, sizeof x->err, "Axis %u: must be 0 (all), 1 (X), 2 (Y) or 3 (Z)", axis);
-        return NNC_FAIL;
-    }
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&s_mu);
-    m.motor_freq_Hz = f;
-    m.motor_amp_V = a;
-    pthread_mutex_unlock(&s_mu);
-    return NNC_OK;
+    return rc ? rc : nnc_props_put(x, &s_freq_get);
 }
 
 /* ---- AutoApproach: the controller's engage -------------------------------------------------------------- */
@@ -676,29 +592,10 @@ static int h_fm_xy_get(nnc_ctx *x)
     return NNC_OK;
 }
 
-static int h_fm_speed_set(nnc_ctx *x)
-{
-    float v = nn_get_f32(&x->r, "Speed (m/s)");
-    uint32_t custom = nn_get_u32(&x->r, "Custom speed");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (custom > 1) {
-        snprintf(x->err, sizeof x->err, "Custom speed %u: must be 0 (the scan speed) or 1 (custom)", custom);
-        return NNC_FAIL;
-    }
-    if (!isfinite(v) || v <= 0 || v > 0.01f) {
-        snprintf(x->err, sizeof x->err, "Speed (m/s) %g: must be in (0, 0.01] m/s", (double)v);
-        return NNC_FAIL;
-    }
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&s_mu);
-    m.folme_speed = v;
-    m.folme_custom = (int)custom;
-    pthread_mutex_unlock(&s_mu);
-    return NNC_OK;
-}
+S_PROPS(s_speed, { .type = NNF_F32, .name = "Speed (m/s)", .off = offsetof(s_values, folme_speed),
+          .check = NNF_RANGE, .lo_open = 1, .lo = 0, .hi = 0.01, .must = "must be in (0, 0.01] m/s" },
+        NNF_ROW(NNF_U32, s_values, "Custom speed", folme_custom, NNF_RANGE, NNF_SAME, 0, 1, NNF_NO_NC,
+                "must be 0 (the scan speed) or 1 (custom)"));
 
 static int h_fm_speed_get(nnc_ctx *x)
 {
@@ -732,39 +629,39 @@ static int h_fm_stop(nnc_ctx *x)
 }
 
 const nnc_cmd nnc_ctrl_cmds[] = {
-    { "ZCtrl.OnOffSet", h_zc_onoff_set, "" },
-    { "ZCtrl.OnOffGet", h_zc_onoff_get, "I" },
-    { "ZCtrl.ZPosSet", h_zc_zpos_set, "" },
-    { "ZCtrl.ZPosGet", h_zc_zpos_get, "f" },
-    { "ZCtrl.SetpntSet", h_zc_setpnt_set, "" },
-    { "ZCtrl.SetpntGet", h_zc_setpnt_get, "f" },
-    { "ZCtrl.GainSet", h_zc_gain_set, "" },
-    { "ZCtrl.GainGet", h_zc_gain_get, "fff" },
-    { "ZCtrl.Withdraw", h_zc_withdraw, "" },
-    { "ZCtrl.LimitsSet", h_zc_limits_set, "" },
-    { "ZCtrl.LimitsGet", h_zc_limits_get, "ff" },
-    { "ZCtrl.StatusGet", h_zc_status, "H" },
-    { "ZCtrl.TipLiftSet", h_zc_lift_set, "" },
-    { "ZCtrl.TipLiftGet", h_zc_lift_get, "f" },
-    { "ZCtrl.Home", h_zc_home, "" },
-    { "ZCtrl.HomePropsSet", h_zc_home_set, "" },
-    { "ZCtrl.HomePropsGet", h_zc_home_get, "Hf" },
-    { "ZCtrl.SwitchOffDelaySet", h_zc_delay_set, "" },
-    { "ZCtrl.SwitchOffDelayGet", h_zc_delay_get, "f" },
-    { "Motor.StartMove", h_mo_start, "" },
-    { "Motor.StartClosedLoop", h_mo_closed_loop, "" },
-    { "Motor.StopMove", h_mo_stop, "" },
-    { "Motor.PosGet", h_mo_pos, "ddd" },
-    { "Motor.StepCounterGet", h_mo_steps, "iii" },
-    { "Motor.FreqAmpGet", h_mo_freq_get, "ff" },
-    { "Motor.FreqAmpSet", h_mo_freq_set, "" },
-    { "AutoApproach.Open", nnc_ping_only, "" },
-    { "AutoApproach.OnOffSet", h_aa_onoff_set, "" },
-    { "AutoApproach.OnOffGet", h_aa_onoff_get, "H" },
-    { "FolMe.XYPosSet", h_fm_xy_set, "" },
-    { "FolMe.XYPosGet", h_fm_xy_get, "dd" },
-    { "FolMe.SpeedSet", h_fm_speed_set, "" },
-    { "FolMe.SpeedGet", h_fm_speed_get, "fI" },
-    { "FolMe.Stop", h_fm_stop, "" },
+    { "ZCtrl.OnOffSet", h_zc_onoff_set, "", NULL },
+    { "ZCtrl.OnOffGet", h_zc_onoff_get, "I", NULL },
+    { "ZCtrl.ZPosSet", h_zc_zpos_set, "", NULL },
+    { "ZCtrl.ZPosGet", h_zc_zpos_get, "f", NULL },
+    { "ZCtrl.SetpntSet", h_zc_setpnt_set, "", NULL },
+    { "ZCtrl.SetpntGet", h_zc_setpnt_get, "f", NULL },
+    { "ZCtrl.GainSet", h_zc_gain_set, "", NULL },
+    { "ZCtrl.GainGet", h_zc_gain_get, "fff", NULL },
+    { "ZCtrl.Withdraw", h_zc_withdraw, "", NULL },
+    { "ZCtrl.LimitsSet", h_zc_limits_set, "", NULL },
+    { "ZCtrl.LimitsGet", h_zc_limits_get, "ff", NULL },
+    { "ZCtrl.StatusGet", h_zc_status, "H", NULL },
+    { "ZCtrl.TipLiftSet", nnc_props_set, "", &s_lift },
+    { "ZCtrl.TipLiftGet", nnc_props_get, "f", &s_lift },
+    { "ZCtrl.Home", h_zc_home, "", NULL },
+    { "ZCtrl.HomePropsSet", nnc_props_set, "", &s_home },
+    { "ZCtrl.HomePropsGet", nnc_props_get, "Hf", &s_home },
+    { "ZCtrl.SwitchOffDelaySet", nnc_props_set, "", &s_delay },
+    { "ZCtrl.SwitchOffDelayGet", nnc_props_get, "f", &s_delay },
+    { "Motor.StartMove", h_mo_start, "", NULL },
+    { "Motor.StartClosedLoop", h_mo_closed_loop, "", NULL },
+    { "Motor.StopMove", h_mo_stop, "", NULL },
+    { "Motor.PosGet", h_mo_pos, "ddd", NULL },
+    { "Motor.StepCounterGet", h_mo_steps, "iii", NULL },
+    { "Motor.FreqAmpGet", h_mo_freq_get, "ff", NULL },
+    { "Motor.FreqAmpSet", nnc_props_set, "", &s_freq },
+    { "AutoApproach.Open", nnc_ping_only, "", NULL },
+    { "AutoApproach.OnOffSet", h_aa_onoff_set, "", NULL },
+    { "AutoApproach.OnOffGet", h_aa_onoff_get, "H", NULL },
+    { "FolMe.XYPosSet", h_fm_xy_set, "", NULL },
+    { "FolMe.XYPosGet", h_fm_xy_get, "dd", NULL },
+    { "FolMe.SpeedSet", nnc_props_set, "", &s_speed },
+    { "FolMe.SpeedGet", h_fm_speed_get, "fI", NULL },
+    { "FolMe.Stop", h_fm_stop, "", NULL },
 };
 const size_t nnc_ctrl_ncmds = sizeof nnc_ctrl_cmds / sizeof nnc_ctrl_cmds[0];

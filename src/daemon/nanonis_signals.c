@@ -10,6 +10,7 @@
  */
 #include <math.h>
 #include <pthread.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -221,43 +222,18 @@ put:
 
 /* ---- Bias: a value (no physics) ------------------------------------------------------------------- */
 
-static int h_bias_set(nnc_ctx *x)
-{
-    float v = nn_get_f32(&x->r, "Bias value (V)");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (!isfinite(v) || fabsf(v) > 10.f) {
-        snprintf(x->err, sizeof x->err, "Bias value (V) %g: must be in [-10, 10] V", (double)v);
-        return NNC_FAIL;
-    }
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nnc_m.bias_V = v;
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_bias_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_f32(x->o, nnc_m.bias_V);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
+static const nnc_field s_bias_f[] = { NNF_F32(nnc_state, "Bias value (V)", bias_V, NNF_RANGE, -10, 10,
+                                              "must be in [-10, 10] V") };
+static const nnc_props s_bias = { &nnc_mu, &nnc_m, s_bias_f, 1 };
 
 const nnc_cmd nnc_signals_cmds[] = {
-    { "Signals.NamesGet", h_names, "ii" },
-    { "Signals.ValGet", h_valget, "f" },
-    { "Signals.ValsGet", h_valsget, "i" },
-    { "Signals.CalibrGet", h_calibr, "ff" },
-    { "Signals.RangeGet", h_range, "ff" },
-    { "Signals.MeasNamesGet", h_names, "ii" },
-    { "Bias.Set", h_bias_set, "" },
-    { "Bias.Get", h_bias_get, "f" },
+    { "Signals.NamesGet", h_names, "ii", NULL },
+    { "Signals.ValGet", h_valget, "f", NULL },
+    { "Signals.ValsGet", h_valsget, "i", NULL },
+    { "Signals.CalibrGet", h_calibr, "ff", NULL },
+    { "Signals.RangeGet", h_range, "ff", NULL },
+    { "Signals.MeasNamesGet", h_names, "ii", NULL },
+    { "Bias.Set", nnc_props_set, "", &s_bias },
+    { "Bias.Get", nnc_props_get, "f", &s_bias },
 };
 const size_t nnc_signals_ncmds = sizeof nnc_signals_cmds / sizeof nnc_signals_cmds[0];

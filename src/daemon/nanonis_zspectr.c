@@ -10,6 +10,7 @@
  */
 #include <math.h>
 #include <pthread.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -17,18 +18,6 @@
 #include "daemon/nanonis_cmds.h"
 
 /* ---- ZSpectr: properties -------------------------------------------------------------------------- */
-
-static int h_zs_status(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_u32(x->o, (uint32_t)nnc_m.running);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
 static int h_zs_chs_set(nnc_ctx *x)
 {
     int32_t n = nn_get_i32(&x->r, "Number of channels");
@@ -79,49 +68,6 @@ static int h_zs_chs_get(nnc_ctx *x)
     return NNC_OK;
 }
 
-static int h_zs_props_set(nnc_ctx *x)
-{
-    unsigned bwd = nn_get_u16(&x->r, "Backward sweep");
-    int32_t pts = nn_get_i32(&x->r, "Number of points");
-    unsigned sw = nn_get_u16(&x->r, "Number of sweeps");
-    unsigned as = nn_get_u16(&x->r, "Autosave");
-    unsigned sd = nn_get_u16(&x->r, "Show save dialog");
-    unsigned sa = nn_get_u16(&x->r, "Save all");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (pts < 0 || pts > NNC_MAX_POINTS) {
-        snprintf(x->err, sizeof x->err, "Number of points %d: must be in [1, %d] (0: no change)", (int)pts,
-                 NNC_MAX_POINTS);
-        return NNC_FAIL;
-    }
-    if (sw > NNC_MAX_SWEEPS) {
-        snprintf(x->err, sizeof x->err, "Number of sweeps %u: must be in [1, %d] (0: no change)", sw, NNC_MAX_SWEEPS);
-        return NNC_FAIL;
-    }
-    int b = -1, a = -1, d = -1, s = -1;
-    if (nnc_flag(x, bwd, "Backward sweep", &b) || nnc_flag(x, as, "Autosave", &a) ||
-        nnc_flag(x, sd, "Show save dialog", &d) || nnc_flag(x, sa, "Save all", &s))
-        return NNC_FAIL;
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    if (b >= 0)
-        nnc_m.backward = b;
-    if (pts)
-        nnc_m.points = pts;
-    if (sw)
-        nnc_m.sweeps = (int)sw;
-    if (a >= 0)
-        nnc_m.autosave = a;
-    if (d >= 0)
-        nnc_m.show_dialog = d;
-    if (s >= 0)
-        nnc_m.save_all = s;
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
 /* The parameters ZSpectr.Start returns, in this order: the fixed ones, then the others. */
 static const char *const s_fixed_params[] = { "Z offset (m)", "Z sweep distance (m)" };
 static const char *const s_params[] = { "Settling time (s)", "Integration time (s)", "Number of sweeps",
@@ -129,275 +75,50 @@ static const char *const s_params[] = { "Settling time (s)", "Integration time (
 #define S_NFIXED 2
 #define S_NPARAMS 6
 
-static int h_zs_props_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_u16(x->o, (uint16_t)nnc_m.backward);
-    nn_put_i32(x->o, nnc_m.points);
-    nn_put_i32(x->o, (int32_t)nn_strings_bytes(s_params, S_NPARAMS));
-    nn_put_i32(x->o, S_NPARAMS);
-    nn_put_strings(x->o, s_params, S_NPARAMS);
-    nn_put_i32(x->o, (int32_t)nn_strings_bytes(s_fixed_params, S_NFIXED));
-    nn_put_i32(x->o, S_NFIXED);
-    nn_put_strings(x->o, s_fixed_params, S_NFIXED);
-    nn_put_u16(x->o, (uint16_t)nnc_m.sweeps);
-    nn_put_u16(x->o, (uint16_t)nnc_m.autosave);
-    nn_put_u16(x->o, (uint16_t)nnc_m.show_dialog);
-    nn_put_u16(x->o, (uint16_t)nnc_m.save_all);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
+/* The Get/Set pairs: each a table of its arguments (nanonis_cmds.h, nnc_props_get/set). */
+#define S_T nnc_state
+#define S_PROPS(name, ...)                                                                                   \
+    static const nnc_field name##_f[] = { __VA_ARGS__ };                                                     \
+    _Static_assert(sizeof name##_f / sizeof name##_f[0] <= NNC_MAX_FIELDS, #name ": too many fields");      \
+    static const nnc_props name = { &nnc_mu, &nnc_m, name##_f, (int)(sizeof name##_f / sizeof name##_f[0]) }
+#define S_CMP(mem) /* a comparison: 0 >, 1 <, 2 no change */                                                  \
+    NNF_ROW(NNF_U16, S_T, "Comparison", mem, NNF_RANGE, NNF_SAME, 0, 1, 2, "must be 0 (>), 1 (<) or 2 (no change)")
+#define S_SIGNAL(mem) NNF_ROW(NNF_I32, S_T, "Signal index", mem, NNF_SIGNAL, NNF_SAME, 0, 0, -1, "")
+#define S_THRESHOLD(mem) NNF_F32(S_T, "Threshold", mem, NNF_ANY, 0, 0, "must be a finite number")
 
-static int h_zs_adv_set(nnc_ctx *x)
-{
-    float t = nn_get_f32(&x->r, "Time between forward and backward sweep (s)");
-    unsigned rf = nn_get_u16(&x->r, "Record final Z");
-    unsigned lr = nn_get_u16(&x->r, "Lockin Run");
-    unsigned rz = nn_get_u16(&x->r, "Reset Z");
-    if (nnc_args_done(x) || nnc_time(x, t, "Time between forward and backward sweep (s)"))
-        return NNC_FAIL;
-    int a = -1, b = -1, c = -1;
-    if (nnc_flag(x, rf, "Record final Z", &a) || nnc_flag(x, lr, "Lockin Run", &b) || nnc_flag(x, rz, "Reset Z", &c))
-        return NNC_FAIL;
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nnc_m.t_fwd_bwd_s = t;
-    if (a >= 0)
-        nnc_m.record_final_z = a;
-    if (b >= 0)
-        nnc_m.lockin_run = b;
-    if (c >= 0)
-        nnc_m.reset_z = c;
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_adv_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_f32(x->o, nnc_m.t_fwd_bwd_s);
-    nn_put_u16(x->o, (uint16_t)nnc_m.record_final_z);
-    nn_put_u16(x->o, (uint16_t)nnc_m.lockin_run);
-    nn_put_u16(x->o, (uint16_t)nnc_m.reset_z);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_range_set(nnc_ctx *x)
-{
-    float off = nn_get_f32(&x->r, "Z offset (m)");
-    float dist = nn_get_f32(&x->r, "Z sweep distance (m)");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (!isfinite(off) || fabsf(off) > 1e-4f) {
-        snprintf(x->err, sizeof x->err, "Z offset (m) %g: must be in [-1e-4, 1e-4] m", (double)off);
-        return NNC_FAIL;
-    }
-    if (!isfinite(dist) || fabsf(dist) < 1e-12f || fabsf(dist) > 1e-4f) {
-        snprintf(x->err, sizeof x->err, "Z sweep distance (m) %g: its magnitude must be in [1e-12, 1e-4] m",
-                 (double)dist);
-        return NNC_FAIL;
-    }
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nnc_m.z_offset_m = off;
-    nnc_m.z_distance_m = dist;
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_range_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_f32(x->o, nnc_m.z_offset_m);
-    nn_put_f32(x->o, nnc_m.z_distance_m);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static const char *const s_timing_names[7] = { "Z averaging time (s)", "Initial settling time (s)",
-                                                "Maximum slew rate (V/s)", "Settling time (s)",
-                                                "Integration time (s)", "End settling time (s)",
-                                                "Z control time (s)" };
-
-static int h_zs_timing_set(nnc_ctx *x)
-{
-    float t[7];
-    for (int i = 0; i < 7; i++)
-        t[i] = nn_get_f32(&x->r, s_timing_names[i]);
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    for (int i = 0; i < 7; i++) {
-        if (i == 2) {
-            if (!isfinite(t[i]) || t[i] <= 0)
-                return nnc_fail(x, "%s: must be a positive number", s_timing_names[i]);
-        } else if (nnc_time(x, t[i], s_timing_names[i]))
-            return NNC_FAIL;
-    }
-    if (!(t[4] > 0))
-        return nnc_fail(x, "%s: must be > 0 (each point's samples are averaged over it)", s_timing_names[4]);
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nnc_m.t_zavg_s = t[0];
-    nnc_m.t_init_settle_s = t[1];
-    nnc_m.slew_V_per_s = t[2];
-    nnc_m.t_settle_s = t[3];
-    nnc_m.t_integr_s = t[4];
-    nnc_m.t_end_settle_s = t[5];
-    nnc_m.t_zctrl_s = t[6];
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_timing_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    float t[7] = { nnc_m.t_zavg_s,   nnc_m.t_init_settle_s, nnc_m.slew_V_per_s,  nnc_m.t_settle_s,
-                   nnc_m.t_integr_s, nnc_m.t_end_settle_s,  nnc_m.t_zctrl_s };
-    pthread_mutex_unlock(&nnc_mu);
-    for (int i = 0; i < 7; i++)
-        nn_put_f32(x->o, t[i]);
-    return NNC_OK;
-}
-
-static int h_zs_rdelay_set(nnc_ctx *x)
-{
-    float t = nn_get_f32(&x->r, "Retract delay (s)");
-    if (nnc_args_done(x) || nnc_time(x, t, "Retract delay (s)"))
-        return NNC_FAIL;
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nnc_m.retract_delay_s = t;
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_rdelay_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_f32(x->o, nnc_m.retract_delay_s);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_retract_set(nnc_ctx *x)
-{
-    unsigned en = nn_get_u16(&x->r, "Enable");
-    float thr = nn_get_f32(&x->r, "Threshold");
-    int32_t sig = nn_get_i32(&x->r, "Signal index");
-    unsigned cmp = nn_get_u16(&x->r, "Comparison");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    int e = -1;
-    if (nnc_flag(x, en, "Enable", &e) || (sig != -1 && nnc_signal_index(x, sig, "Signal index")))
-        return NNC_FAIL;
-    if (cmp > 2) {
-        snprintf(x->err, sizeof x->err, "Comparison %u: must be 0 (>), 1 (<) or 2 (no change)", cmp);
-        return NNC_FAIL;
-    }
-    if (!isfinite(thr))
-        return nnc_fail(x, "%s: must be a finite number", "Threshold");
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    if (e >= 0)
-        nnc_m.ar_enable = e;
-    nnc_m.ar_threshold = thr;
-    if (sig != -1)
-        nnc_m.ar_signal = sig;
-    if (cmp != 2)
-        nnc_m.ar_cmp = (int)cmp;
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_retract_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_u16(x->o, (uint16_t)nnc_m.ar_enable);
-    nn_put_f32(x->o, nnc_m.ar_threshold);
-    nn_put_i32(x->o, nnc_m.ar_signal);
-    nn_put_u16(x->o, (uint16_t)nnc_m.ar_cmp);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_retract2_set(nnc_ctx *x)
-{
-    int32_t cond = nn_get_i32(&x->r, "2nd condition");
-    float thr = nn_get_f32(&x->r, "Threshold");
-    int32_t sig = nn_get_i32(&x->r, "Signal index");
-    unsigned cmp = nn_get_u16(&x->r, "Comparison");
-    if (nnc_args_done(x))
-        return NNC_FAIL;
-    if (cond < 0 || cond > 4) {
-        snprintf(x->err, sizeof x->err, "2nd condition %d: must be 0 (no change), 1 (-No-), 2 (OR), 3 (AND) or 4 "
-                 "(THEN)", (int)cond);
-        return NNC_FAIL;
-    }
-    if ((sig != -1 && nnc_signal_index(x, sig, "Signal index")))
-        return NNC_FAIL;
-    if (cmp > 2) {
-        snprintf(x->err, sizeof x->err, "Comparison %u: must be 0 (>), 1 (<) or 2 (no change)", cmp);
-        return NNC_FAIL;
-    }
-    if (!isfinite(thr))
-        return nnc_fail(x, "%s: must be a finite number", "Threshold");
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    if (cond)
-        nnc_m.ar2_cond = cond - 1; /* Set counts from "no change", Get from -No- */
-    nnc_m.ar2_threshold = thr;
-    if (sig != -1)
-        nnc_m.ar2_signal = sig;
-    if (cmp != 2)
-        nnc_m.ar2_cmp = (int)cmp;
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
-
-static int h_zs_retract2_get(nnc_ctx *x)
-{
-    int rc = nnc_ping(x);
-    if (rc)
-        return rc;
-    pthread_mutex_lock(&nnc_mu);
-    nn_put_i32(x->o, nnc_m.ar2_cond);
-    nn_put_f32(x->o, nnc_m.ar2_threshold);
-    nn_put_i32(x->o, nnc_m.ar2_signal);
-    nn_put_u16(x->o, (uint16_t)nnc_m.ar2_cmp);
-    pthread_mutex_unlock(&nnc_mu);
-    return NNC_OK;
-}
+S_PROPS(s_status, NNF_ROW(NNF_U32, S_T, "Status", running, NNF_ANY, NNF_NONE, 0, 0, NNF_NO_NC, ""));
+/* PropsGet's layout; PropsSet reads the same less the strings */
+S_PROPS(s_props, NNF_FLAG(S_T, "Backward sweep", backward),
+        NNF_ROW(NNF_I32, S_T, "Number of points", points, NNF_RANGE, NNF_SAME, 1, NNC_MAX_POINTS, 0,
+                "must be in [1, 100000] (0: no change)"),
+        NNF_STRS(s_params, S_NPARAMS), NNF_STRS(s_fixed_params, S_NFIXED),
+        NNF_ROW(NNF_U16, S_T, "Number of sweeps", sweeps, NNF_RANGE, NNF_SAME, 1, NNC_MAX_SWEEPS, 0,
+                "must be in [1, 1000] (0: no change)"),
+        NNF_FLAG(S_T, "Autosave", autosave), NNF_FLAG(S_T, "Show save dialog", show_dialog),
+        NNF_FLAG(S_T, "Save all", save_all));
+_Static_assert(NNC_MAX_POINTS == 100000 && NNC_MAX_SWEEPS == 1000, "the ranges' messages above");
+S_PROPS(s_adv, NNF_TIME(S_T, "Time between forward and backward sweep (s)", t_fwd_bwd_s),
+        NNF_FLAG(S_T, "Record final Z", record_final_z), NNF_FLAG(S_T, "Lockin Run", lockin_run),
+        NNF_FLAG(S_T, "Reset Z", reset_z));
+S_PROPS(s_range, NNF_F32(S_T, "Z offset (m)", z_offset_m, NNF_RANGE, -1e-4, 1e-4, "must be in [-1e-4, 1e-4] m"),
+        NNF_F32(S_T, "Z sweep distance (m)", z_distance_m, NNF_MAGNITUDE, 1e-12, 1e-4,
+                "its magnitude must be in [1e-12, 1e-4] m"));
+S_PROPS(s_timing, NNF_TIME(S_T, "Z averaging time (s)", t_zavg_s),
+        NNF_TIME(S_T, "Initial settling time (s)", t_init_settle_s),
+        { .type = NNF_F32, .name = "Maximum slew rate (V/s)", .off = offsetof(S_T, slew_V_per_s),
+          .check = NNF_RANGE, .lo_open = 1, .lo = 0, .hi = INFINITY, .must = "must be a positive number" },
+        NNF_TIME(S_T, "Settling time (s)", t_settle_s),
+        { .type = NNF_F32, .name = "Integration time (s)", .off = offsetof(S_T, t_integr_s), .check = NNF_RANGE,
+          .lo_open = 1, .lo = 0, .hi = 1000,
+          .must = "must be in (0, 1000] s (each point's samples are averaged over it)" },
+        NNF_TIME(S_T, "End settling time (s)", t_end_settle_s), NNF_TIME(S_T, "Z control time (s)", t_zctrl_s));
+S_PROPS(s_rdelay, NNF_TIME(S_T, "Retract delay (s)", retract_delay_s));
+S_PROPS(s_retract, NNF_FLAG(S_T, "Enable", ar_enable), S_THRESHOLD(ar_threshold), S_SIGNAL(ar_signal),
+        S_CMP(ar_cmp));
+/* Set counts the condition from "no change", Get from -No- */
+S_PROPS(s_retract2, NNF_ROW(NNF_I32, S_T, "2nd condition", ar2_cond, NNF_RANGE, NNF_MINUS1, 1, 4, 0,
+                            "must be 0 (no change), 1 (-No-), 2 (OR), 3 (AND) or 4 (THEN)"),
+        S_THRESHOLD(ar2_threshold), S_SIGNAL(ar2_signal), S_CMP(ar2_cmp));
 
 /* ---- ZSpectr.Start: a force curve on vafm's physics ------------------------------------------------
  * The sweep is one `curve` of the scene with a fixed symmetric ramp: it starts Z offset above the scene's
@@ -717,27 +438,27 @@ static int h_zs_stop(nnc_ctx *x)
 }
 
 const nnc_cmd nnc_zspectr_cmds[] = {
-    { "ZSpectr.Open", nnc_ping_only, "" },
-    { "ZSpectr.Start", h_zs_start, "iiiii" },
-    { "ZSpectr.Stop", h_zs_stop, "" },
-    { "ZSpectr.StatusGet", h_zs_status, "I" },
-    { "ZSpectr.ChsSet", h_zs_chs_set, "" },
-    { "ZSpectr.ChsGet", h_zs_chs_get, "ii" },
-    { "ZSpectr.PropsSet", h_zs_props_set, "" },
-    { "ZSpectr.PropsGet", h_zs_props_get, "HiiiiiHHHH" },
-    { "ZSpectr.AdvPropsSet", h_zs_adv_set, "" },
-    { "ZSpectr.AdvPropsGet", h_zs_adv_get, "fHHH" },
-    { "ZSpectr.RangeSet", h_zs_range_set, "" },
-    { "ZSpectr.RangeGet", h_zs_range_get, "ff" },
-    { "ZSpectr.TimingSet", h_zs_timing_set, "" },
-    { "ZSpectr.TimingGet", h_zs_timing_get, "fffffff" },
-    { "ZSpectr.RetractDelaySet", h_zs_rdelay_set, "" },
-    { "ZSpectr.RetractDelayGet", h_zs_rdelay_get, "f" },
-    { "ZSpectr.RetractSet", h_zs_retract_set, "" },
-    { "ZSpectr.RetractGet", h_zs_retract_get, "HfiH" },
-    { "ZSpectr.Retract2ndSet", h_zs_retract2_set, "" },
-    { "ZSpectr.Retract2ndGet", h_zs_retract2_get, "ifiH" },
-    { "ZSpectr.RetractSecondSet", h_zs_retract2_set, "" }, /* the spelling nanonis_spm sends */
-    { "ZSpectr.RetractSecondGet", h_zs_retract2_get, "ifiH" },
+    { "ZSpectr.Open", nnc_ping_only, "", NULL },
+    { "ZSpectr.Start", h_zs_start, "iiiii", NULL },
+    { "ZSpectr.Stop", h_zs_stop, "", NULL },
+    { "ZSpectr.StatusGet", nnc_props_get, "I", &s_status },
+    { "ZSpectr.ChsSet", h_zs_chs_set, "", NULL },
+    { "ZSpectr.ChsGet", h_zs_chs_get, "ii", NULL },
+    { "ZSpectr.PropsSet", nnc_props_set, "", &s_props },
+    { "ZSpectr.PropsGet", nnc_props_get, "HiiiiiHHHH", &s_props },
+    { "ZSpectr.AdvPropsSet", nnc_props_set, "", &s_adv },
+    { "ZSpectr.AdvPropsGet", nnc_props_get, "fHHH", &s_adv },
+    { "ZSpectr.RangeSet", nnc_props_set, "", &s_range },
+    { "ZSpectr.RangeGet", nnc_props_get, "ff", &s_range },
+    { "ZSpectr.TimingSet", nnc_props_set, "", &s_timing },
+    { "ZSpectr.TimingGet", nnc_props_get, "fffffff", &s_timing },
+    { "ZSpectr.RetractDelaySet", nnc_props_set, "", &s_rdelay },
+    { "ZSpectr.RetractDelayGet", nnc_props_get, "f", &s_rdelay },
+    { "ZSpectr.RetractSet", nnc_props_set, "", &s_retract },
+    { "ZSpectr.RetractGet", nnc_props_get, "HfiH", &s_retract },
+    { "ZSpectr.Retract2ndSet", nnc_props_set, "", &s_retract2 },
+    { "ZSpectr.Retract2ndGet", nnc_props_get, "ifiH", &s_retract2 },
+    { "ZSpectr.RetractSecondSet", nnc_props_set, "", &s_retract2 }, /* the spelling nanonis_spm sends */
+    { "ZSpectr.RetractSecondGet", nnc_props_get, "ifiH", &s_retract2 },
 };
 const size_t nnc_zspectr_ncmds = sizeof nnc_zspectr_cmds / sizeof nnc_zspectr_cmds[0];
