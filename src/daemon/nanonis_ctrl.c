@@ -71,6 +71,30 @@ static json_t *s_status(nnc_ctx *x, int *rc)
     return c;
 }
 
+/* Numbers of status.ctrl: keys[i] a member ("a/b": b of the object a; true, false: 1, 0; else NaN). */
+static int s_status_nums(nnc_ctx *x, const char *const *keys, int n, double *v)
+{
+    int rc;
+    json_t *c = s_status(x, &rc);
+    if (!c)
+        return rc;
+    for (int i = 0; i < n; i++) {
+        const char *sl = strchr(keys[i], '/');
+        json_t *o = c;
+        if (sl) {
+            char parent[32];
+            snprintf(parent, sizeof parent, "%.*s", (int)(sl - keys[i]), keys[i]);
+            o = json_object_get(c, parent);
+        }
+        json_t *j = json_object_get(o, sl ? sl + 1 : keys[i]);
+        v[i] = json_is_boolean(j) ? (double)json_is_true(j) : nnc_num(o, sl ? sl + 1 : keys[i]);
+    }
+    json_decref(c);
+    return NNC_OK;
+}
+
+static int s_status_num(nnc_ctx *x, const char *key, double *v) { return s_status_nums(x, &key, 1, v); }
+
 static const char *s_state(json_t *c)
 {
     json_t *s = json_object_get(c, "state");
@@ -161,11 +185,10 @@ static int h_zc_onoff_set(nnc_ctx *x)
     pthread_mutex_unlock(&s_mu);
     if (lift == 0)
         return NNC_OK;
-    json_t *c = s_status(x, &rc); /* the tip lift: Z up by it (clamped at the piezo's ends) */
-    if (!c)
+    double z = 0; /* the tip lift: Z up by it (clamped at the piezo's ends) */
+    if ((rc = s_status_num(x, "piezo_z_m", &z)))
         return rc;
-    double z = -nnc_num(c, "piezo_z_m") + lift;
-    json_decref(c);
+    z = -z + lift;
     double hi = 0, lo = 0, range = 0;
     if ((rc = s_limits(x, NULL, &hi, &lo, &range)))
         return rc;
@@ -174,13 +197,11 @@ static int h_zc_onoff_set(nnc_ctx *x)
 
 static int h_zc_onoff_get(nnc_ctx *x)
 {
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
-        return rc;
-    nn_put_u32(x->o, json_is_true(json_object_get(c, "feedback")));
-    json_decref(c);
-    return NNC_OK;
+    double on = 0;
+    int rc = s_status_num(x, "feedback", &on);
+    if (!rc)
+        nn_put_u32(x->o, on == 1);
+    return rc;
 }
 
 static int h_zc_zpos_set(nnc_ctx *x)
@@ -191,13 +212,11 @@ static int h_zc_zpos_set(nnc_ctx *x)
 
 static int s_put_field(nnc_ctx *x, const char *key, double scale)
 {
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
-        return rc;
-    nn_put_f32(x->o, (float)(scale * nnc_num(c, key)));
-    json_decref(c);
-    return NNC_OK;
+    double v = 0;
+    int rc = s_status_num(x, key, &v);
+    if (!rc)
+        nn_put_f32(x->o, (float)(scale * v));
+    return rc;
 }
 
 static int h_zc_zpos_get(nnc_ctx *x) { return s_put_field(x, "piezo_z_m", -1.0); }
@@ -215,16 +234,7 @@ static int h_zc_setpnt_set(nnc_ctx *x)
     return s_cmd(x, json_pack("{s:s,s:f}", "cmd", "feedback", "setpoint", (double)v));
 }
 
-static int h_zc_setpnt_get(nnc_ctx *x)
-{
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
-        return rc;
-    nn_put_f32(x->o, (float)nnc_num(json_object_get(c, "setpoint"), "value"));
-    json_decref(c);
-    return NNC_OK;
-}
+static int h_zc_setpnt_get(nnc_ctx *x) { return s_put_field(x, "setpoint/value", 1.0); }
 
 /* Gains: P in m/N, I in m/(N·s) (vafm's), the time constant T = P/I as the spec defines it (I = P/T). */
 static int h_zc_gain_set(nnc_ctx *x)
@@ -338,12 +348,11 @@ S_PROPS(s_delay, NNF_TIME(s_values, "Z-Controller switch off delay (s)", switch_
 
 static int h_zc_home(nnc_ctx *x)
 {
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
+    double z = 0;
+    int rc = s_status_num(x, "piezo_z_m", &z);
+    if (rc)
         return rc;
-    double z = -nnc_num(c, "piezo_z_m");
-    json_decref(c);
+    z = -z;
     pthread_mutex_lock(&s_mu);
     double target = m.home_relative ? z + m.home_m : m.home_m;
     pthread_mutex_unlock(&s_mu);
@@ -425,12 +434,10 @@ static int h_mo_closed_loop(nnc_ctx *x)
     if (t[0] != 0 || t[1] != 0)
         return nnc_fail(x, "%s: vafm's coarse motor moves in Z only (X and Y targets must be 0)",
                         t[0] != 0 ? tn[0] : tn[1]);
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
+    double z = 0;
+    int rc = s_status_num(x, "motor_z_m", &z);
+    if (rc)
         return rc;
-    double z = nnc_num(c, "motor_z_m");
-    json_decref(c);
     static const char *const names[] = { "ctrl_motor_step_m" };
     json_t *v = nnc_get(x, names, 1, &rc);
     if (!v)
@@ -470,14 +477,13 @@ static int h_mo_pos(nnc_ctx *x)
     }
     if (nnc_args_done(x) || s_group(x, grp))
         return NNC_FAIL;
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
+    double z = 0;
+    int rc = s_status_num(x, "motor_z_m", &z);
+    if (rc)
         return rc;
     nn_put_f64(x->o, 0);
     nn_put_f64(x->o, 0);
-    nn_put_f64(x->o, nnc_num(c, "motor_z_m"));
-    json_decref(c);
+    nn_put_f64(x->o, z);
     return NNC_OK;
 }
 
@@ -490,12 +496,10 @@ static int h_mo_steps(nnc_ctx *x)
         r[i] = nn_get_u32(&x->r, rn[i]);
     if (nnc_args_done(x))
         return NNC_FAIL;
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
+    double z = 0;
+    int rc = s_status_num(x, "motor_z_m", &z);
+    if (rc)
         return rc;
-    double z = nnc_num(c, "motor_z_m");
-    json_decref(c);
     static const char *const names[] = { "ctrl_motor_z0_m", "ctrl_motor_step_m" };
     json_t *v = nnc_get(x, names, 2, &rc);
     if (!v)
@@ -582,13 +586,13 @@ static int h_fm_xy_set(nnc_ctx *x)
 static int h_fm_xy_get(nnc_ctx *x)
 {
     (void)nn_get_u32(&x->r, "Wait for newest data");
-    int rc = nnc_args_done(x) ? NNC_FAIL : NNC_OK;
-    json_t *c = rc ? NULL : s_status(x, &rc);
-    if (!c)
+    static const char *const keys[] = { "x_m", "y_m" };
+    double xy[2] = { 0, 0 };
+    int rc = nnc_args_done(x) ? NNC_FAIL : s_status_nums(x, keys, 2, xy);
+    if (rc)
         return rc;
-    nn_put_f64(x->o, nnc_num(c, "x_m"));
-    nn_put_f64(x->o, nnc_num(c, "y_m"));
-    json_decref(c);
+    nn_put_f64(x->o, xy[0]);
+    nn_put_f64(x->o, xy[1]);
     return NNC_OK;
 }
 
@@ -616,16 +620,12 @@ static int h_fm_speed_get(nnc_ctx *x)
 /* Stop: a move to where the tip is now. */
 static int h_fm_stop(nnc_ctx *x)
 {
-    int rc;
-    json_t *c = s_status(x, &rc);
-    if (!c)
+    static const char *const keys[] = { "moving", "x_m", "y_m" };
+    double v[3] = { 0, 0, 0 };
+    int rc = s_status_nums(x, keys, 3, v);
+    if (rc || v[0] != 1)
         return rc;
-    int moving = json_is_true(json_object_get(c, "moving"));
-    double xm = nnc_num(c, "x_m"), ym = nnc_num(c, "y_m");
-    json_decref(c);
-    if (!moving)
-        return NNC_OK;
-    return s_cmd(x, json_pack("{s:s,s:f,s:f}", "cmd", "move", "x_m", xm, "y_m", ym));
+    return s_cmd(x, json_pack("{s:s,s:f,s:f}", "cmd", "move", "x_m", v[1], "y_m", v[2]));
 }
 
 const nnc_cmd nnc_ctrl_cmds[] = {
