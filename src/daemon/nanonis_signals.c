@@ -167,58 +167,59 @@ static int h_valsget(nnc_ctx *x)
     return NNC_OK;
 }
 
-static int h_calibr(nnc_ctx *x)
+/* CalibrGet and RangeGet: the signal index, then two floats that derive from the scene. */
+static int s_signal_pair(nnc_ctx *x, void (*pair)(int i, const double sc[SC_N], double v[2]))
 {
     int32_t i = nn_get_i32(&x->r, "Signal index");
-    double sc[SC_N];
+    double sc[SC_N], v[2];
     int rc = nnc_args_done(x) || nnc_signal_index(x, i, "Signal index") ? NNC_FAIL : s_scene(x, sc);
     if (rc)
         return rc;
-    /* physical units per volt of the detector signal, and the offset in physical units */
-    int kind = nnc_signals[i].kind;
-    double cal = kind == KIND_DEFL_M ? sc[SC_SENS] : kind == KIND_FORCE ? sc[SC_SENS] * sc[SC_K] : 1.0;
-    double off = kind == KIND_DEFL_M ? -sc[SC_OFFSET] * sc[SC_SENS]
-                 : kind == KIND_FORCE ? -sc[SC_OFFSET] * sc[SC_SENS] * sc[SC_K]
-                                      : 0.0;
-    nn_put_f32(x->o, (float)cal);
-    nn_put_f32(x->o, (float)off);
+    pair(i, sc, v);
+    nn_put_f32(x->o, (float)v[0]);
+    nn_put_f32(x->o, (float)v[1]);
     return NNC_OK;
 }
 
-static int h_range(nnc_ctx *x)
+/* physical units per volt of the detector signal, and the offset in physical units */
+static void s_calibr(int i, const double sc[SC_N], double v[2])
 {
-    int32_t i = nn_get_i32(&x->r, "Signal index");
-    double sc[SC_N];
-    int rc = nnc_args_done(x) || nnc_signal_index(x, i, "Signal index") ? NNC_FAIL : s_scene(x, sc);
-    if (rc)
-        return rc;
-    double hi, lo, half = sc[SC_ADC] / 2;
+    int kind = nnc_signals[i].kind;
+    v[0] = kind == KIND_DEFL_M ? sc[SC_SENS] : kind == KIND_FORCE ? sc[SC_SENS] * sc[SC_K] : 1.0;
+    v[1] = kind == KIND_DEFL_M ? -sc[SC_OFFSET] * sc[SC_SENS]
+           : kind == KIND_FORCE ? -sc[SC_OFFSET] * sc[SC_SENS] * sc[SC_K]
+                                : 0.0;
+}
+
+/* the signal's range: v[0] the high end, v[1] the low */
+static void s_range(int i, const double sc[SC_N], double v[2])
+{
+    double half = sc[SC_ADC] / 2;
     switch (nnc_signals[i].range) { /* the controller's rows */
-    case RNG_PIEZO: hi = 0, lo = -sc[SC_PIEZO]; goto put;
-    case RNG_MOTOR: hi = sc[SC_MOTOR_MAX], lo = sc[SC_MOTOR_MIN]; goto put;
-    case RNG_XY: hi = sc[SC_XY] / 2, lo = -hi; goto put;
-    case RNG_FORCE: hi = sc[SC_FLIMIT], lo = -hi; goto put;
-    case RNG_VOLT: hi = half, lo = -half; goto put;
-    case RNG_GAP: hi = sc[SC_MOTOR_MAX], lo = -sc[SC_PIEZO]; goto put;
+    case RNG_PIEZO: v[0] = 0, v[1] = -sc[SC_PIEZO]; return;
+    case RNG_MOTOR: v[0] = sc[SC_MOTOR_MAX], v[1] = sc[SC_MOTOR_MIN]; return;
+    case RNG_XY: v[0] = sc[SC_XY] / 2, v[1] = -v[0]; return;
+    case RNG_FORCE: v[0] = sc[SC_FLIMIT], v[1] = -v[0]; return;
+    case RNG_VOLT: v[0] = half, v[1] = -half; return;
+    case RNG_GAP: v[0] = sc[SC_MOTOR_MAX], v[1] = -sc[SC_PIEZO]; return;
     default: break;
     }
     switch (nnc_signals[i].kind) {
     case KIND_Z: { /* the travel of a curve: from the start height down by the ramp (or the travel limit) */
         double travel = sc[SC_RAMP] > 0 ? sc[SC_RAMP] : sc[SC_ZRANGE] > 0 ? sc[SC_ZRANGE] : sc[SC_START];
-        hi = sc[SC_START];
-        lo = sc[SC_START] - travel;
+        v[0] = sc[SC_START];
+        v[1] = sc[SC_START] - travel;
         break;
     }
-    case KIND_DEFL_V: hi = half, lo = -half; break;
-    case KIND_DEFL_M: hi = half * sc[SC_SENS], lo = -hi; break;
-    case KIND_FORCE: hi = half * sc[SC_SENS] * sc[SC_K], lo = -hi; break;
-    default: hi = 10, lo = -10; break; /* bias: the ±10 V of a controller's output */
+    case KIND_DEFL_V: v[0] = half, v[1] = -half; break;
+    case KIND_DEFL_M: v[0] = half * sc[SC_SENS], v[1] = -v[0]; break;
+    case KIND_FORCE: v[0] = half * sc[SC_SENS] * sc[SC_K], v[1] = -v[0]; break;
+    default: v[0] = 10, v[1] = -10; break; /* bias: the ±10 V of a controller's output */
     }
-put:
-    nn_put_f32(x->o, (float)hi);
-    nn_put_f32(x->o, (float)lo);
-    return NNC_OK;
 }
+
+static int h_calibr(nnc_ctx *x) { return s_signal_pair(x, s_calibr); }
+static int h_range(nnc_ctx *x) { return s_signal_pair(x, s_range); }
 
 /* ---- Bias: a value (no physics) ------------------------------------------------------------------- */
 
