@@ -95,19 +95,23 @@ def u32(x):
     return struct.pack(">I", x)
 
 
+def connect_when_open(port, alive=lambda: True, timeout=10.0):
+    """A Conn to the Nanonis port once it opens (within timeout s, while alive() holds)."""
+    deadline = time.time() + timeout
+    while True:
+        try:
+            return Conn(port)
+        except OSError:
+            assert alive() and time.time() < deadline, "the Nanonis port did not open"
+            time.sleep(0.05)
+
+
 @pytest.fixture
 def nd():
     port = free_port()
     d = Daemon("--free-run", "--nanonis", f"127.0.0.1:{port}")
     d.port = port
-    deadline = time.time() + 10
-    while True:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=1).close()
-            break
-        except OSError:
-            assert time.time() < deadline, "the Nanonis port did not open"
-            time.sleep(0.05)
+    connect_when_open(port).close()
     yield d
     assert d.stop() == 0
 
@@ -789,14 +793,7 @@ def test_curve_refuses_nanonis(tmp_path):
     args[-1] = f"127.0.0.1:{port}"
     d = subprocess.Popen(args + ["--nanonis-with-curve"], stderr=subprocess.PIPE)
     try:
-        deadline = time.time() + 10
-        while True:
-            try:
-                c = Conn(port)
-                break
-            except OSError:
-                assert d.poll() is None and time.time() < deadline, "the Nanonis port did not open"
-                time.sleep(0.05)
+        c = connect_when_open(port, alive=lambda: d.poll() is None)
         assert names_get(c)[0] == "Z (m)"
         c.close()
     finally:
@@ -811,14 +808,7 @@ def test_partial_headers_do_not_hold_the_slots():
     port = free_port()
     d = Daemon("--free-run", "--nanonis", f"127.0.0.1:{port}", env={"VAFMD_TEST_NANONIS_REQUEST_S": "1"})
     try:
-        deadline = time.time() + 10
-        while True:
-            try:
-                idle = Conn(port)
-                break
-            except OSError:
-                assert time.time() < deadline, "the Nanonis port did not open"
-                time.sleep(0.05)
+        idle = connect_when_open(port)
         held = []
         for _ in range(2):  # with the idle one and the one below: all four slots
             s = socket.create_connection(("127.0.0.1", port), timeout=5)

@@ -44,19 +44,29 @@ HDR = struct.Struct(">32sih2x")  # request: command name, body size, send-respon
 RHDR = struct.Struct(">32si4x")  # response: command name, body size, 4 unused
 
 
+def strings(b, off):
+    """A 1D array of strings at off: its size in bytes (i32), count (i32), then each as size + bytes.
+    Returns the strings and the offset after them."""
+    _, count = struct.unpack_from(">ii", b, off)
+    off, out = off + 8, []
+    for _ in range(count):
+        (k,) = struct.unpack_from(">i", b, off)
+        out.append(b[off + 4:off + 4 + k].decode())
+        off += 4 + k
+    return out, off
+
+
 class Nanonis:
     """A minimal Nanonis TCP client, from the specification alone."""
 
     def __init__(self, host, port, timeout=600.0):
         self.s = socket.create_connection((host, port), timeout=timeout)
+        self.f = self.s.makefile("rb")
 
     def _recv(self, n):
-        b = b""
-        while len(b) < n:
-            k = self.s.recv(n - len(b))
-            if not k:
-                raise ConnectionError("the Nanonis server closed the connection")
-            b += k
+        b = self.f.read(n)
+        if len(b) < n:
+            raise ConnectionError("the Nanonis server closed the connection")
         return b
 
     def call(self, name, body=b"", nret=None):
@@ -82,12 +92,7 @@ class Nanonis:
 
     def zspectr_start(self):
         b = self.call("ZSpectr.Start", struct.pack(">Ii", 1, 0))
-        _, count = struct.unpack_from(">ii", b, 0)
-        off, names = 8, []
-        for _ in range(count):
-            (n,) = struct.unpack_from(">i", b, off)
-            names.append(b[off + 4:off + 4 + n].decode())
-            off += 4 + n
+        names, off = strings(b, 0)
         rows, cols = struct.unpack_from(">ii", b, off)
         data = np.frombuffer(b, dtype=">f4", count=rows * cols, offset=off + 8).reshape(rows, cols)
         off += 8 + 4 * rows * cols
@@ -122,13 +127,7 @@ def main(argv=None):
     time.sleep(0.3)  # the subscription reaches the daemon
 
     # the signals by name (Signals.NamesGet), as a Nanonis script finds them
-    b = n.call("Signals.NamesGet")
-    _, count = struct.unpack_from(">ii", b, 0)
-    off, names = 8, []
-    for _ in range(count):
-        (k,) = struct.unpack_from(">i", b, off)
-        names.append(b[off + 4:off + 4 + k].decode())
-        off += 4 + k
+    names, _ = strings(n.call("Signals.NamesGet"), 0)
     force = names.index("Force (N)")
     n.call("ZSpectr.Open", b"", 0)
     n.call("ZSpectr.ChsSet", struct.pack(">ii", 1, force), 0)
