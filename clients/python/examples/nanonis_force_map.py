@@ -11,16 +11,24 @@ ZSpectr.Start with data), and listens on vafmd's stream for each curve's ground 
 the sweep returns (docs/nanonis.md): run.start's `scene` (the material the daemon simulated under the tip
 for that curve) and run.end's `result` (wire.md §3.3: `pulloff_sampled_N`, the curve's own pull-off).
 
-From each point's measured data alone it recovers the adhesion: the pull-off force, the most tensile force
-of the backward sweep. The truth is the same curve's `pulloff_sampled_N` (at a finite temperature the
-contact pulls off early, thermally activated, so the athermal JKR pull-off 3/2 pi gamma R of the scene is
-not what the curve did; it is printed as an extra line). Points are grouped by the material the ground
-truth reports; the recovered contrast (the ratio of the two materials' mean adhesion) is printed beside
-the true one of the same curves with sigma, the standard error of their difference: the sems of the
-materials' means (recovered and true, N curves each) and the sweep's resolution (the backward sweep reads
-the force every distance/points in Z, so its most tensile point falls short of the pull-off by up to one
-step k dZ of the spring force, uncorrected: k dZ/sqrt(3) on each recovered mean), in quadrature. The check
-(exit 4 when it fails) is agreement within 3 sigma.
+From each point's measured data alone it recovers the adhesion: the pull-off force of the backward sweep,
+interpolated within the Z step where the tip snaps off (pulloff(): the sweep reads the force only every
+dZ = distance/points, so its most tensile point falls short of the pull-off by up to k dZ, 0.2 nN at
+k = 0.1 N/m and 2 nm; the tensile branch before the snap is a line of slope k, fitted on the points before
+it, and the snapping point's mean is the branch's force over the part of the step before the snap plus the
+free lever's after it, which gives where in the step the snap happened and the force there).
+The truth is the same curve's `pulloff_sampled_N` (at a finite temperature the contact pulls off early,
+thermally activated, so the athermal JKR pull-off 3/2 pi gamma R of the scene is not what the curve did;
+it is printed as an extra line). That truth is itself sampled: the most tensile output sample, each sample
+the mean over its sample period (the stream's `sample_rate_Hz`, run.start), so it falls short of the
+snap's force by k dz (u + 1/2), dz = v_retract / sample_rate the Z travel of one sample, u uniform in
+[0, 1): on average k dz (0.02 nN here), spread k dz/sqrt(12). The recovered value compared with it is the
+interpolated pull-off less k dz (`adhesion_sampled_N`). Points are grouped by the material the ground truth
+reports; the recovered contrast (the ratio of the two materials' mean adhesion) is printed beside the true
+one of the same curves with sigma, the standard error of their difference: recovered and true are the same
+curves, so only each curve's residual counts, k dz/sqrt(12) (the truth's sampling) and the residuals' own
+spread, in quadrature, over sqrt(N) for each material's mean. The check (exit 4 when it fails) is agreement
+within 3 sigma.
 
 The sample: vafmd's `ctrl_sample` setting (wire.md §2.4) puts a map's sample under the controller, e.g.
     vafm ctl set ctrl_sample=pattern=stripes,period_m=2e-6,b_E_star_Pa=5e9,b_gamma_J_per_m2=0.2
@@ -54,6 +62,38 @@ def strings(b, off):
         out.append(b[off + 4:off + 4 + k].decode())
         off += 4 + k
     return out, off
+
+
+def pulloff(bwd):
+    """The pull-off force (N, tensile positive) from a backward sweep's force points (index: the forward
+    point's, so the retract runs toward index 0), interpolated within the step where the tip snaps off.
+    Returns (pull-off, the most tensile point's force): the first is NaN when the sweep has no tensile branch
+    of three points to fit."""
+    f = np.asarray(bwd, float)
+    if not np.isfinite(f).any():
+        return math.nan, math.nan
+    i = int(np.nanargmin(f))
+    naive = max(0.0, -float(f[i]))
+    fit = np.arange(i + 1, i + 4)  # in contact: beyond the most tensile point
+    if fit[-1] >= len(f) or not np.isfinite(f[fit]).all() or f[i] >= 0:
+        return math.nan, naive
+    slope, icpt = np.polyfit(fit, f[fit], 1)  # the tensile branch: f = icpt + slope * j
+    if not slope > 0:
+        return math.nan, naive
+    # the snapping point j: the most tensile one if it is off the branch, else the next one out
+    j = i if abs(f[i] - (icpt + slope * i)) > 0.05 * slope else i - 1
+    if j < 0:
+        return math.nan, naive
+    free = f[max(0, j - 8):max(0, j - 2)]  # the free lever further out (its ring-down past)
+    free = float(np.median(free)) if len(free) else 0.0
+    f0, df = icpt + slope * (j + 0.5), -slope  # the branch at the step's start, its change over the step
+    # the step's mean: q (f0 + q df / 2) + (1 - q) free, q the part of the step before the snap
+    a, b, c = df / 2, f0 - free, free - f[j]
+    disc = math.sqrt(max(b * b - 4 * a * c, 0.0))
+    q = min([r for r in ((-b - disc) / (2 * a), (-b + disc) / (2 * a)) if -0.5 <= r <= 1.5] or [0.5],
+            key=lambda r: abs(r - 0.5))
+    q = min(max(q, 0.0), 1.0)
+    return -(f0 + q * df), naive
 
 
 class Nanonis:
@@ -161,16 +201,18 @@ def main(argv=None):
             n.folme_xy(float(x), float(y))
             chans, data, params = n.zspectr_start()
             run_id = int(params[5])  # Run ID (docs/nanonis.md: after the fixed parameters)
-            bwd = data[chans.index("Force [bwd] (N)")]
-            adhesion = max(0.0, -float(np.nanmin(bwd))) if np.isfinite(bwd).any() else math.nan
+            adhesion, most_tensile = pulloff(data[chans.index("Force [bwd] (N)")])
             start, end = truth(run_id)
             scene, res = start["scene"], end.get("result") or {}
             if end.get("status") != "ok" or res.get("pulloff_sampled_N") is None:
                 sys.exit(f"run {run_id} ended {end.get('status')} without a pull-off: {end.get('error')}")
             R, gamma, E = scene["R_m"], scene["gamma_J_per_m2"], scene["E_star_Pa"]
+            # one output sample's Z travel: the truth (the most tensile sample) is k dz short on average
+            k_dz = scene["k_N_per_m"] * scene["v_retract_m_per_s"] / start["sample_rate_Hz"]
             pts.append({"ix": ix, "iy": iy, "x_m": float(x), "y_m": float(y), "run_id": run_id,
-                        "adhesion_N": adhesion, "E_star_Pa": E, "gamma_J_per_m2": gamma,
-                        "adhesion_true_N": res["pulloff_sampled_N"],
+                        "adhesion_N": adhesion, "adhesion_sampled_N": adhesion - k_dz,
+                        "adhesion_most_tensile_point_N": most_tensile, "sample_step_N": k_dz,
+                        "E_star_Pa": E, "gamma_J_per_m2": gamma, "adhesion_true_N": res["pulloff_sampled_N"],
                         "adhesion_jkr_N": 1.5 * math.pi * gamma * R, "k_N_per_m": scene["k_N_per_m"]})
     dt = time.time() - t0
 
@@ -184,12 +226,18 @@ def main(argv=None):
         return float(v.std(ddof=1) / math.sqrt(len(v))) if len(v) > 1 else math.nan
 
     for (E, g), ps in sorted(mats.items()):
-        rec = np.array([p["adhesion_N"] for p in ps])
+        rec = np.array([p["adhesion_sampled_N"] for p in ps])
         tru = np.array([p["adhesion_true_N"] for p in ps])
         jkr = ps[0]["adhesion_jkr_N"]
+        # the standard error of the mean residual (recovered - true, the same curves): the truth's sampling
+        # k dz/sqrt(12) and the residuals' own spread, in quadrature
+        step = max(p["sample_step_N"] for p in ps)
+        resid = rec - tru
+        spread = float(np.nanstd(resid, ddof=1)) if np.isfinite(resid).sum() > 1 else 0.0
         m = {"E_star_Pa": E, "gamma_J_per_m2": g, "points": len(ps),
              "adhesion_true_N": float(tru.mean()), "adhesion_true_sem_N": sem(tru),
              "adhesion_recovered_N": float(np.nanmean(rec)), "adhesion_recovered_sem_N": sem(rec),
+             "residual_sem_N": math.sqrt(step ** 2 / 12 + spread ** 2) / math.sqrt(np.isfinite(rec).sum()),
              "adhesion_jkr_N": jkr}
         summary.append(m)
         print(f"material E* = {E:.4g} Pa, gamma = {g:.4g} J/m^2: {len(ps)} points, adhesion recovered "
@@ -204,14 +252,10 @@ def main(argv=None):
         c_true = hi["adhesion_true_N"] / lo["adhesion_true_N"]
         c_rec = hi["adhesion_recovered_N"] / lo["adhesion_recovered_N"]
         c_jkr = hi["adhesion_jkr_N"] / lo["adhesion_jkr_N"]
-        # the standard error of c_rec - c_true: each material's means, recovered and true, as independent
-        # estimates (their sems), and the sweep's resolution k dZ / sqrt(3) (the recovered pull-off falls
-        # short by 0 to one Z step k dZ of the spring force, not corrected for: the standard deviation of a
-        # uniform error of half-width k dZ), in quadrature; relative errors of numerator and denominator
-        res = pts[0]["k_N_per_m"] * abs(a.distance) / a.points / math.sqrt(3)
-        rel = [(m["adhesion_recovered_sem_N"] ** 2 + res ** 2) / m["adhesion_recovered_N"] ** 2
-               + (m["adhesion_true_sem_N"] / m["adhesion_true_N"]) ** 2 for m in (lo, hi)]
-        sigma = c_true * math.sqrt(sum(rel))
+        # the standard error of c_rec - c_true: recovered and true are the same curves, so only their
+        # residuals count (each material's residual_sem_N, relative to its mean), in quadrature
+        res = max(p["sample_step_N"] for p in pts) / math.sqrt(12)
+        sigma = c_true * math.sqrt(sum((m["residual_sem_N"] / m["adhesion_true_N"]) ** 2 for m in (lo, hi)))
         z = (c_rec - c_true) / sigma if sigma > 0 else math.inf if sigma == 0 else math.nan
         agree = bool(abs(z) <= 3) if math.isfinite(sigma) else None  # None: a material of one curve, no sem
         result["contrast"] = {"true": c_true, "recovered": c_rec, "sigma": sigma, "z": z, "resolution_N": res,
