@@ -164,7 +164,12 @@ def main(argv=None):
     sub.setsockopt(zmq.SUBSCRIBE, b"run.start")
     sub.setsockopt(zmq.SUBSCRIBE, b"run.end")
     sub.connect(a.pub)
-    time.sleep(0.3)  # the subscription reaches the daemon
+    # the subscription is in place once the daemon's welcome heartbeat (wire.md §3: one at once for every
+    # new subscription) arrives: a run started before it would go unseen
+    sub.setsockopt(zmq.SUBSCRIBE, b"heartbeat")
+    if not sub.poll(10000):
+        sys.exit(f"no heartbeat from {a.pub} within 10 s: is --pub vafmd's stream?")
+    sub.setsockopt(zmq.UNSUBSCRIBE, b"heartbeat")
 
     # the signals by name (Signals.NamesGet), as a Nanonis script finds them
     names, _ = strings(n.call("Signals.NamesGet"), 0)
@@ -187,7 +192,7 @@ def main(argv=None):
             if sub.poll(500):
                 frames = sub.recv_multipart()
                 h = json.loads(frames[1])
-                if "run_id" in h:
+                if frames[0] in (b"run.start", b"run.end") and "run_id" in h:
                     seen.setdefault(h["run_id"], {})[frames[0].decode()] = h
         got = seen.pop(run_id, {})
         for topic in ("run.start", "run.end"):
