@@ -338,6 +338,81 @@ def test_zspectr_timing_and_settling(nd):
     assert dz == pytest.approx(-200e-9 / 50, rel=1e-3)
 
 
+def test_zspectr_timings_shape_the_sweep(nd, tmp_path):
+    """ZSpectr.TimingSet's other timings on vafm's physics (docs/nanonis.md): at 1x speed the initial
+    settling time (a pause at the start before the forward sweep), the end settling time (after the
+    backward sweep) and the move from the current Z to the start at the maximum slew rate (V/s over the
+    piezo range's 20 V) each lengthen the sweep by their time, the forward and backward points unchanged;
+    the Z averaging time averages an engaged controller's Z only (none here: no effect). With the log on
+    the sweep is the plain curve (a segment list is not logged): the timings have no effect."""
+    nd.cmd({"cmd": "set", "values": {"free_run": False, "speed": 1}})
+    range_m = nd.cmd({"cmd": "get", "names": ["ctrl_piezo_range_m"]})["values"]["ctrl_piezo_range_m"]
+    c = Conn(nd.port)
+    setup_sweep(c, points=50, t_int=2e-3, bwd=1, retract=(2, 0, 0, 0))  # auto-retract off: the whole range
+
+    def sweep(t_zavg=0.1, t_init=0.0, slew=100.0, t_end=0.0, offset=0.0):
+        c.call("ZSpectr.RangeSet", f32(offset) + f32(200e-9))
+        c.call("ZSpectr.TimingSet", struct.pack(">7f", t_zavg, t_init, slew, 0, 2e-3, t_end, 0))
+        t0 = time.monotonic()
+        _, data, _ = zspectr_start(c)
+        return time.monotonic() - t0, data
+
+    w0, d0 = sweep()
+    assert 2 * 50 * 2e-3 <= w0 < 2 * 50 * 2e-3 + 2.0 and np.isfinite(d0).all()
+    slew = 0.1  # V/s: 20 nm at 0.1 * range/20 m/s
+    cases = {"initial settling": (dict(t_init=0.3), 0.3, 0.0), "end settling": (dict(t_end=0.4), 0.4, 0.0),
+             "slew": (dict(slew=slew, offset=20e-9), 20e-9 / (slew * range_m / 20), 20e-9),
+             "Z averaging (not engaged)": (dict(t_zavg=1.0), 0.0, 0.0)}
+    for what, (kw, extra, offset) in cases.items():
+        w, d = sweep(**kw)
+        # at 1x the run cannot be faster than its simulated time (measured: +0.29-0.30 s, +0.39-0.40 s, +0.42 s
+        # over the plain sweep); the other side: scheduling on a loaded machine, 3 s
+        assert 2 * 50 * 2e-3 + extra <= w < w0 + extra + 3.0, (what, w, w0, extra)
+        assert np.isfinite(d).all(), what
+        assert d[0] == pytest.approx(d0[0] + offset, abs=1e-12), what  # the forward Z points, shifted by the offset
+        assert np.allclose(d[4], d[0], rtol=0, atol=3e-9), what  # backward point i at forward point i's Z
+    # a pause too long to collect (1000 s at 10 kHz: 1e7 samples, more than 2^20): refused, saying why
+    c.call("ZSpectr.TimingSet", struct.pack(">7f", 0.1, 1000, 100, 0, 2e-3, 0, 0))
+    b, st, desc = c.call("ZSpectr.Start", u32(1) + i32(0), ok=False)
+    assert st == 1 and "timings" in desc and "initial and end settling" in desc, desc
+    # the log on: the plain curve, the timings without effect (and the sweep still runs)
+    assert nd.cmd({"cmd": "log", "path": str(tmp_path / "log.h5")})["status"] == "ok"
+    w, d = sweep(t_init=2.0, t_end=2.0)
+    assert w < 2.0 and np.isfinite(d).all() and d[0] == pytest.approx(d0[0], abs=1e-12), w  # not 4 s longer
+    assert nd.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 1
+    c.close()
+
+
+def test_zspectr_zavg_and_zctrl_engaged(nd):
+    """With the controller engaged: the Z averaging time averages its gap (the feedback on) before the sweep
+    starts there (Z offset above it), lengthening the request by that time (wall clock); the Z control time
+    switches the feedback back on after the sweep (a constant-force pause at the setpoint): the tip ends at
+    the setpoint's height, not at the sweep's start 50 nm above."""
+    assert nd.cmd({"cmd": "set", "values": {"speed": 20, "ctrl_motor_z0_m": 40e-6}})["status"] == "ok"
+    c = Conn(nd.port)
+    setup_sweep(c, points=50, t_int=2e-3, bwd=1)
+    c.call("ZSpectr.RangeSet", f32(50e-9) + f32(200e-9))
+    got = []
+    for t_zavg, t_zctrl in ((0.0, 0.0), (0.5, 0.5)):
+        c.call("ZSpectr.TimingSet", struct.pack(">7f", t_zavg, 0, 100, 0, 2e-3, 0, t_zctrl))
+        if struct.unpack(">H", c.call("ZCtrl.StatusGet")[0])[0] != 2:  # a sweep leaves ZCtrl as it found it
+            c.call("AutoApproach.OnOffSet", u16(1))
+            poll(lambda: struct.unpack(">H", c.call("ZCtrl.StatusGet")[0])[0] == 2, 60, "the controller engaged")
+        st = ctrl(nd)
+        t0 = time.monotonic()
+        _, data, _ = zspectr_start(c)
+        wall = time.monotonic() - t0
+        z_end = struct.unpack(">f", c.call("Signals.ValGet", i32(0) + u32(0))[0])[0]
+        got.append((st, data, wall, z_end))
+    for st, data, _, _ in got:  # the sweep starts at the (averaged) gap + offset: point 0 half a step below
+        assert data[0][0] == pytest.approx(st["gap_m"] + 50e-9 - 200e-9 / 50 / 2, abs=1e-9), (st, data[0][:3])
+    (st0, _, w0, z0), (st1, _, w1, z1) = got
+    assert w1 >= 0.5, (w0, w1)  # the averaging's wall time (without it the sweep took 0.02-0.14 s)
+    assert z0 == pytest.approx(st0["gap_m"] + 50e-9, abs=2e-9)  # no Z control: back at the sweep's start
+    assert z1 == pytest.approx(st1["gap_m"], abs=3e-9)  # Z control: the feedback holds the setpoint's height
+    c.close()
+
+
 def test_zspectr_scene_unchanged_while_it_runs(nd):
     """The sweep's values are put back as soon as its curve has started (the curve keeps its own scene):
     a JSON client sees the scene unchanged during a sweep, and its own `set` made then is not undone when

@@ -295,6 +295,8 @@ int nn_collect_arm(size_t cap)
             fresh.v[k][i] = NAN;
     }
     fresh.dwell_at = fresh.retract_at = -1;
+    for (int k = 0; k < NN_RUN_SEGS; k++)
+        fresh.seg_at[k] = -1;
     pthread_mutex_lock(&s.mu);
     nn_run_free(&s.run);
     s.run = fresh;
@@ -392,6 +394,10 @@ static void s_on_json(const char *topic, zmq_msg_t *body)
             const char *kind = json_string_value(json_object_get(j, "kind"));
             const char *to = json_string_value(json_object_get(j, "to"));
             json_int_t at = json_integer_value(json_object_get(j, "sample"));
+            json_t *pos = json_object_get(j, "to_segment"); /* a segment list's: the position */
+            if (kind && !strcmp(kind, "segment") && json_is_integer(pos) && json_integer_value(pos) >= 0 &&
+                json_integer_value(pos) < NN_RUN_SEGS && s.run.seg_at[json_integer_value(pos)] < 0)
+                s.run.seg_at[json_integer_value(pos)] = at;
             if (kind && !strcmp(kind, "segment") && to) {
                 if (!strcmp(to, "dwell"))
                     s.run.dwell_at = at;

@@ -85,11 +85,13 @@ int nn_live(double v[NN_CH_N], int *has_hmeas);
 /* The run collector: one Z spectroscopy at a time. arm() before the `curve` command: the next run's
  * samples (whichever run starts next) are kept, at most cap samples. wait() until its run.end, the
  * deadline (monotonic s) or the daemon stopping. */
+#define NN_RUN_SEGS 8 /* the segments of a list whose starts the collector keeps */
 typedef struct nn_run {
     uint64_t run_id;
     size_t n;                   /* samples kept */
     double *v[NN_CH_N];         /* per channel (NN_CH_HMEAS: NULL unless the run streams it) */
     int64_t dwell_at, retract_at; /* sample index where the dwell / retract segment begins (-1: not seen) */
+    int64_t seg_at[NN_RUN_SEGS]; /* a segment list's run: where the segment at position i begins (-1: not seen) */
     int ended;                  /* run.end seen */
     char status[16];            /* run.end "status" */
     int overflow;               /* more samples than cap (not kept) */

@@ -6,7 +6,8 @@
  * connections. ZSpectr.Start turns them into one `curve` of the scene per sweep (the scene's values set for
  * the sweep and restored after it), collects the run's samples from the stream (nanonis.c's collector) and
  * averages each point over its integration time after its settling time; forward and backward sweeps are
- * the curve's approach and retract. ZSpectr.Stop aborts the run in progress.
+ * the curve's approach and retract. The other timings make the curve a segment list (see "the timings"
+ * below). ZSpectr.Stop aborts the run in progress.
  */
 #include <math.h>
 #include <pthread.h>
@@ -169,6 +170,114 @@ static int s_restore(nnc_ctx *x, const json_t *saved, int *rc)
     return r;
 }
 
+/* ---- the timings (ZSpectr.TimingSet) ------------------------------------------------------------------
+ * Settling and integration time shape each point of the plain curve. The others give the sweep phases a
+ * plain curve does not have, so a sweep that needs one runs a segment list (docs/instrument.md "Segments")
+ * instead: the move from the current Z to the sweep's start at the maximum slew rate, a pause of the
+ * initial settling time there, the forward sweep (an extend by the sweep distance, the auto-retract as its
+ * trigger), the dwell, the backward sweep (a retract back to the start: a height trigger), a pause of the
+ * end settling time and, where the controller was engaged, its feedback switched back on for the Z control
+ * time (a constant-force pause at its setpoint). The Z averaging time is spent before: the engaged
+ * controller's gap averaged over it (the feedback on) gives the current Z. A list's curve is not logged
+ * (wire.md `curve`): with the log on, the sweep stays the plain curve and these timings have no effect.
+ * All of them 0 (and the move shorter than one sample): the plain curve, as before. */
+
+#define S_M_PER_V_DIV 20.0    /* the slew rate's volts: the piezo range spans the Z output's 20 V (±10 V) */
+
+typedef struct s_plan {
+    json_t *list;       /* the segment list, or NULL: the plain curve */
+    int fwd, bwd;       /* the positions of the forward sweep's extend and the backward sweep's retract */
+    double run_start_m; /* the run's start height (the current Z, where the move begins) */
+    double extra_s;     /* the time the list adds to the plain curve's */
+    double samples;     /* the output samples it adds (at the run's rate: a decimated segment's samples are
+                           released faster than real time at 1x, so every segment keeps the run's rate) */
+} s_plan;
+
+/* The engaged controller's gap averaged over t s (the feedback on), polled every 2 ms: *gap. */
+static int s_zavg(nnc_ctx *x, double t, double *gap)
+{
+    double sum = 0, end = nn_now_s() + t;
+    long n = 0;
+    int rc = NNC_OK;
+    do {
+        json_t *st = NULL;
+        if ((rc = nnc_call(x, json_pack("{s:s}", "cmd", "status"), &st)))
+            return rc;
+        double g = nnc_num(json_object_get(st, "ctrl"), "gap_m");
+        json_decref(st);
+        if (isfinite(g))
+            sum += g, n++;
+        pthread_mutex_lock(&nnc_mu);
+        int stop = nnc_m.stop;
+        pthread_mutex_unlock(&nnc_mu);
+        if (stop || nn_quitting())
+            break;
+        struct timespec ts = { 0, 2000000 };
+        nanosleep(&ts, NULL);
+    } while (nn_now_s() < end);
+    if (n)
+        *gap = sum / (double)n;
+    return rc;
+}
+
+/* A pause of dur_s (extra: more of its keys, consumed); added: it adds to the plain curve's time. */
+static void s_pause(json_t *list, s_plan *pl, double fs, double dur_s, json_t *extra, int added)
+{
+    json_t *g = json_pack("{s:s,s:f}", "kind", "pause", "duration_s", dur_s);
+    if (extra)
+        json_object_update(g, extra);
+    json_decref(extra);
+    json_array_append_new(list, g);
+    pl->extra_s += added ? dur_s : 0;
+    pl->samples += added ? dur_s * fs + 2 : 2; /* the dwell's are counted already */
+}
+
+/* The sweep's plan: a segment list when a timing asks for one and the log is off (pl->list), else the
+ * plain curve. vals: the sweep's scene values (its trigger, rate); hc: the current Z; start: the sweep's. */
+static void s_plan_make(const nnc_state *p, json_t *vals, double hc, double start, double dist, double range_m,
+                        int logging, int engaged, double setpoint_N, s_plan *pl)
+{
+    memset(pl, 0, sizeof *pl);
+    pl->run_start_m = start;
+    double tp = (double)p->t_settle_s + (double)p->t_integr_s, v = dist / (tp * p->points);
+    double fs = nnc_num(vals, "sample_rate_Hz"), dwell = nnc_num(vals, "dwell_s");
+    double v_slew = fmin((double)p->slew_V_per_s * range_m / S_M_PER_V_DIV, 1e3);
+    double move = start - hc, t_move = isfinite(v_slew) && v_slew > 0 ? fabs(move) / v_slew : 0;
+    int zctrl = engaged && p->t_zctrl_s > 0 && isfinite(setpoint_N);
+    if (!(t_move * fs >= 1))
+        t_move = 0; /* shorter than one sample: not modelled (the plain curve starts at the start) */
+    if (logging || (t_move == 0 && p->t_init_settle_s == 0 && p->t_end_settle_s == 0 && !zctrl))
+        return;
+    json_t *list = json_array();
+    if (t_move > 0) { /* from the current Z to the start */
+        json_array_append_new(list, json_pack("{s:s,s:f,s:f}", "kind", move > 0 ? "retract" : "extend",
+                                              "speed_m_per_s", v_slew, "distance_m", fabs(move)));
+        pl->run_start_m = hc;
+        pl->extra_s += t_move;
+        pl->samples += t_move * fs + 2;
+    }
+    if (p->t_init_settle_s > 0)
+        s_pause(list, pl, fs, p->t_init_settle_s, NULL, 1);
+    pl->fwd = (int)json_array_size(list);
+    const char *trig = json_string_value(json_object_get(vals, "trigger"));
+    int force = trig && !strcmp(trig, "force");
+    json_array_append_new(list, json_pack("{s:s,s:f,s:f,s:{s:s,s:s,s:f}}", "kind", "extend", "speed_m_per_s", v,
+                                          "distance_m", dist, "trigger", "channel", force ? "force" : "height",
+                                          "op", force ? ">" : "<", "value",
+                                          nnc_num(vals, force ? "setpoint_N" : "trigger_height_m")));
+    if (dwell > 0)
+        s_pause(list, pl, fs, dwell, NULL, 0);
+    pl->bwd = (int)json_array_size(list);
+    json_array_append_new(list, json_pack("{s:s,s:f,s:f,s:{s:s,s:s,s:f}}", "kind", "retract", "speed_m_per_s", v,
+                                          "distance_m", dist + 1e-9, "trigger", "channel", "height", "op", ">",
+                                          "value", start));
+    if (p->t_end_settle_s > 0)
+        s_pause(list, pl, fs, p->t_end_settle_s, NULL, 1);
+    if (zctrl) /* the feedback back on: the force held at the controller's setpoint */
+        s_pause(list, pl, fs, p->t_zctrl_s, json_pack("{s:s,s:f}", "mode", "force", "hold_force_N", setpoint_N), 1);
+    pl->list = list;
+}
+
 static int h_zs_start(nnc_ctx *x)
 {
     uint32_t get_data = nn_get_u32(&x->r, "Get data");
@@ -190,7 +299,7 @@ static int h_zs_start(nnc_ctx *x)
     nnc_m.stop = 0;
     pthread_mutex_unlock(&nnc_mu);
     int rc = NNC_OK, applied = 0; /* applied: the sweep's values are set and not yet put back */
-    json_t *saved = NULL, *vals = NULL;
+    json_t *saved = NULL, *vals = NULL, *seg_list = NULL; /* seg_list: the sweep's segment list, or NULL */
     double *acc = NULL;
     const char **names = NULL;
     int n_rows = 1 + p.n_chs, n_dirs = p.backward ? 2 : 1, triggered = 0;
@@ -220,16 +329,36 @@ static int h_zs_start(nnc_ctx *x)
         goto out;
     }
     double fs = nnc_num(saved, "sample_rate_Hz"), start = nnc_num(saved, "start_height_m") + (double)p.z_offset_m;
+    int engaged = 0, logging = 0;
+    double setpoint_N = NAN, range_m = NAN;
     {   /* the current Z: where the controller is engaged, its gap (the tip above the surface under it) */
         json_t *st = NULL;
         if ((rc = nnc_call(x, json_pack("{s:s}", "cmd", "status"), &st)))
             goto out;
         json_t *c = json_object_get(st, "ctrl");
         json_t *state = json_object_get(c, "state");
+        const char *log = json_string_value(json_object_get(json_object_get(st, "log"), "state"));
         double gap = nnc_num(c, "gap_m");
-        if (json_is_string(state) && !strcmp(json_string_value(state), "engaged") && isfinite(gap))
+        logging = log && strcmp(log, "off") != 0;
+        engaged = json_is_string(state) && !strcmp(json_string_value(state), "engaged") && isfinite(gap);
+        if (engaged)
             start = gap + (double)p.z_offset_m;
+        setpoint_N = nnc_num(c, "setpoint_N");
         json_decref(st);
+    }
+    if (engaged && p.t_zavg_s > 0) { /* the current Z: the gap averaged with the feedback on */
+        double gap = start - (double)p.z_offset_m;
+        if ((rc = s_zavg(x, p.t_zavg_s, &gap)))
+            goto out;
+        start = gap + (double)p.z_offset_m;
+    }
+    {
+        static const char *const rn[] = { "ctrl_piezo_range_m" };
+        json_t *r = nnc_get(x, rn, 1, &rc);
+        if (!r)
+            goto out;
+        range_m = nnc_num(r, "ctrl_piezo_range_m");
+        json_decref(r);
     }
     double k_N = nnc_num(saved, "k_N_per_m"), sens = nnc_num(saved, "sensitivity_m_per_V");
     double speed = nnc_num(saved, "speed");
@@ -269,6 +398,18 @@ static int h_zs_start(nnc_ctx *x)
         json_object_set_new(vals, "trigger_height_m",
                             json_real(p.ar_enable ? fmax((double)p.ar_threshold, start - dist) : start - dist));
     }
+    s_plan pl;
+    s_plan_make(&p, vals, start - (double)p.z_offset_m, start, dist, range_m, logging, engaged, setpoint_N, &pl);
+    seg_list = pl.list;
+    json_object_set_new(vals, "start_height_m", json_real(pl.run_start_m));
+    total += pl.samples;
+    if (!(total <= (double)VAFMD_NANONIS_MAX_RUN_SAMPLES)) {
+        snprintf(x->err, sizeof x->err, "this sweep with its timings would have ~%.3g samples: at most %zu; use "
+                 "shorter initial and end settling or Z control times, a faster maximum slew rate, or a lower "
+                 "sample_rate_Hz", total, VAFMD_NANONIS_MAX_RUN_SAMPLES);
+        rc = NNC_FAIL;
+        goto out;
+    }
     size_t n_cols = (size_t)p.points;
     acc = calloc((size_t)n_rows * (size_t)n_dirs * n_cols, sizeof *acc);
     if (!acc) {
@@ -301,7 +442,8 @@ static int h_zs_start(nnc_ctx *x)
         rc = nnc_call(x, json_pack("{s:s,s:O}", "cmd", "set", "values", vals), NULL);
         if (rc == NNC_OK) {
             applied = 1; /* the rebuilt controller keeps its state, X and Y included (wire.md §2.4) */
-            rc = nnc_call(x, json_pack("{s:s,s:I}", "cmd", "curve", "index", (json_int_t)index), &reply);
+            rc = nnc_call(x, json_pack("{s:s,s:I,s:O*}", "cmd", "curve", "index", (json_int_t)index, "segments",
+                                       pl.list), &reply);
             if (s_restore(x, saved, &rc) == NNC_OK)
                 applied = 0;
         }
@@ -312,7 +454,7 @@ static int h_zs_start(nnc_ctx *x)
         }
         uint64_t run_id = (uint64_t)json_integer_value(json_object_get(reply, "run_id"));
         json_decref(reply);
-        double expect = 2 * tp * p.points + dwell;
+        double expect = 2 * tp * p.points + dwell + pl.extra_s;
         double deadline = nn_now_s() + (free_run ? 60 : expect / (speed > 0 ? speed : 1) * 1.5 + 60);
         nn_run run;
         int wrc = nn_collect_wait(&run, deadline);
@@ -327,8 +469,13 @@ static int h_zs_start(nnc_ctx *x)
         last_run = run_id;
         /* forward: approach samples [0, turn); backward: from the retract's start */
         int64_t turn = run.dwell_at >= 0 ? run.dwell_at : run.retract_at >= 0 ? run.retract_at : (int64_t)run.n;
-        int64_t r0 = run.retract_at >= 0 ? run.retract_at : (int64_t)run.n;
-        int64_t done_pts = turn / K; /* forward points completed */
+        int64_t r0 = run.retract_at >= 0 ? run.retract_at : (int64_t)run.n, f0 = 0;
+        if (pl.list) { /* a list: its forward extend, what follows it, its backward retract */
+            f0 = pl.fwd == 0 ? 0 : run.seg_at[pl.fwd] >= 0 ? run.seg_at[pl.fwd] : (int64_t)run.n;
+            turn = run.seg_at[pl.fwd + 1] >= 0 ? run.seg_at[pl.fwd + 1] : (int64_t)run.n;
+            r0 = run.seg_at[pl.bwd] >= 0 ? run.seg_at[pl.bwd] : (int64_t)run.n;
+        }
+        int64_t done_pts = (turn - f0) / K; /* forward points completed */
         if (done_pts < p.points)
             triggered = 1;
         for (int d = 0; d < n_dirs; d++)
@@ -338,8 +485,8 @@ static int h_zs_start(nnc_ctx *x)
                     double val;
                     int64_t a, b;
                     if (d == 0) {
-                        a = (int64_t)i * K + Ks;
-                        b = (int64_t)(i + 1) * K;
+                        a = f0 + (int64_t)i * K + Ks;
+                        b = f0 + (int64_t)(i + 1) * K;
                         if (b > turn)
                             b = a; /* not reached: NaN */
                     } else { /* backward point i is at forward point i's height: the j-th after the turn */
@@ -413,6 +560,7 @@ out:
         s_restore(x, saved, &rc);
     json_decref(saved);
     json_decref(vals);
+    json_decref(seg_list);
     free(acc);
     free(names);
     pthread_mutex_lock(&nnc_mu);
