@@ -52,16 +52,21 @@ HDR = struct.Struct(">32sih2x")  # request: command name, body size, send-respon
 RHDR = struct.Struct(">32si4x")  # response: command name, body size, 4 unused
 
 
-def strings(b, off):
-    """A 1D array of strings at off: its size in bytes (i32), count (i32), then each as size + bytes.
-    Returns the strings and the offset after them."""
-    _, count = struct.unpack_from(">ii", b, off)
-    off, out = off + 8, []
-    for _ in range(count):
-        (k,) = struct.unpack_from(">i", b, off)
-        out.append(b[off + 4:off + 4 + k].decode())
-        off += 4 + k
-    return out, off
+class Body:
+    """A response body read in order: take(fmt) unpacks the next values (big-endian struct formats)."""
+
+    def __init__(self, b):
+        self.b, self.off = b, 0
+
+    def take(self, fmt):
+        v = struct.unpack_from(fmt, self.b, self.off)
+        self.off += struct.calcsize(fmt)
+        return v
+
+    def strings(self):
+        """A 1D array of strings: its size in bytes (i32), its count (i32), then each as size + bytes."""
+        _, count = self.take(">ii")
+        return [self.take(f">{self.take('>i')[0]}s")[0].decode() for _ in range(count)]
 
 
 def pulloff(bwd):
@@ -131,14 +136,12 @@ class Nanonis:
         self.call("FolMe.XYPosSet", struct.pack(">ddI", x, y, 1), 0)
 
     def zspectr_start(self):
-        b = self.call("ZSpectr.Start", struct.pack(">Ii", 1, 0))
-        names, off = strings(b, 0)
-        rows, cols = struct.unpack_from(">ii", b, off)
-        data = np.frombuffer(b, dtype=">f4", count=rows * cols, offset=off + 8).reshape(rows, cols)
-        off += 8 + 4 * rows * cols
-        (npar,) = struct.unpack_from(">i", b, off)
-        params = struct.unpack_from(f">{npar}f", b, off + 4)
-        return names, data.astype(float), params
+        r = Body(self.call("ZSpectr.Start", struct.pack(">Ii", 1, 0)))
+        names = r.strings()
+        rows, cols = r.take(">ii")
+        data = np.array(r.take(f">{rows * cols}f"), dtype=float).reshape(rows, cols)
+        params = r.take(f">{r.take('>i')[0]}f")
+        return names, data, params
 
 
 def main(argv=None):
@@ -172,7 +175,7 @@ def main(argv=None):
     sub.setsockopt(zmq.UNSUBSCRIBE, b"heartbeat")
 
     # the signals by name (Signals.NamesGet), as a Nanonis script finds them
-    names, _ = strings(n.call("Signals.NamesGet"), 0)
+    names = Body(n.call("Signals.NamesGet")).strings()
     force = names.index("Force (N)")
     n.call("ZSpectr.Open", b"", 0)
     n.call("ZSpectr.ChsSet", struct.pack(">ii", 1, force), 0)
