@@ -107,27 +107,6 @@ int nnc_signal_index(nnc_ctx *x, int32_t i, const char *arg)
     return NNC_OK;
 }
 
-/* a flag of a Set: 0 no change, 1 on, 2 off */
-int nnc_flag(nnc_ctx *x, unsigned v, const char *arg, int *dst)
-{
-    if (v > 2) {
-        snprintf(x->err, sizeof x->err, "%s %u: must be 0 (no change), 1 (on) or 2 (off)", arg, v);
-        return NNC_FAIL;
-    }
-    if (v)
-        *dst = v == 1;
-    return NNC_OK;
-}
-
-int nnc_time(nnc_ctx *x, float v, const char *arg)
-{
-    if (!isfinite(v) || v < 0 || v > 1000) {
-        snprintf(x->err, sizeof x->err, "%s %g: must be in [0, 1000] s", arg, (double)v);
-        return NNC_FAIL;
-    }
-    return NNC_OK;
-}
-
 int nnc_ping_only(nnc_ctx *x) { return nnc_args_done(x) ? NNC_FAIL : nnc_ping(x); }
 
 /* ---- table-driven Get and Set (nanonis_cmds.h) ------------------------------------------------------- */

@@ -59,9 +59,6 @@ json_t *nnc_get(nnc_ctx *x, const char *const *names, size_t n, int *rc);
 double nnc_num(json_t *o, const char *k); /* o[k] if a number, else NaN */
 int nnc_args_done(nnc_ctx *x);            /* NNC_FAIL (naming the argument) if the body was short */
 int nnc_signal_index(nnc_ctx *x, int32_t i, const char *arg);
-/* a flag of a Set: 0 no change, 1 on, 2 off (*dst 1 or 0; untouched for 0) */
-int nnc_flag(nnc_ctx *x, unsigned v, const char *arg, int *dst);
-int nnc_time(nnc_ctx *x, float v, const char *arg); /* a time in [0, 1000] s */
 
 /* ---- table-driven Get and Set ------------------------------------------------------------------------
  * A module value group: its fields in the order of the command's arguments (Set) or return arguments
