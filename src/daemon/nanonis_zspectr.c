@@ -178,8 +178,8 @@ static int s_restore(nnc_ctx *x, const json_t *saved, int *rc)
  * trigger), the dwell, the backward sweep (a retract back to the start: a height trigger), a pause of the
  * end settling time and, where the controller was engaged, its feedback switched back on for the Z control
  * time (a constant-force pause at its setpoint). The Z averaging time is spent before: the engaged
- * controller's gap averaged over it (the feedback on) gives the current Z. A list's curve is not logged
- * (wire.md `curve`): with the log on, the sweep stays the plain curve and these timings have no effect.
+ * controller's gap averaged over it (the feedback on) gives the current Z. A list's curve is logged like
+ * any curve, with its own list (wire.md `curve`).
  * All of them 0 (and the move shorter than one sample): the plain curve, as before. */
 
 #define S_M_PER_V_DIV 20.0    /* the slew rate's volts: the piezo range spans the Z output's 20 V (±10 V) */
@@ -235,7 +235,7 @@ static void s_pause(json_t *list, s_plan *pl, double fs, double dur_s, json_t *e
 /* The sweep's plan: a segment list when a timing asks for one and the log is off (pl->list), else the
  * plain curve. vals: the sweep's scene values (its trigger, rate); hc: the current Z; start: the sweep's. */
 static void s_plan_make(const nnc_state *p, json_t *vals, double hc, double start, double dist, double range_m,
-                        int logging, int engaged, double setpoint_N, s_plan *pl)
+                        int engaged, double setpoint_N, s_plan *pl)
 {
     memset(pl, 0, sizeof *pl);
     pl->run_start_m = start;
@@ -246,7 +246,7 @@ static void s_plan_make(const nnc_state *p, json_t *vals, double hc, double star
     int zctrl = engaged && p->t_zctrl_s > 0 && isfinite(setpoint_N);
     if (!(t_move * fs >= 1))
         t_move = 0; /* shorter than one sample: not modelled (the plain curve starts at the start) */
-    if (logging || (t_move == 0 && p->t_init_settle_s == 0 && p->t_end_settle_s == 0 && !zctrl))
+    if (t_move == 0 && p->t_init_settle_s == 0 && p->t_end_settle_s == 0 && !zctrl)
         return;
     json_t *list = json_array();
     if (t_move > 0) { /* from the current Z to the start */
@@ -329,7 +329,7 @@ static int h_zs_start(nnc_ctx *x)
         goto out;
     }
     double fs = nnc_num(saved, "sample_rate_Hz"), start = nnc_num(saved, "start_height_m") + (double)p.z_offset_m;
-    int engaged = 0, logging = 0;
+    int engaged = 0;
     double setpoint_N = NAN, range_m = NAN;
     {   /* the current Z: where the controller is engaged, its gap (the tip above the surface under it) */
         json_t *st = NULL;
@@ -337,9 +337,7 @@ static int h_zs_start(nnc_ctx *x)
             goto out;
         json_t *c = json_object_get(st, "ctrl");
         json_t *state = json_object_get(c, "state");
-        const char *log = json_string_value(json_object_get(json_object_get(st, "log"), "state"));
         double gap = nnc_num(c, "gap_m");
-        logging = log && strcmp(log, "off") != 0;
         engaged = json_is_string(state) && !strcmp(json_string_value(state), "engaged") && isfinite(gap);
         if (engaged)
             start = gap + (double)p.z_offset_m;
@@ -399,7 +397,7 @@ static int h_zs_start(nnc_ctx *x)
                             json_real(p.ar_enable ? fmax((double)p.ar_threshold, start - dist) : start - dist));
     }
     s_plan pl;
-    s_plan_make(&p, vals, start - (double)p.z_offset_m, start, dist, range_m, logging, engaged, setpoint_N, &pl);
+    s_plan_make(&p, vals, start - (double)p.z_offset_m, start, dist, range_m, engaged, setpoint_N, &pl);
     seg_list = pl.list;
     json_object_set_new(vals, "start_height_m", json_real(pl.run_start_m));
     total += pl.samples;
