@@ -25,4 +25,4 @@ __all__ = ["CHANNELS", "DEFAULT_PUB", "DEFAULT_REP", "HEADER", "MAGIC", "Client"
            "DaemonError", "GapError", "H5File", "Header", "Run", "Stream", "TransportError", "TruncatedError",
            "decode_header",
            "load_h5"]
-__version__ = "0.7.0"
+__version__ = "0.8.0"
