@@ -9,7 +9,7 @@ import time
 import numpy as np
 import zmq
 
-from vafmd_harness import Daemon, TIMEOUT_MS, collect_run
+from vafmd_harness import Daemon, TIMEOUT_MS, collect_run, receive_run
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "clients", "python"))
 KB = 1.380649e-23
@@ -819,3 +819,54 @@ def test_move_over_a_dome_follows_the_surface():
         assert d.cmd({"cmd": "status"})["ctrl"]["live"]["dropped"] == 0
     finally:
         d.stop()
+
+
+def _paced_list_run(d, s, segs, index):
+    """A paced curve of list segs: (run.end, the daemon's wall time of the run, the client's from the reply to
+    run.end, the streamed channels)."""
+    t0 = time.monotonic()
+    r = d.cmd({"cmd": "curve", "index": index, "segments": segs})
+    assert r["status"] == "ok", r
+    start, blocks, _, end, t_ns = receive_run(s, r["run_id"])
+    t_client = time.monotonic() - t0
+    assert end["status"] == "ok", end
+    names = [c["name"] for c in start["channels"]]
+    ch = {n: np.concatenate([np.frombuffer(p[k], "<f8") for _, p in blocks]) for k, n in enumerate(names)}
+    return end, end["wall_s"], t_client, ch
+
+
+def test_paced_list_takes_its_simulated_time_at_any_output_rate():
+    """A paced run (speed 1) of a segment list takes its simulated time in wall time whatever its segments'
+    output rates: 0.5 s of pauses at fs/12, at fs/12 and fs/50, and at the scene's rate each take 0.5 s
+    (0.7.x released a decimated segment's samples as if each spanned one scene sample: the fs/12 pause ended
+    after 0.04 s). Bounds: the daemon's wall time from the run's start to its end (run.end wall_s) at least
+    0.9 × 0.5 s (pacing cannot release a block before its deadline: the last is due at 0.5 s; the bug gives
+    0.042 s, 10.7× below), at most 0.5 s + 2.5 s (compute of a pause is ~1 ms here; slack for a loaded
+    machine); the client's time from the reply to run.end at least as long. The stream is the free run's,
+    bit for bit (pacing changes timing only)."""
+    d = Daemon()
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    assert d.cmd({"cmd": "set", "values": {"free_run": False, "speed": 1}})["status"] == "ok"
+    fs = d.cmd({"cmd": "get", "names": ["sample_rate_Hz"]})["values"]["sample_rate_Hz"]
+    T = 0.5
+    lists = [("fs/12", [{"kind": "pause", "duration_s": T, "sample_rate_Hz": fs / 12}], round(T * fs / 12)),
+             ("fs/12+fs/50", [{"kind": "pause", "duration_s": 0.3, "sample_rate_Hz": fs / 12},
+                              {"kind": "pause", "duration_s": 0.2, "sample_rate_Hz": fs / 50}],
+              round(0.3 * fs / 12) + round(0.2 * fs / 50)),
+             ("full rate", [{"kind": "pause", "duration_s": T}], round(T * fs))]
+    paced = {}
+    for i, (name, segs, n) in enumerate(lists):
+        end, wall, t_client, ch = _paced_list_run(d, s, segs, 10 + i)
+        assert abs(end["samples"] - n) <= 2, (name, end["samples"], n)
+        assert 0.9 * T <= wall <= T + 2.5, (name, wall)
+        assert t_client >= 0.9 * T, (name, t_client)
+        paced[name] = ch
+    assert d.cmd({"cmd": "set", "values": {"free_run": True}})["status"] == "ok"
+    for i, (name, segs, _) in enumerate(lists):
+        _, wall, _, ch = _paced_list_run(d, s, segs, 10 + i)
+        assert wall < 0.9 * T, (name, wall)  # a free run is not paced
+        assert ch.keys() == paced[name].keys()
+        for k in ch:
+            assert np.array_equal(ch[k].view(np.uint64), paced[name][k].view(np.uint64)), (name, k)
+    d.stop()

@@ -456,6 +456,71 @@ static void test_decimation(void)
     vafm_sim_destroy(&s);
 }
 
+/* The run's clock (vafm_sim_clock_samples) as each output sample is handed over. */
+typedef struct t_clock {
+    const vafm_sim *s;
+    uint64_t *at; /* at[i]: the clock when sample i arrived (the end of the block it came in) */
+    size_t n, cap;
+} t_clock;
+
+static int t_clock_fn(void *user, const vafm_samples *b)
+{
+    t_clock *c = user;
+    for (size_t i = 0; i < b->n && c->n < c->cap; i++)
+        c->at[c->n++] = i + 1 == b->n ? vafm_sim_clock_samples(c->s) : 0;
+    return 0;
+}
+
+/* 6b. the clock counts the scene's samples, whatever the segment's output rate: a list with a pause at
+ * the scene's rate / 4 ends at the clock of the same list at full rate, and each output sample (advanced
+ * one scene sample a call) ends at the scene samples it gathered: 1 a sample outside the pause, 4 in it
+ * (its last: 3). Counting output samples instead (the old pacing) gives 92 fewer at the end. */
+static void test_decimation_clock(void)
+{
+    vafm_params p;
+    t_preset(&p, "contact-silica");
+    vafm_segment_spec g[3];
+    for (int i = 0; i < 3; i++)
+        vafm_segment_spec_default(&g[i]);
+    g[0].speed_m_per_s = p.v_approach_m_per_s;
+    g[0].trigger = VAFM_SEGMENT_TRIGGER_FORCE;
+    g[0].trigger_value = 3e-9;
+    g[1].kind = VAFM_SEGMENT_PAUSE;
+    g[1].duration_s = 0.0123; /* 123 samples of the scene's rate: 31 at rate / 4 */
+    g[2].kind = VAFM_SEGMENT_RETRACT;
+    g[2].end = VAFM_SEGMENT_END_DETACH;
+    g[2].speed_m_per_s = p.v_retract_m_per_s;
+    vafm_sim *s = NULL;
+    ENSURE(vafm_sim_new(&s, &p, NULL) == 0);
+    ENSURE(vafm_sim_clock_samples(s) == 0 && vafm_sim_clock_samples(NULL) == 0);
+    t_trace full = { 0 };
+    ENSURE(vafm_sim_segments(s, 5, g, 3, t_collect, &full, NULL) == 0);
+    ENSURE_MSG(vafm_sim_clock_samples(s) == full.n, "full rate: clock %llu, %zu samples",
+               (unsigned long long)vafm_sim_clock_samples(s), full.n);
+    g[1].sample_rate_Hz = p.sample_rate_Hz / 4;
+    t_clock c = { s, calloc(full.n, sizeof(uint64_t)), 0, full.n };
+    ENSURE(c.at != NULL && vafm_sim_segments_begin(s, 5, g, 3) == 0);
+    int rc = 1;
+    while (c.at && rc == 1)
+        rc = vafm_sim_advance(s, 1, t_clock_fn, &c);
+    ENSURE(rc == 0 && c.n == full.n - 92);
+    ENSURE_MSG(vafm_sim_clock_samples(s) == full.n, "decimated: clock %llu, %zu samples at full rate",
+               (unsigned long long)vafm_sim_clock_samples(s), full.n);
+    size_t a0 = 0;
+    while (a0 < full.n && full.seg[a0] != 1)
+        a0++;
+    int ok = c.at != NULL;
+    for (size_t j = 0; j < c.n && ok; j++) {
+        uint64_t want = j < a0 ? j + 1 : j < a0 + 31 ? a0 + (j - a0 + 1 < 31 ? 4 * (j - a0 + 1) : 123) : j + 93;
+        ok = c.at[j] == want;
+        if (!ok)
+            ENSURE_MSG(0, "sample %zu: clock %llu, want %llu", j, (unsigned long long)c.at[j], (unsigned long long)want);
+    }
+    free(c.at);
+    t_trace_free(&full);
+    vafm_sim_destroy(&s);
+}
+
 /* ---- 7. a 4-segment list: every sample labelled with its segment, in order ------------------------------ */
 
 static void test_four_segments(void)
@@ -506,6 +571,7 @@ int main(void)
     RUN_TEST(test_force_pause);
     RUN_TEST(test_modulation_fit);
     RUN_TEST(test_decimation);
+    RUN_TEST(test_decimation_clock);
     RUN_TEST(test_four_segments);
     return harness_done();
 }

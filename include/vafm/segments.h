@@ -135,6 +135,14 @@ VAFM_API int vafm_sim_segments_begin(vafm_sim *s, uint64_t index, const vafm_seg
 /** The list's segment the simulation is in (its position), or −1 when no list runs or it ended. */
 VAFM_API int vafm_sim_segment_current(const vafm_sim *s);
 
+/** The run's clock at its last output sample: the sample intervals of the scene's rate (sample_rate_Hz)
+ *  from the scene's start to the end of the last output sample handed to the callback (0 before the
+ *  first, or without a scene). The simulated time of the samples so far is this / sample_rate_Hz, whatever
+ *  the segments' output rates: a segment decimated by d adds d a sample (its last sample, what it gathered
+ *  when the segment ended). At the scene's rate (a plain curve, a tune, a live scene) it is the number of
+ *  output samples. For a caller that paces the output to real time (vafmd). Since API 0.8. */
+VAFM_API uint64_t vafm_sim_clock_samples(const vafm_sim *s);
+
 /** Run a list to the end (vafm_sim_segments_begin, then vafm_sim_advance). fn may be NULL.
  *  @return 0 or a negative VAFM_E* code. */
 VAFM_API int vafm_sim_segments(vafm_sim *s, uint64_t index, const vafm_segment_spec *segs, size_t n,

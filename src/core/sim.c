@@ -250,6 +250,8 @@ static void s_begin(vafm_sim *s, uint64_t index, int scene)
     s->index = index;
     memset(&s->err, 0, sizeof s->err);
     s->sample_index = 0;
+    s->scene_samples = 0;
+    s->clock_samples = 0;
     s->nblk = 0;
     s->flags = 0;
     s->touched = 0;
@@ -795,6 +797,7 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
             s->phase = S_PH_DONE;
             return r;
         }
+        s->scene_samples++;
         double u_m, uspr_m, t_m;
         if (s->p.antialias == VAFM_ANTIALIAS_MEAN && K->acc_n > 0) {
             u_m = K->acc_u / (double)K->acc_n;
@@ -828,6 +831,7 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
         } else {
             s->nblk++;
             s->sample_index++;
+            s->clock_samples = s->scene_samples;
             if (in_retract) {
                 s->retract_samples++;
                 if (force < s->sample_min_force)

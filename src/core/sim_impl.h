@@ -65,6 +65,8 @@ struct vafm_sim {
     /* scene */
     int scene, phase;
     uint64_t index, sample_index, tune_samples;
+    uint64_t scene_samples; /* sample intervals of the scene's rate completed since the scene began */
+    uint64_t clock_samples; /* ... up to the end of the last output sample (vafm_sim_clock_samples) */
     long dwell_left;
     double uspr_start, uspr_turn, uspr_trigger, uspr_zlimit, retract_travel_max, margin, F_set;
     double base_sum;    /* relative setpoint: sum of the baseline samples so far */

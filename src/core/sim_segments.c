@@ -220,6 +220,11 @@ int vafm_sim_segment_current(const vafm_sim *s)
     return (int)s->iseg;
 }
 
+uint64_t vafm_sim_clock_samples(const vafm_sim *s)
+{
+    return s && s->scene != S_SCENE_NONE ? s->clock_samples : 0;
+}
+
 /* Decimation of a list's segment: add the sample in block slot j (reduced force: force) to the running sums.
  * @return 1 once the output sample is complete (dec samples). */
 int vafm_sim_dec_add(vafm_sim *s, size_t j, double force)
@@ -248,6 +253,7 @@ void vafm_sim_dec_emit(vafm_sim *s, size_t j, int seg, int in_retract)
     const double force = s->dec_sum[6] * w;
     s->dec_n = 0;
     s->sample_index++;
+    s->clock_samples = s->scene_samples;
     if (in_retract) {
         s->retract_samples++;
         if (force < s->sample_min_force)

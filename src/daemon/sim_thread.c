@@ -511,8 +511,13 @@ static void s_compute(vafmd_st *x)
     /* replay: the curves of the selection that began in this block */
     b->n_rev = r->cmd.replay ? vafmd_replay_take_events(r->cmd.replay, b->rev, VAFMD_REPLAY_MAX_EVENTS) : 0;
     uint64_t end = r->computed + r->fill;
-    /* a replay is paced by its recorded times (replay.c), a simulation by its sample index */
-    double t_end = r->cmd.replay ? vafmd_replay_clock_s(r->cmd.replay) : (double)end / vafmd_st_run_fs(r);
+    /* a replay is paced by its recorded times (replay.c), a simulation by the simulated time at the end of
+     * the block's last sample: its sample index at the scene's rate; a segment list's clock in samples of
+     * the scene's rate (a segment decimated by d spans d of them a sample: counting its output samples
+     * released it d times too fast) */
+    double t_end = r->cmd.replay ? vafmd_replay_clock_s(r->cmd.replay)
+                   : r->cmd.segs ? (double)vafm_sim_clock_samples(r->cmd.sim) / vafmd_st_run_fs(r)
+                                 : (double)end / vafmd_st_run_fs(r);
     b->deadline = r->t_start + (int64_t)llround(t_end / r->cmd.set.speed * 1e9);
     b->ready = vafmd_st_now();
     r->computed = end;
