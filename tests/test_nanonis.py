@@ -3,6 +3,7 @@
 vendor's specification (TCPProtocol_SPM, "TCP Protocol" chapter and the functions' layouts) with plain
 sockets and struct: 40-byte big-endian headers, the error status and description at the end of every
 response body. No vendor code, no PDF needed."""
+import json
 import math
 import socket
 import struct
@@ -380,6 +381,41 @@ def test_zspectr_timings_shape_the_sweep(nd, tmp_path):
     w, d = sweep(t_init=0.3)
     assert 2 * 50 * 2e-3 + 0.3 <= w and np.isfinite(d).all() and d[0] == pytest.approx(d0[0], abs=1e-12), w
     assert nd.cmd({"cmd": "log", "stop": True})["log"]["curves"] == 1
+    c.close()
+
+
+def test_zspectr_end_settling_recorded_at_the_point_rate(nd, tmp_path):
+    """The pauses after a sweep's backward sweep are recorded at one sample a point time (the sweep's rate /
+    its samples a point; docs/nanonis.md "The timings"), the initial settling at the sweep's rate: 0.3 s
+    initial and 0.4 s end settling at 2 ms points and 10 kHz add 3 000 + 200 samples (+ at most 2 a segment)
+    to the plain sweep's run (the end settling at 10 kHz added 4 000: 7 000 in all); the points are the
+    plain sweep's; logged, the curve goes into the file. At 1x the decimated pause still takes its time
+    (test_zspectr_timings_shape_the_sweep: vafmd paces a list by its simulated time)."""
+    s = nd.sub(topics=(b"run.end",))
+    time.sleep(0.2)
+    c = Conn(nd.port)
+    setup_sweep(c, points=50, t_int=2e-3, bwd=1, retract=(2, 0, 0, 0))
+    got = []
+    for t_init, t_end in ((0.0, 0.0), (0.3, 0.4)):
+        c.call("ZSpectr.TimingSet", struct.pack(">7f", 0.1, t_init, 100, 0, 2e-3, t_end, 0))
+        _, data, params = zspectr_start(c)
+        assert s.poll(10000), "no run.end"
+        end = json.loads(s.recv_multipart()[1])
+        assert end["run_id"] == int(params[5]) and end["status"] == "ok", end
+        got.append((end["samples"], data))
+    (n0, d0), (n1, d1) = got
+    assert 3200 - 3 <= n1 - n0 <= 3200 + 6, (n0, n1)
+    assert np.isfinite(d1).all() and d1[0] == pytest.approx(d0[0], abs=1e-12)
+    assert np.allclose(d1[4], d1[0], rtol=0, atol=3e-9)  # backward point i at forward point i's Z
+    assert nd.cmd({"cmd": "log", "path": str(tmp_path / "log.h5")})["status"] == "ok"
+    _, data, _ = zspectr_start(c)
+    assert np.isfinite(data).all()
+    deadline = time.time() + 30
+    while nd.cmd({"cmd": "status"})["log"]["curves"] < 1:
+        assert time.time() < deadline, nd.cmd({"cmd": "status"})["log"]
+        time.sleep(0.01)
+    lg = nd.cmd({"cmd": "log", "stop": True})["log"]
+    assert (lg["curves"], lg["curves_dropped"], lg["error"]) == (1, 0, None), lg
     c.close()
 
 

@@ -17,6 +17,7 @@
 #include <string.h>
 #include <time.h>
 #include "daemon/nanonis_cmds.h"
+#include "vafm/segments.h"
 
 /* ---- ZSpectr: properties -------------------------------------------------------------------------- */
 static int h_zs_chs_set(nnc_ctx *x)
@@ -189,8 +190,9 @@ typedef struct s_plan {
     int fwd, bwd;       /* the positions of the forward sweep's extend and the backward sweep's retract */
     double run_start_m; /* the run's start height (the current Z, where the move begins) */
     double extra_s;     /* the time the list adds to the plain curve's */
-    double samples;     /* the output samples it adds (at the run's rate: a decimated segment's samples are
-                           released faster than real time at 1x, so every segment keeps the run's rate) */
+    double samples;     /* the output samples it adds */
+    double rate_Hz;     /* the output rate of the pauses after the sweeps (end settling, Z control): one
+                           sample a point time, the run's rate / its samples a point */
 } s_plan;
 
 /* The engaged controller's gap averaged over t s (the feedback on), polled every 2 ms: *gap. */
@@ -220,27 +222,36 @@ static int s_zavg(nnc_ctx *x, double t, double *gap)
     return rc;
 }
 
-/* A pause of dur_s (extra: more of its keys, consumed); added: it adds to the plain curve's time. */
-static void s_pause(json_t *list, s_plan *pl, double fs, double dur_s, json_t *extra, int added)
+/* A pause of dur_s at rate_Hz (0: the run's, fs) (extra: more of its keys, consumed); added: it adds to the
+ * plain curve's time. */
+static void s_pause(json_t *list, s_plan *pl, double fs, double rate_Hz, double dur_s, json_t *extra, int added)
 {
     json_t *g = json_pack("{s:s,s:f}", "kind", "pause", "duration_s", dur_s);
+    if (rate_Hz > 0)
+        json_object_set_new(g, "sample_rate_Hz", json_real(rate_Hz));
     if (extra)
         json_object_update(g, extra);
     json_decref(extra);
     json_array_append_new(list, g);
     pl->extra_s += added ? dur_s : 0;
-    pl->samples += added ? dur_s * fs + 2 : 2; /* the dwell's are counted already */
+    pl->samples += added ? dur_s * (rate_Hz > 0 ? rate_Hz : fs) + 2 : 2; /* the dwell's are counted already */
 }
 
-/* The sweep's plan: a segment list when a timing asks for one and the log is off (pl->list), else the
- * plain curve. vals: the sweep's scene values (its trigger, rate); hc: the current Z; start: the sweep's. */
-static void s_plan_make(const nnc_state *p, json_t *vals, double hc, double start, double dist, double range_m,
-                        int engaged, double setpoint_N, s_plan *pl)
+/* The sweep's plan: a segment list when a timing asks for one (pl->list), else the plain curve. vals: the
+ * sweep's scene values (its trigger, rate); kpt: its samples a point; hc: the current Z; start: the sweep's.
+ * The pauses after the sweeps (end settling, Z control) are recorded at one sample a point time (decimated by
+ * kpt: a paced run still takes their simulated time, the physics runs at the run's rate, the points are cut
+ * from the sweeps' samples only), so long ones do not fill the 2^20 samples. The move and the initial
+ * settling keep the run's rate: a logged curve's time must start within one mean sample interval of 0
+ * (hdf5.md), which a decimated first segment breaks. */
+static void s_plan_make(const nnc_state *p, json_t *vals, double kpt, double hc, double start, double dist,
+                        double range_m, int engaged, double setpoint_N, s_plan *pl)
 {
     memset(pl, 0, sizeof *pl);
     pl->run_start_m = start;
     double tp = (double)p->t_settle_s + (double)p->t_integr_s, v = dist / (tp * p->points);
     double fs = nnc_num(vals, "sample_rate_Hz"), dwell = nnc_num(vals, "dwell_s");
+    pl->rate_Hz = fs / fmin(fmax(kpt, 1), VAFM_SEGMENT_DECIMATION_MAX);
     double v_slew = fmin((double)p->slew_V_per_s * range_m / S_M_PER_V_DIV, 1e3);
     double move = start - hc, t_move = isfinite(v_slew) && v_slew > 0 ? fabs(move) / v_slew : 0;
     int zctrl = engaged && p->t_zctrl_s > 0 && isfinite(setpoint_N);
@@ -257,7 +268,7 @@ static void s_plan_make(const nnc_state *p, json_t *vals, double hc, double star
         pl->samples += t_move * fs + 2;
     }
     if (p->t_init_settle_s > 0)
-        s_pause(list, pl, fs, p->t_init_settle_s, NULL, 1);
+        s_pause(list, pl, fs, 0, p->t_init_settle_s, NULL, 1);
     pl->fwd = (int)json_array_size(list);
     const char *trig = json_string_value(json_object_get(vals, "trigger"));
     int force = trig && !strcmp(trig, "force");
@@ -266,15 +277,16 @@ static void s_plan_make(const nnc_state *p, json_t *vals, double hc, double star
                                           "op", force ? ">" : "<", "value",
                                           nnc_num(vals, force ? "setpoint_N" : "trigger_height_m")));
     if (dwell > 0)
-        s_pause(list, pl, fs, dwell, NULL, 0);
+        s_pause(list, pl, fs, 0, dwell, NULL, 0);
     pl->bwd = (int)json_array_size(list);
     json_array_append_new(list, json_pack("{s:s,s:f,s:f,s:{s:s,s:s,s:f}}", "kind", "retract", "speed_m_per_s", v,
                                           "distance_m", dist + 1e-9, "trigger", "channel", "height", "op", ">",
                                           "value", start));
     if (p->t_end_settle_s > 0)
-        s_pause(list, pl, fs, p->t_end_settle_s, NULL, 1);
+        s_pause(list, pl, fs, pl->rate_Hz, p->t_end_settle_s, NULL, 1);
     if (zctrl) /* the feedback back on: the force held at the controller's setpoint */
-        s_pause(list, pl, fs, p->t_zctrl_s, json_pack("{s:s,s:f}", "mode", "force", "hold_force_N", setpoint_N), 1);
+        s_pause(list, pl, fs, pl->rate_Hz, p->t_zctrl_s,
+                json_pack("{s:s,s:f}", "mode", "force", "hold_force_N", setpoint_N), 1);
     pl->list = list;
 }
 
@@ -397,7 +409,7 @@ static int h_zs_start(nnc_ctx *x)
                             json_real(p.ar_enable ? fmax((double)p.ar_threshold, start - dist) : start - dist));
     }
     s_plan pl;
-    s_plan_make(&p, vals, start - (double)p.z_offset_m, start, dist, range_m, engaged, setpoint_N, &pl);
+    s_plan_make(&p, vals, kpt, start - (double)p.z_offset_m, start, dist, range_m, engaged, setpoint_N, &pl);
     seg_list = pl.list;
     json_object_set_new(vals, "start_height_m", json_real(pl.run_start_m));
     total += pl.samples;
