@@ -742,6 +742,28 @@ def test_log_holds_segment_list_curves(tmp_path):
     _check_log(path, runs)
 
 
+def test_log_list_whose_first_segment_is_decimated(tmp_path):
+    """A list may record its first segment below the scene's rate (a pause at fs/12): its first sample is
+    stamped at the middle of its own, longer interval, d/(2 fs), beyond the curve's mean interval. The file's
+    time rule (hdf5.md L13) allows the first interval too; 0.8.0's writer dropped such a curve
+    (`curves_dropped` 1: "time starts at 0")."""
+    d = Daemon("--free-run")
+    s = d.sub(topics=(b"data", b"run.", b"event"))
+    time.sleep(0.2)
+    fs = d.cmd({"cmd": "get", "names": ["sample_rate_Hz"]})["values"]["sample_rate_Hz"]
+    assert d.cmd({"cmd": "set", "values": {"segment_channel": True}})["status"] == "ok"
+    path = tmp_path / "first_decimated.h5"
+    assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
+    segs = [{"kind": "pause", "duration_s": 0.01, "sample_rate_Hz": fs / 12}] + SEG3[:1] + SEG3[2:]
+    runs = [_logged_run(d, s, {"cmd": "curve", "index": 1, "segments": segs}),
+            _logged_run(d, s, {"cmd": "curve", "index": 2})]
+    _wait_logged(d, 2)
+    st = d.cmd({"cmd": "log", "stop": True})["log"]
+    assert (st["curves"], st["curves_dropped"], st["error"]) == (2, 0, None), st
+    d.stop()
+    _check_log(path, runs)
+
+
 def test_log_segment_lists_kill9_resume(tmp_path):
     """A daemon killed (-9) during the second list's curve leaves the plain curve and the first list's intact;
     `log` with resume keeps both and appends the second list's curve again."""

@@ -753,9 +753,12 @@ const char *vafm_h5i_rule_time(const double *t, size_t n, size_t *at)
             *at = i;
             return "time increases strictly from sample to sample";
         }
-    /* "continuous from 0": the first sample lies within one mean sample interval of 0 (vafm stamps a
-     * box-car averaged sample at the middle of its interval, so t[0] = interval/2) */
-    if (n >= 2 && t[0] > (t[n - 1] - t[0]) / (double)(n - 1) * (1 + 1e-9)) {
+    /* "continuous from 0": the first sample lies within one sample interval of 0 (vafm stamps a box-car
+     * averaged sample at the middle of its interval, so t[0] = interval/2). The interval is the mean one, or
+     * the first one where that is longer: a segment list may record its first segment at a lower rate than
+     * the rest (t[0] = d/(2 fs), t[1] − t[0] ≥ d/(2 fs) whatever the next segment's rate). */
+    double mean = n >= 2 ? (t[n - 1] - t[0]) / (double)(n - 1) : 0, first = n >= 2 ? t[1] - t[0] : 0;
+    if (n >= 2 && t[0] > (first > mean ? first : mean) * (1 + 1e-9)) {
         *at = 0;
         return "time starts at 0 (the first sample lies within one sample interval of 0)";
     }
