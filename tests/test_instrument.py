@@ -219,7 +219,13 @@ def session(seed, until_s=38.0, set_at_s=None):
     value, the engage timeout raised): the state carries (wire.md §2.4) and the session goes on as it was."""
     d = Daemon()
     s = live_sub(d)
-    assert d.cmd({"cmd": "set", "values": {"free_run": True, "speed": 25, "monitor_rate_Hz": 1000,
+    # the live subscription in place before the seed's controller starts (a live point with no subscriber is
+    # neither sent nor counted: a late subscription would start this session's points later than another's)
+    while recv(s)[0] != "live":
+        pass
+    # the controller's clock at 0.01x while the commands are given (at 25x, engage's 4 s passed in 0.16 s of
+    # wall time: on a loaded machine it came late), then at 25x: the pacing is not in the samples
+    assert d.cmd({"cmd": "set", "values": {"free_run": True, "speed": 0.01, "monitor_rate_Hz": 1000,
                                            "seed": str(seed)}})["status"] == "ok"
     gen = d.cmd({"cmd": "status"})["ctrl"]["generation"]
     for c in ({"cmd": "engage", "at_s": 4.0}, {"cmd": "feedback", "tau_s": 0.002, "at_s": 33.0},
@@ -227,6 +233,8 @@ def session(seed, until_s=38.0, set_at_s=None):
               {"cmd": "withdraw", "at_s": 35.5}):
         r = d.cmd(c)
         assert r["status"] == "ok" and r["scheduled"] and not r["late"], r  # else not the same session
+    assert d.cmd({"cmd": "set", "values": {"speed": 25}})["status"] == "ok"
+    assert d.cmd({"cmd": "status"})["ctrl"]["generation"] == gen  # the same controller, its clock faster
     pts, seqs, events = [], [], []
     while True:
         t, m = recv(s)
@@ -240,6 +248,8 @@ def session(seed, until_s=38.0, set_at_s=None):
             st = d.cmd({"cmd": "status"})["ctrl"]
             assert st["generation"] == gen + 1 and st["held_commands"] >= 1 and st["time_s"] >= set_at_s, st
             set_at_s = None
+        if not seqs:  # the session's points from its controller's first sample on
+            assert m[0]["first_sample"] == 0, m[0]
         seqs.append(m[0]["seq"])
         pts.append(np.stack([m[1][n] for n in m[0]["channels"]]))
         if m[1]["time_s"][-1] >= until_s:
