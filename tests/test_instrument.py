@@ -52,6 +52,22 @@ def err(r, code, field):
     return r["message"]
 
 
+def wait_live_unsubscribed(d, timeout_s=30.0):
+    """Until the daemon has seen its last live subscriber go (the unsubscription reaches it asynchronously, late
+    on a loaded machine): the live seq (counted only when sent) stands still while the controller's clock goes
+    on by 0.3 s; a subscribed topic gets a message every 0.1 s of that clock. Both from one status snapshot."""
+    deadline = time.time() + timeout_s
+    a = d.cmd({"cmd": "status"})["ctrl"]
+    while time.time() < deadline:
+        time.sleep(0.01)
+        b = d.cmd({"cmd": "status"})["ctrl"]
+        if b["live"]["seq"] != a["live"]["seq"]:
+            a = b  # still sent: look again from here
+        elif b["time_s"] - a["time_s"] >= 0.3:
+            return
+    raise AssertionError("the daemon still sends the live topic with no subscriber left")
+
+
 def test_live_topic_free_thermal_noise():
     """A subscriber that only watches sees the free lever breathe: <x^2> = kT/k within its statistical error.
     N = 60000 samples (decimation 1; point samples: antialias "point", the default "mean" averages each sample
@@ -88,7 +104,7 @@ def test_live_topic_free_thermal_noise():
     # a subscriber to everything sees no live message unless someone asked for the topic: greeted first
     d.cmd({"cmd": "set", "values": {"monitor_rate_Hz": 100}})
     s.close(0)
-    time.sleep(0.3)
+    wait_live_unsubscribed(d)
     a = d.sub(topics=(b"",), greet=True)
     t0 = time.time()
     while time.time() - t0 < 0.5:
