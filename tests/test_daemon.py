@@ -1064,8 +1064,10 @@ def test_detector_adc_offset_clipping_and_log(fig4, tmp_path):
 def wait_log_curves(d, n, timeout=30):
     deadline = time.time() + timeout
     while time.time() < deadline:
-        if d.cmd({"cmd": "status"})["log"]["curves"] >= n:
+        log = d.cmd({"cmd": "status"})["log"]
+        if log["curves"] >= n:
             return
+        assert not log["overflows"] and not log["curves_dropped"], log  # lost: it will never be written
         time.sleep(0.01)
     raise AssertionError("the writer did not write the curve")
 
@@ -1083,16 +1085,19 @@ def wait_log_notice(s, run_id, timeout=30):
 def logged_then_stalled(tmp_path, hooks, name):
     """A paper-fig4 daemon with the given test hooks logging to tmp_path/name, one curve (index 0) run and
     written, then the writer stalled ($VAFMD_TEST_LOG_STALL): (daemon, subscriber, stall file, path, that
-    curve's run). Paced at 1x (a block every 5 ms): free-running, the core can outrun the writer through
-    a small ring or pool on a loaded machine, and then the unstalled curves would overflow too."""
+    curve's run). That curve in free run: a logged free run waits for the writer and loses nothing (paced
+    at 1x, a block every 5 ms, a writer descheduled for 40 ms on a loaded machine overflowed a ring of 8).
+    Then paced at 1x again, for the curves to come (a stalled writer must make them overflow)."""
     stall = tmp_path / "stall"
     d = Daemon("--preset", "paper-fig4", env={**hooks, "VAFMD_TEST_LOG_STALL": str(stall)})
     path = tmp_path / name
     assert d.cmd({"cmd": "log", "path": str(path)})["status"] == "ok"
     s = d.sub()
     settle(d, s)
+    assert d.cmd({"cmd": "set", "values": {"free_run": True}})["status"] == "ok"
     first = run_once(d, s, {"cmd": "curve", "index": 0})
     wait_log_curves(d, 1)
+    assert d.cmd({"cmd": "set", "values": {"free_run": False}})["status"] == "ok"
     stall.touch()
     time.sleep(0.2)  # the writer has seen the file (it looks every millisecond)
     return d, s, stall, path, first
@@ -1118,9 +1123,9 @@ def test_log_ring_overflow_drops_only_that_curve(tmp_path):
     deadline = time.time() + 30
     while d.cmd({"cmd": "status"})["log"]["queued"] and time.time() < deadline:  # the writer drains
         time.sleep(0.01)
-    # slower (a block every 20 ms): the 8-item ring must not overflow on a loaded machine (a CPU hog beside
-    # the suite made it at 1x)
-    assert d.cmd({"cmd": "set", "values": {"speed": 0.25}})["status"] == "ok"
+    # in free run (it waits for the writer): the 8-item ring must not overflow on a loaded machine (a CPU
+    # hog beside the suite made it at 1x; 0.25x, a block every 20 ms, only made it rarer)
+    assert d.cmd({"cmd": "set", "values": {"free_run": True}})["status"] == "ok"
     runs.append(run_once(d, s, {"cmd": "curve", "index": 2}))
     log = d.cmd({"cmd": "log", "stop": True})["log"]
     assert (log["curves"], log["overflows"], log["curves_dropped"], log["error"]) == (2, 2, 1, None), log
@@ -1172,7 +1177,7 @@ def test_log_pool_exhaustion_drops_only_that_curve(tmp_path):
     deadline = time.time() + 30
     while d.cmd({"cmd": "status"})["log"]["queued"] and time.time() < deadline:  # the writer drains
         time.sleep(0.01)
-    assert d.cmd({"cmd": "set", "values": {"block_s": 0.005, "speed": 0.25}})["status"] == "ok"  # see above
+    assert d.cmd({"cmd": "set", "values": {"block_s": 0.005, "free_run": True}})["status"] == "ok"  # see above
     kept.append(run_once(d, s, {"cmd": "curve", "index": 4}))
     log = d.cmd({"cmd": "log", "stop": True})["log"]
     assert (log["curves"], log["overflows"], log["curves_dropped"], log["error"]) == (3, 2, 2, None), log
