@@ -453,10 +453,12 @@ def test_log_journal_of_controller(tmp_path):
     assert d.cmd({"cmd": "engage"})["status"] == "ok"
     assert wait_event(s, ["engaged", "engage_failed", "crash"], 60)["kind"] == "engaged"
     second, _ = curve_at(d, sub, 2)
+    deadline = time.time() + 30  # the curves written (their "runs" entries are durable with them)
+    while d.cmd({"cmd": "status"})["log"]["curves"] < 2:
+        assert time.time() < deadline, "the writer did not write the curves"
+        time.sleep(0.01)
     assert d.cmd({"cmd": "withdraw"})["status"] == "ok"
-    wait_event(s, ["withdrawn"])
-    time.sleep(0.1)
-    d.proc.kill()  # kill -9: the withdraw's record must already be in the file
+    d.proc.kill()  # kill -9 at once: the withdraw's record must already be in the file when its reply came
     d.proc.wait(timeout=10)
     with h5py.File(path, "r") as h:
         j = json.loads(h.attrs["vafm ctrl"])

@@ -217,8 +217,11 @@ typedef struct vafmd_log {
     vafmd_ring fault_ring;                /* simulation thread → writer: faults injected while logging is on,
                                              kept in the file's root attribute "vafm faults" (faults.md) */
     vafmd_fault_rec fault_store[256];
-    pthread_mutex_t jmu;                  /* guards jpend (control thread ↔ writer thread; held briefly) */
+    pthread_mutex_t jmu;                  /* guards jpend, jseq (control thread ↔ writer thread; held briefly) */
     json_t *jpend;                        /* state-changing commands not yet taken by the writer (JSON array) */
+    uint64_t jseq;                        /* commands handed over so far (jpend's last one's number) */
+    atomic_uint_least64_t jdone;          /* the writer has made commands 1..jdone durable (or let them go: no
+                                             file, or the journal full) */
     /* writer thread: the open file's root attribute "vafm ctrl" (protocol/hdf5.md) */
     json_t *jnote;
     const void *jnote_of;                 /* the recorder it belongs to (a new log starts a new journal) */
@@ -227,8 +230,11 @@ typedef struct vafmd_log {
 } vafmd_log;
 
 /* Control thread: a command that changed the controller's state (or may have: set) was applied; with
- * logging on, the writer adds it to the file's "vafm ctrl" journal (steals rec). */
+ * logging on, the writer adds it to the file's "vafm ctrl" journal (steals rec) and flushes the file. Returns
+ * once it has (the command's reply says it is durable: protocol/hdf5.md), the log is no longer on, or after
+ * VAFMD_LOG_JOURNAL_WAIT_NS (a writer held up: the record is still written, later). */
 void vafmd_log_journal(struct vafmd *d, json_t *rec);
+#define VAFMD_LOG_JOURNAL_WAIT_NS 2000000000LL
 
 #define VAFMD_LOOKAHEAD_MAX_BYTES (256u << 20) /* memory of a run's compute-ahead FIFO (sim_thread.c) */
 #define VAFMD_STREAM_MAX_BYTES (256u << 20)   /* samples queued for one subscriber (sim_publish.c) */

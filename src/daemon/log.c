@@ -158,8 +158,47 @@ void vafmd_log_journal(vafmd *d, json_t *rec)
         L->jpend = json_array();
     if (json_array_size(L->jpend) < 4096)
         json_array_append(L->jpend, rec);
+    const uint64_t seq = ++L->jseq;
     pthread_mutex_unlock(&L->jmu);
     json_decref(rec);
+    /* durable before the reply (a kill -9 right after it must not lose it): the writer takes it within a
+     * millisecond, or between two items of a run it is writing */
+    struct timespec t0, t;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    while (atomic_load_explicit(&L->jdone, memory_order_acquire) < seq &&
+           atomic_load_explicit(&L->state, memory_order_acquire) == VAFMD_LOG_ON &&
+           !atomic_load_explicit(&L->quit, memory_order_acquire)) {
+        clock_gettime(CLOCK_MONOTONIC, &t);
+        if ((long long)(t.tv_sec - t0.tv_sec) * 1000000000LL + (t.tv_nsec - t0.tv_nsec) > VAFMD_LOG_JOURNAL_WAIT_NS)
+            break;
+        nanosleep(&(struct timespec){ 0, 50000 }, NULL);
+    }
+}
+
+/* Writer thread: the commands handed over since the last call into the journal, flushed (durable), and the
+ * control thread told (jdone). */
+static void s_journal_take(vafmd_log *L, int st)
+{
+    json_t *cmds = NULL;
+    pthread_mutex_lock(&L->jmu);
+    if (L->jpend && json_array_size(L->jpend)) {
+        cmds = L->jpend;
+        L->jpend = NULL;
+    }
+    const uint64_t upto = L->jseq;
+    pthread_mutex_unlock(&L->jmu);
+    if (cmds && st == VAFMD_LOG_ON && L->w) {
+        size_t i;
+        json_t *v;
+        json_array_foreach(cmds, i, v) s_journal_add(L, "commands", json_incref(v));
+        s_journal_note(L);
+        vafm_error e; /* durable now: commands are rare, and a kill must not lose one */
+        memset(&e, 0, sizeof e);
+        if (vafm_recorder_flush(L->w, &e))
+            s_set_err(L, "the controller journal: %s%s", e.message, "");
+    }
+    json_decref(cmds);
+    atomic_store_explicit(&L->jdone, upto, memory_order_release);
 }
 
 /* Append the finished curve; the recorder makes it durable before it returns (flush interval 0). */
@@ -312,27 +351,11 @@ void *vafmd_log_main(void *arg)
                 s_set_err(L, "the fault record: %s%s", text ? e.message : "out of memory", "");
             free(text);
         }
-        json_t *cmds = NULL; /* state-changing commands from the control thread */
-        pthread_mutex_lock(&L->jmu);
-        if (L->jpend && json_array_size(L->jpend)) {
-            cmds = L->jpend;
-            L->jpend = NULL;
-        }
-        pthread_mutex_unlock(&L->jmu);
-        if (cmds && st == VAFMD_LOG_ON && L->w) {
-            size_t i;
-            json_t *v;
-            json_array_foreach(cmds, i, v) s_journal_add(L, "commands", json_incref(v));
-            s_journal_note(L);
-            vafm_error e; /* durable now: commands are rare, and a kill must not lose one */
-            memset(&e, 0, sizeof e);
-            if (vafm_recorder_flush(L->w, &e))
-                s_set_err(L, "the controller journal: %s%s", e.message, "");
-        }
-        json_decref(cmds);
+        s_journal_take(L, st); /* state-changing commands from the control thread */
         while (vafmd_ring_pop(&L->ring, &it)) {
             got = 1;
             s_handle(L, &c, &it, st != VAFMD_LOG_OFF);
+            s_journal_take(L, st); /* a run's items may keep coming: the command waits for its reply */
         }
         if (st == VAFMD_LOG_STOPPING) {
             /* everything pushed before the stop request was popped above (the request is made only when
