@@ -304,6 +304,9 @@ def test_set_keeps_the_controller_state():
     s = live_sub(d)
     d.cmd({"cmd": "engage"})
     assert wait_event(s, ["engaged", "engage_failed", "crash"], 60)["kind"] == "engaged"
+    # the clock at 0.01x while the held command and the set are given and checked (at 50x its 20 s passed in
+    # 0.4 s of wall time: on a loaded machine the move came late), then at 50x again
+    assert d.cmd({"cmd": "set", "values": {"speed": 0.01}})["status"] == "ok"
     st0 = d.cmd({"cmd": "status"})["ctrl"]
     at = st0["time_s"] + 20.0
     r = d.cmd({"cmd": "move", "x_m": 1e-6, "y_m": 0, "at_s": at})
@@ -320,6 +323,8 @@ def test_set_keeps_the_controller_state():
     # height in contact, sqrt(kT/(k + k_c)) < 1 pm (k_c ~ 90 N/m, contact-silica), plus the integral loop's
     # correction of a deflection off by the lever's thermal sd sqrt(kT/k) = 0.2 nm: 1 nm bounds both
     assert abs(st["piezo_z_m"] - st0["piezo_z_m"]) < 1e-9, (st0["piezo_z_m"], st["piezo_z_m"])
+    assert d.cmd({"cmd": "set", "values": {"speed": 50}})["status"] == "ok"
+    assert d.cmd({"cmd": "status"})["ctrl"]["generation"] == st["generation"]  # the same controller, faster
     f, states = [], []
     while len(f) < 50:
         t, m = recv(s)
