@@ -483,21 +483,27 @@ static void s_hash_sink(void *user, const vafm_ctrl_samples *b)
     *h = s_fnv(*h, b->state, b->n);
 }
 
+/* The scripted sessions' set-up: the scene with this seed over a disc 50 nm high, the motor at 25 µm. */
+static vafm_ctrl *s_disc_session(vafm_params *p, vafm_map_spec *map, vafm_ctrl_params *cp, uint64_t seed)
+{
+    s_scene(p);
+    p->seed = seed;
+    vafm_map_spec_default(map);
+    map->pattern = VAFM_MAP_DISC;
+    map->center_x_m = 5e-6;
+    map->radius_m = 2e-6;
+    map->height_m = 50e-9;
+    vafm_ctrl_params_default(cp);
+    cp->motor_z0_m = 25e-6;
+    return s_new(p, cp, map);
+}
+
 static uint64_t s_session(uint64_t seed)
 {
     vafm_params p;
-    s_scene(&p);
-    p.seed = seed;
     vafm_map_spec map;
-    vafm_map_spec_default(&map);
-    map.pattern = VAFM_MAP_DISC;
-    map.center_x_m = 5e-6;
-    map.radius_m = 2e-6;
-    map.height_m = 50e-9;
     vafm_ctrl_params cp;
-    vafm_ctrl_params_default(&cp);
-    cp.motor_z0_m = 25e-6;
-    vafm_ctrl *c = s_new(&p, &cp, &map);
+    vafm_ctrl *c = s_disc_session(&p, &map, &cp, seed);
     uint64_t h = 1469598103934665603ULL;
     vafm_error err;
     vafm_ctrl_advance(c, 1000, s_hash_sink, &h);
@@ -537,6 +543,15 @@ static void test_reproducible(void)
 
 /* ---- carry: the state goes on in a controller built over new settings (issue #27) ---------------- */
 
+/* The carry tests' start: the scene over a flat surface, the motor at 30 µm, engaged and settled. */
+static vafm_ctrl *s_engaged_flat(vafm_params *p, vafm_ctrl_params *cp)
+{
+    s_scene(p);
+    vafm_ctrl_params_default(cp);
+    cp->motor_z0_m = 30e-6;
+    return s_engaged(p, cp, NULL);
+}
+
 static vafm_ctrl *s_carried(vafm_ctrl *old, vafm_params *p, vafm_ctrl_params *cp, const vafm_map_spec *map)
 {
     vafm_ctrl *c = s_new(p, cp, map);
@@ -561,6 +576,18 @@ static void s_carry_sink(void *user, const vafm_ctrl_samples *b)
     }
 }
 
+/* Advance a carried controller by n samples: the mean force with its standard error (S_NB blocks) in m and se.
+ * @return the samples not in the engaged state. */
+static long s_carry_run(vafm_ctrl *c, long n, double *m, double *se)
+{
+    s_carry_rec rec;
+    memset(&rec, 0, sizeof rec);
+    s_blk_init(&rec.f, n);
+    ENSURE(vafm_ctrl_advance(c, (size_t)n, s_carry_sink, &rec) == n);
+    s_blk_stat(&rec.f, 0, m, se);
+    return rec.not_engaged;
+}
+
 /* Engaged at 10 kHz and 298 K, carried into a controller over 20 kHz and 350 K: still engaged at once, the motor
  * and piezo where they were, the clock going on (time continues, the new interval from there), and the feedback
  * holds the setpoint: over N = 100 000 samples (5 s; S_NB blocks of 2000, far beyond the correlation time) the
@@ -568,11 +595,8 @@ static void s_carry_sink(void *user, const vafm_ctrl_samples *b)
 static void test_carry_engaged(void)
 {
     vafm_params p;
-    s_scene(&p);
     vafm_ctrl_params cp;
-    vafm_ctrl_params_default(&cp);
-    cp.motor_z0_m = 30e-6;
-    vafm_ctrl *old = s_engaged(&p, &cp, NULL);
+    vafm_ctrl *old = s_engaged_flat(&p, &cp);
     vafm_ctrl_status a, b;
     vafm_ctrl_status_get(old, &a);
     ENSURE(a.state == VAFM_CTRL_ENGAGED && a.feedback && a.in_contact);
@@ -590,17 +614,13 @@ static void test_carry_engaged(void)
     vafm_ctrl_event ev;
     ENSURE(vafm_ctrl_event_pop(c, &ev) == 0); /* nothing to report */
     const long N = 100000;
-    s_carry_rec rec;
-    memset(&rec, 0, sizeof rec);
-    s_blk_init(&rec.f, N);
-    ENSURE(vafm_ctrl_advance(c, (size_t)N, s_carry_sink, &rec) == N);
-    vafm_ctrl_status_get(c, &b);
     double m, se;
-    s_blk_stat(&rec.f, 0, &m, &se);
+    const long not_engaged = s_carry_run(c, N, &m, &se);
+    vafm_ctrl_status_get(c, &b);
     fprintf(stderr, "  carried into 20 kHz, 350 K: <F> %.6g ± %.2g N (setpoint %.6g N), piezo %.6g -> %.6g m, "
             "t %.6f -> %.6f s, %ld samples not engaged\n", m, se, b.setpoint_N, a.piezo_z_m, b.piezo_z_m, a.time_s,
-            b.time_s, rec.not_engaged);
-    ENSURE(rec.not_engaged == 0 && b.state == VAFM_CTRL_ENGAGED);
+            b.time_s, not_engaged);
+    ENSURE(not_engaged == 0 && b.state == VAFM_CTRL_ENGAGED);
     ENSURE(fabs(m - b.setpoint_N) < 5.0 * se);
     ENSURE(b.sample == a.sample + (uint64_t)N);
     ENSURE_REL(b.time_s, a.time_s + (double)N / p2.sample_rate_Hz, 1e-12);
@@ -621,11 +641,8 @@ static void test_carry_engaged(void)
 static void test_carry_clamp(void)
 {
     vafm_params p;
-    s_scene(&p);
     vafm_ctrl_params cp;
-    vafm_ctrl_params_default(&cp);
-    cp.motor_z0_m = 30e-6;
-    vafm_ctrl *old = s_engaged(&p, &cp, NULL);
+    vafm_ctrl *old = s_engaged_flat(&p, &cp);
     vafm_error err;
     ENSURE(vafm_ctrl_move(old, 30e-6, -10e-6, 1e-2, &err) == 0);
     vafm_ctrl_event ev;
@@ -712,18 +729,9 @@ static void s_advance_carry(vafm_ctrl **c, long n, uint64_t at, vafm_params *p, 
 static uint64_t s_session_carry(uint64_t at)
 {
     vafm_params p;
-    s_scene(&p);
-    p.seed = 7;
     vafm_map_spec map;
-    vafm_map_spec_default(&map);
-    map.pattern = VAFM_MAP_DISC;
-    map.center_x_m = 5e-6;
-    map.radius_m = 2e-6;
-    map.height_m = 50e-9;
     vafm_ctrl_params cp;
-    vafm_ctrl_params_default(&cp);
-    cp.motor_z0_m = 25e-6;
-    vafm_ctrl *c = s_new(&p, &cp, &map);
+    vafm_ctrl *c = s_disc_session(&p, &map, &cp, 7);
     uint64_t h = 1469598103934665603ULL;
     vafm_error err;
     s_advance_carry(&c, 1000, at, &p, &cp, &map, &h);
@@ -769,11 +777,8 @@ static void test_carry_bit_for_bit(void)
 static void test_carry_adhesive_contact(void)
 {
     vafm_params p;
-    s_scene(&p);
     vafm_ctrl_params cp;
-    vafm_ctrl_params_default(&cp);
-    cp.motor_z0_m = 30e-6;
-    vafm_ctrl *old = s_engaged(&p, &cp, NULL);
+    vafm_ctrl *old = s_engaged_flat(&p, &cp);
     vafm_error err;
     ENSURE(vafm_ctrl_feedback_set(old, -1e-9, VAFM_CTRL_UNIT_N, 0, NAN, NAN, NAN, &err) == 0);
     ENSURE(vafm_ctrl_advance(old, 20000, NULL, NULL) == 20000);
@@ -789,19 +794,15 @@ static void test_carry_adhesive_contact(void)
     vafm_ctrl_params cp2 = *vafm_ctrl_params_get(old); /* the settings in force: the tensile setpoint */
     vafm_ctrl *c = s_carried(old, &p2, &cp2, NULL);
     vafm_ctrl_destroy(&old);
-    s_carry_rec rec;
-    memset(&rec, 0, sizeof rec);
-    s_blk_init(&rec.f, 20000);
-    ENSURE(vafm_ctrl_advance(c, 20000, s_carry_sink, &rec) == 20000);
+    double m, se;
+    const long not_engaged = s_carry_run(c, 20000, &m, &se);
     vafm_ctrl_status_get(c, &b);
     int lost = 0;
     while (vafm_ctrl_event_pop(c, &ev))
         lost += ev.type == VAFM_CTRL_EV_LOST_CONTACT;
-    double m, se;
-    s_blk_stat(&rec.f, 0, &m, &se);
     fprintf(stderr, "  carried into 300 K: in contact %d, lost_contact events %d, <F> %.4g ± %.2g N\n", b.in_contact,
             lost, m, se);
-    ENSURE(lost == 0 && b.in_contact && b.state == VAFM_CTRL_ENGAGED && rec.not_engaged == 0);
+    ENSURE(lost == 0 && b.in_contact && b.state == VAFM_CTRL_ENGAGED && not_engaged == 0);
     ENSURE(fabs(m - b.setpoint_N) < 5.0 * se);
     vafm_ctrl_destroy(&c);
 }
