@@ -1702,6 +1702,25 @@ static void seg4_make(syn *s, size_t n, uint64_t index)
     s->c.meta.segment_count = 4;
 }
 
+/* A copy of src at dst, opened read-write with plain HDF5 for a test to damage. */
+static hid_t s_copy_rw(const char *src, const char *dst)
+{
+    size_t n = 0;
+    unsigned char *b = s_slurp(src, &n);
+    s_spit(dst, b, n);
+    free(b);
+    hid_t f = H5Fopen(dst, H5F_ACC_RDWR, H5P_DEFAULT);
+    ENSURE(f >= 0);
+    return f;
+}
+
+/* The file says format version v (an older one than its content needs, for the hostile edits). */
+static void s_say_version(hid_t f, const char *v)
+{
+    H5Adelete(f, "vafm format version");
+    h_str(f, "vafm format version", v, 0);
+}
+
 /* A 4-segment list file of `count` curves (resume: continue it). @return 0 or the first error. */
 static int seg4_file(const char *path, int resume, int count, const char *list, vafm_error *e)
 {
@@ -1730,12 +1749,7 @@ static int seg4_file(const char *path, int resume, int count, const char *list, 
  * list and says 1.1 (a count with no list); 2 keeps the list and says 1.1; 3 drops the list and keeps 1.2. */
 static void seg4_hostile(const char *src, const char *dst, int kind)
 {
-    size_t n = 0;
-    unsigned char *b = s_slurp(src, &n);
-    s_spit(dst, b, n);
-    free(b);
-    hid_t f = H5Fopen(dst, H5F_ACC_RDWR, H5P_DEFAULT);
-    ENSURE(f >= 0);
+    hid_t f = s_copy_rw(src, dst);
     if (kind == 0) {
         hid_t d = H5Dopen2(f, "1/segment", H5P_DEFAULT);
         uint8_t v[4000];
@@ -1750,10 +1764,8 @@ static void seg4_hostile(const char *src, const char *dst, int kind)
     }
     if (kind == 1 || kind == 3)
         ENSURE(H5Adelete(f, "vafm segments") >= 0);
-    if (kind == 1 || kind == 2) {
-        H5Adelete(f, "vafm format version");
-        h_str(f, "vafm format version", "1.1", 0);
-    }
+    if (kind == 1 || kind == 2)
+        s_say_version(f, "1.1");
     H5Fclose(f);
 }
 
@@ -1942,20 +1954,13 @@ static void cseg_read_back(const char *path, size_t count)
  * list for a curve that is not there, 2 says 1.1, 3 gives curve 2 a 4-segment list (its count is 3). */
 static void cseg_hostile(const char *src, const char *dst, int kind)
 {
-    size_t n = 0;
-    unsigned char *b = s_slurp(src, &n);
-    s_spit(dst, b, n);
-    free(b);
-    hid_t f = H5Fopen(dst, H5F_ACC_RDWR, H5P_DEFAULT);
-    ENSURE(f >= 0);
+    hid_t f = s_copy_rw(src, dst);
     if (kind == 0)
         ENSURE(H5Adelete(f, "vafm segments 1") >= 0);
     if (kind == 1)
         h_str(f, "vafm segments 9", S_SEG3, 0);
-    if (kind == 2) {
-        H5Adelete(f, "vafm format version");
-        h_str(f, "vafm format version", "1.1", 0);
-    }
+    if (kind == 2)
+        s_say_version(f, "1.1");
     if (kind == 3) {
         H5Adelete(f, "vafm segments 2");
         h_str(f, "vafm segments 2", S_SEG4, 0);
