@@ -548,6 +548,10 @@ run info "$TMP/fd.h5"
 if [ "$rc" -eq 0 ] && grep -q "^vafm format  1.1," "$TMP/out" && ! grep -q "^segments" "$TMP/out"; then
     ok "run --out without a list: a format 1.1 file"
 else bad "run --out" "exit $rc"; fi
+# a tune runs no force curve: a segment list with it is a usage error (vafm run takes no --tune)
+expect_fail "samples --tune --segments: excluded" 2 "--segments and --tune exclude each other" -- \
+    samples --tune --segments "$TMP/seg4.json" --csv "$TMP/tuneseg.csv"
+expect_fail "run --tune: not an option of vafm run" 2 "--tune does not apply" -- run --tune
 printf '{"segments": [{"kind": "retract", "speed_m_per_s": 0, "distance_m": 1e-7}]}' >"$TMP/segbad.json"
 expect_fail "--segments: a bad speed names the segment and field" 2 "segment 0" speed_m_per_s -- run --segments "$TMP/segbad.json"
 printf '[{"kind": "extend", "sped": 1}]' >"$TMP/segbad.json"

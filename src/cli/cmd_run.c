@@ -129,13 +129,23 @@ static int s_write_run(const vafm_cli_args *a, const vafm_params *p, s_gather *g
     return VAFM_CLI_EXIT_OK;
 }
 
-/* The scene, the --index and a simulation for it: the common start of vafm run and vafm samples. */
-static int s_open_sim(const vafm_cli_args *a, vafm_cli_scene *sc, uint64_t *index, vafm_sim **sim)
+/* The common start of vafm run and vafm samples: the scene, the --index and a simulation for it. */
+typedef struct s_start {
+    vafm_cli_scene sc;
+    uint64_t index;
+    vafm_sim *sim;
+} s_start;
+
+/* Fill st (st->sim NULL on an error). @return 0 or the exit status, reported. */
+static int s_open_sim(const vafm_cli_args *a, s_start *st)
 {
+    vafm_cli_scene *sc = &st->sc;
+    vafm_sim **sim = &st->sim;
+    *sim = NULL;
     /* a tune runs no force curve: it is checked at its own rate (tune_rate_Hz) against its own limits
      * (tune_duration_s) by vafm_sim_new_tune, not against a curve's at either rate */
     int rc = vafm_cli_resolve_scene(a, sc, !a->on[O_TUNE]);
-    if (rc || (rc = s_index_arg(a, index)) != 0)
+    if (rc || (rc = s_index_arg(a, &st->index)) != 0)
         return rc;
     if (!a->on[O_TUNE])
         return vafm_cli_new_sim(&sc->p, sim);
@@ -150,55 +160,53 @@ static int s_open_sim(const vafm_cli_args *a, vafm_cli_scene *sc, uint64_t *inde
 
 int vafm_cli_cmd_run(const vafm_cli_args *a)
 {
-    vafm_cli_scene sc;
-    uint64_t index;
-    vafm_sim *sim = NULL;
-    int rc = s_open_sim(a, &sc, &index, &sim);
+    s_start st;
+    int rc = s_open_sim(a, &st);
     if (rc)
         return rc;
-    vafm_cli_print_provenance(stdout, &sc);
-    vafm_cli_print_scene_si(stdout, &sc.p);
-    vafm_cli_print_scene_reduced(stdout, &sc.p, vafm_sim_dt(sim));
+    vafm_cli_print_provenance(stdout, &st.sc);
+    vafm_cli_print_scene_si(stdout, &st.sc.p);
+    vafm_cli_print_scene_reduced(stdout, &st.sc.p, vafm_sim_dt(st.sim));
     fflush(stdout);
     vafm_cli_progress pg;
     vafm_cli_progress_init(&pg, a);
     if (a->on[O_TUNE] && a->val[O_SEGMENTS]) {
         vafm_cli_error("--segments and --tune exclude each other");
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return VAFM_CLI_EXIT_USAGE;
     }
     vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
     size_t nseg = 0;
-    int r = s_begin_run(a, sim, index, segs, &nseg);
+    int r = s_begin_run(a, st.sim, st.index, segs, &nseg);
     if (r >= 1000) {
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return r - 1000;
     }
     s_gather g = { 0 };
     if (!r)
-        r = vafm_cli_advance_all(sim, a->val[O_OUT] ? s_gather_fn : NULL, &g, &pg);
+        r = vafm_cli_advance_all(st.sim, a->val[O_OUT] ? s_gather_fn : NULL, &g, &pg);
     if (r == VAFM_EABORT && g.full) {
         vafm_cli_error("%s: the run %s", a->val[O_OUT],
                        g.full == 1 ? "has more samples than a file's curve may hold (VAFM_H5_MAX_SAMPLES, 2^25)"
                                    : "does not fit in memory");
         s_gather_free(&g);
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return VAFM_CLI_EXIT_RUNTIME;
     }
     double wall = vafm_cli_now() - pg.t0;
     vafm_curve_result res;
-    vafm_sim_result(sim, &res);
+    vafm_sim_result(st.sim, &res);
     if (r) {
-        const vafm_error *e = vafm_sim_error(sim);
-        vafm_cli_error("curve %" PRIu64 " failed after %.6g s simulated: %s", index, res.duration_s,
+        const vafm_error *e = vafm_sim_error(st.sim);
+        vafm_cli_error("curve %" PRIu64 " failed after %.6g s simulated: %s", st.index, res.duration_s,
                 e ? e->message : vafm_strerror(r));
         s_gather_free(&g);
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return VAFM_CLI_EXIT_RUNTIME;
     }
-    vafm_sim_destroy(&sim);
-    vafm_cli_print_run_result(stdout, &sc.p, &res, wall);
-    rc = a->val[O_OUT] ? s_write_run(a, &sc.p, &g, &res, index, segs, nseg) : VAFM_CLI_EXIT_OK;
+    vafm_sim_destroy(&st.sim);
+    vafm_cli_print_run_result(stdout, &st.sc.p, &res, wall);
+    rc = a->val[O_OUT] ? s_write_run(a, &st.sc.p, &g, &res, st.index, segs, nseg) : VAFM_CLI_EXIT_OK;
     s_gather_free(&g);
     return rc;
 }
@@ -230,15 +238,13 @@ static int s_write_samples(void *user, const vafm_samples *b)
 
 int vafm_cli_cmd_samples(const vafm_cli_args *a)
 {
-    vafm_cli_scene sc;
-    uint64_t index;
-    vafm_sim *sim = NULL;
-    int rc = s_open_sim(a, &sc, &index, &sim);
+    s_start st;
+    int rc = s_open_sim(a, &st);
     if (rc)
         return rc;
     FILE *f = vafm_cli_open_out(a->val[O_CSV]);
     if (!f) {
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return VAFM_CLI_EXIT_RUNTIME;
     }
     vafm_cli_progress pg;
@@ -246,34 +252,34 @@ int vafm_cli_cmd_samples(const vafm_cli_args *a)
     if (a->on[O_TUNE] && a->val[O_SEGMENTS]) {
         vafm_cli_error("--segments and --tune exclude each other");
         vafm_cli_close_out(f, a->val[O_CSV], 1);
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return VAFM_CLI_EXIT_USAGE;
     }
     vafm_segment_spec segs[VAFM_SEGMENTS_MAX];
     size_t nseg = 0;
-    int r = a->on[O_TUNE] ? vafm_sim_tune_begin(sim, index) : s_begin_run(a, sim, index, segs, &nseg);
+    int r = a->on[O_TUNE] ? vafm_sim_tune_begin(st.sim, st.index) : s_begin_run(a, st.sim, st.index, segs, &nseg);
     if (r >= 1000) {
         vafm_cli_close_out(f, a->val[O_CSV], 1);
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return r - 1000;
     }
     int began = r == 0; /* a scene refused at the start (a tune too long) is a parameter error */
     s_out o = { .f = f };
-    o.hm = vafm_detector_height_differs(&sc.p);
+    o.hm = vafm_detector_height_differs(&st.sc.p);
     /* the columns of core/channels.h up to the segment, and the measured height's after it */
     vafm_channels_csv_head(f, o.hm ? vafm_channels[VAFM_CH_HEIGHT_MEASURED].csv : VAFM_CH_SEGMENT_CSV);
     fputc('\n', f);
-    vafm_detector_begin(&o.det, &sc.p, index);
+    vafm_detector_begin(&o.det, &st.sc.p, st.index);
     if (!r)
-        r = vafm_cli_advance_all(sim, s_write_samples, &o, &pg);
+        r = vafm_cli_advance_all(st.sim, s_write_samples, &o, &pg);
     rc = vafm_cli_close_out(f, a->val[O_CSV], r == VAFM_EABORT);
     if (r && r != VAFM_EABORT) {
-        const vafm_error *e = vafm_sim_error(sim);
-        vafm_cli_error("%s %" PRIu64 " failed: %s", a->on[O_TUNE] ? "tune" : "curve", index,
+        const vafm_error *e = vafm_sim_error(st.sim);
+        vafm_cli_error("%s %" PRIu64 " failed: %s", a->on[O_TUNE] ? "tune" : "curve", st.index,
                 e && e->message[0] ? e->message : vafm_strerror(r));
-        vafm_sim_destroy(&sim);
+        vafm_sim_destroy(&st.sim);
         return began ? VAFM_CLI_EXIT_RUNTIME : vafm_cli_exit_of(r);
     }
-    vafm_sim_destroy(&sim);
+    vafm_sim_destroy(&st.sim);
     return rc;
 }
