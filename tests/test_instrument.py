@@ -925,3 +925,31 @@ def test_paced_list_takes_its_simulated_time_at_any_output_rate():
         for k in ch:
             assert np.array_equal(ch[k].view(np.uint64), paced[name][k].view(np.uint64)), (name, k)
     d.stop()
+
+
+def test_stalled_live_subscriber_counts_drops():
+    """A live subscriber that never reads (receive queue of 1, the daemon's send queue of 2 messages) fills its
+    pipe: under XPUB_NODROP the live messages it has no room for are refused, and each refusal counts one in
+    ctrl.live.dropped (0 while nobody stalls); the daemon goes on (status answers, the controller runs)."""
+    d = Daemon("--hwm", "2")
+    stalled = None
+    try:
+        fs = d.cmd({"cmd": "get", "names": ["sample_rate_Hz"]})["values"]["sample_rate_Hz"]
+        assert d.cmd({"cmd": "set", "values": {"monitor_rate_Hz": fs, "speed": 4}})["status"] == "ok"
+        assert d.cmd({"cmd": "status"})["ctrl"]["live"]["dropped"] == 0
+        stalled = d.sub(rcvhwm=1, topics=(b"live",))  # subscribed, never read
+        deadline, st = time.time() + 30, None
+        while time.time() < deadline:
+            st = d.cmd({"cmd": "status"})["ctrl"]
+            if st["live"]["dropped"] > 0:
+                break
+            time.sleep(0.1)
+        print(f"stalled live subscriber: {st['live']['dropped']} live messages dropped, sample {st['sample']}")
+        assert st["live"]["dropped"] > 0, st
+        s1 = d.cmd({"cmd": "status"})["ctrl"]["sample"]
+        time.sleep(0.3)
+        assert d.cmd({"cmd": "status"})["ctrl"]["sample"] > s1  # the controller did not stall with it
+    finally:  # a socket left open would hang the context's teardown
+        if stalled is not None:
+            stalled.close(0)
+        d.stop()

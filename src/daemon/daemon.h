@@ -328,6 +328,17 @@ typedef struct vafmd {
 
 /* sim_thread.c */
 void *vafmd_sim_main(void *arg);
+/* sim_publish.c: send one n-part message on the PUB socket without blocking (EINTR retried). nodrop NULL: with
+ * ZMQ_XPUB_NODROP as it is; else *nodrop caches that setting, turned on for the send: a message that some
+ * matching subscriber has no room for (EAGAIN) then goes out lossy (to everyone with room), the setting off.
+ * @return 0 the message went out whole, 1 it went out lossy, VAFM_EIO it did not go out (refused, nodrop NULL,
+ * or the socket failed; errno says why). */
+int vafmd_pub_send(void *pub, int *nodrop, const void *const *part, const size_t *len, int n);
+/* The same for the two parts [topic, text]. */
+int vafmd_pub_send_text(void *pub, int *nodrop, const char *topic, const char *text);
+/* The same for [topic, j's compact JSON]; j is taken (decref'd). VAFM_ENOMEM: j could not be written, nothing
+ * was sent. */
+int vafmd_pub_send_json(void *pub, int *nodrop, const char *topic, json_t *j);
 /* log.c: the HDF5 writer thread */
 void *vafmd_log_main(void *arg);
 /* auth.c: bind the ZAP socket (before any CURVE socket binds), make a socket a CURVE server, and the

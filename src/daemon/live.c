@@ -116,32 +116,26 @@ void vafmd_live_free(vafmd *d)
 
 /* ================================== simulation thread ================================== */
 
+/* A send's outcome on the counters: a message that did not go out (a full subscriber under XPUB_NODROP refuses
+ * the whole message at its first frame) counts one drop. */
+static void s_sent(vafmd_live *L, int rc)
+{
+    if (rc == VAFM_EIO)
+        L->dropped++;
+}
+
 static void s_send(vafmd_live *L, const void *const *part, const size_t *len, int n)
 {
-    if (L->dead)
-        return;
-    for (int i = 0; i < n; i++) {
-        int rc;
-        while ((rc = zmq_send(L->d->pub, part[i], len[i], ZMQ_DONTWAIT | (i + 1 < n ? ZMQ_SNDMORE : 0))) < 0 &&
-               errno == EINTR)
-            ;
-        if (rc < 0) { /* a full subscriber (XPUB_NODROP) refuses the whole message at its first frame */
-            L->dropped++;
-            return;
-        }
-    }
+    if (!L->dead)
+        s_sent(L, vafmd_pub_send(L->d->pub, NULL, part, len, n));
 }
 
 static void s_send_json(vafmd_live *L, const char *topic, json_t *j)
 {
-    char *text = json_dumps(j, JSON_COMPACT);
-    json_decref(j);
-    if (!text)
-        return;
-    const void *part[2] = { topic, text };
-    size_t len[2] = { strlen(topic), strlen(text) };
-    s_send(L, part, len, 2);
-    free(text);
+    if (L->dead)
+        json_decref(j);
+    else
+        s_sent(L, vafmd_pub_send_json(L->d->pub, NULL, topic, j));
 }
 
 void vafmd_live_subscription(vafmd *d, const char *topic, size_t n, int on)

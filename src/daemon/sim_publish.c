@@ -52,14 +52,6 @@ void vafmd_st_sleep_until(int64_t t)
         ;
 }
 
-static void s_set_nodrop(vafmd_st *x, int on)
-{
-    if (x->nodrop != on) {
-        zmq_setsockopt(x->d->pub, ZMQ_XPUB_NODROP, &on, sizeof on);
-        x->nodrop = on;
-    }
-}
-
 /* The channels a run streams (bits of its channel mask). */
 size_t vafmd_st_channels(unsigned chmask)
 {
@@ -85,51 +77,90 @@ void vafmd_st_stream_bound(vafmd_st *x, unsigned chmask, size_t block_n, int hwm
         x->sndhwm = hwm;
 }
 
-/* Send one multipart message without blocking. With XPUB_NODROP on, a frame that some matching
- * subscriber has no room for fails with EAGAIN: that counts one drop, and the message then goes out
- * lossy (to everyone with room). @return 0, or -1 if the socket failed otherwise. */
-static int s_send(vafmd_st *x, const void *const *part, const size_t *len, int n)
+/* ---- the daemon's PUB socket: the stream's messages and the live mode's ----------------------------- */
+
+static void s_set_nodrop(void *pub, int *nodrop, int on)
 {
-    int dropped = 0;
-    if (x->dead) /* a kill fault: the daemon is gone as far as the stream is concerned */
-        return 0;
-    s_set_nodrop(x, 1);
-    for (int i = 0; i < n; i++) {
-        int flags = ZMQ_DONTWAIT | (i + 1 < n ? ZMQ_SNDMORE : 0);
-        int rc;
-        while ((rc = zmq_send(x->d->pub, part[i], len[i], flags)) < 0 && errno == EINTR)
-            ;
-        if (rc < 0 && errno == EAGAIN && !dropped) {
-            dropped = 1;
-            s_set_nodrop(x, 0);
-            while ((rc = zmq_send(x->d->pub, part[i], len[i], flags)) < 0 && errno == EINTR)
-                ;
-        }
-        if (rc < 0)
-            return -1;
+    if (*nodrop != on) {
+        zmq_setsockopt(pub, ZMQ_XPUB_NODROP, &on, sizeof on);
+        *nodrop = on;
     }
-    if (dropped)
-        atomic_fetch_add_explicit(&x->d->sh.dropped, 1, memory_order_relaxed);
-    return 0;
 }
 
-void vafmd_st_send_json(vafmd_st *x, const char *topic, json_t *j)
+static int s_send_part(void *pub, const void *data, size_t len, int flags)
+{
+    int rc;
+    while ((rc = zmq_send(pub, data, len, flags)) < 0 && errno == EINTR)
+        ;
+    return rc;
+}
+
+int vafmd_pub_send(void *pub, int *nodrop, const void *const *part, const size_t *len, int n)
+{
+    int lossy = 0;
+    if (nodrop)
+        s_set_nodrop(pub, nodrop, 1);
+    for (int i = 0; i < n; i++) {
+        const int flags = ZMQ_DONTWAIT | (i + 1 < n ? ZMQ_SNDMORE : 0);
+        int rc = s_send_part(pub, part[i], len[i], flags);
+        if (rc < 0 && errno == EAGAIN && nodrop && !lossy) {
+            lossy = 1;
+            s_set_nodrop(pub, nodrop, 0);
+            rc = s_send_part(pub, part[i], len[i], flags);
+        }
+        if (rc < 0)
+            return VAFM_EIO;
+    }
+    return lossy;
+}
+
+int vafmd_pub_send_text(void *pub, int *nodrop, const char *topic, const char *text)
+{
+    const void *part[2] = { topic, text };
+    size_t len[2] = { strlen(topic), strlen(text) };
+    return vafmd_pub_send(pub, nodrop, part, len, 2);
+}
+
+int vafmd_pub_send_json(void *pub, int *nodrop, const char *topic, json_t *j)
 {
     char *text = json_dumps(j, JSON_COMPACT);
     json_decref(j);
     if (!text)
-        return;
-    const void *part[2] = { topic, text };
-    size_t len[2] = { strlen(topic), strlen(text) };
-    s_send(x, part, len, 2);
+        return VAFM_ENOMEM;
+    int rc = vafmd_pub_send_text(pub, nodrop, topic, text);
     free(text);
+    return rc;
+}
+
+/* ---- the stream's sends: lossless to every subscriber with room, else lossy and one drop counted ---- */
+
+/* A send's outcome on the counters: a message that went out lossy (some subscriber had no room) counts one
+ * drop; one that did not go out (the socket failed) counts none. */
+static void s_sent(vafmd_st *x, int rc)
+{
+    if (rc == 1)
+        atomic_fetch_add_explicit(&x->d->sh.dropped, 1, memory_order_relaxed);
+}
+
+/* A kill fault: the daemon is gone as far as the stream is concerned, nothing is sent. */
+static void s_send(vafmd_st *x, const void *const *part, const size_t *len, int n)
+{
+    if (!x->dead)
+        s_sent(x, vafmd_pub_send(x->d->pub, &x->nodrop, part, len, n));
+}
+
+void vafmd_st_send_json(vafmd_st *x, const char *topic, json_t *j)
+{
+    if (x->dead)
+        json_decref(j);
+    else
+        s_sent(x, vafmd_pub_send_json(x->d->pub, &x->nodrop, topic, j));
 }
 
 void vafmd_st_send_text(vafmd_st *x, const char *topic, const char *text)
 {
-    const void *part[2] = { topic, text };
-    size_t len[2] = { strlen(topic), strlen(text) };
-    s_send(x, part, len, 2);
+    if (!x->dead)
+        s_sent(x, vafmd_pub_send_text(x->d->pub, &x->nodrop, topic, text));
 }
 
 static const char *s_seg_name(int s)
