@@ -211,9 +211,7 @@ int vafm_ctrl_engage(vafm_ctrl *c)
     c->base_n = 0;
     c->base_boot = 0;
     c->motor_target = c->motor_z;
-    c->z_target = 0.0; /* the baseline is measured with the piezo retracted */
-    c->z_speed = c->cp.z_speed_m_per_s;
-    c->z_moving = 1;
+    vafm_ctrl_piezo_to(c, 0.0); /* the baseline is measured with the piezo retracted */
     return 0;
 }
 
@@ -234,9 +232,7 @@ int vafm_ctrl_withdraw(vafm_ctrl *c, unsigned motor_steps)
     c->moving = 0;
     c->motor_target = c->motor_z;
     c->back_steps = motor_steps;
-    c->z_target = 0.0;
-    c->z_speed = c->cp.z_speed_m_per_s;
-    c->z_moving = 1;
+    vafm_ctrl_piezo_to(c, 0.0);
     return 0;
 }
 
@@ -285,9 +281,7 @@ int vafm_ctrl_z(vafm_ctrl *c, double z_m, vafm_error *err)
         c->state = VAFM_CTRL_IDLE;
     c->feedback = 0;
     c->saturated = 0;
-    c->z_target = z_m;
-    c->z_speed = c->cp.z_speed_m_per_s;
-    c->z_moving = 1;
+    vafm_ctrl_piezo_to(c, z_m);
     return 0;
 }
 

@@ -81,6 +81,14 @@ static inline void vafm_ctrl_push(vafm_ctrl *c, int type, int reason, double val
     e->value = value;
 }
 
+/** The piezo moves to z (m) at the z speed of retracts, withdraws and z moves (cp.z_speed_m_per_s). */
+static inline void vafm_ctrl_piezo_to(vafm_ctrl *c, double z)
+{
+    c->z_target = z;
+    c->z_speed = c->cp.z_speed_m_per_s;
+    c->z_moving = 1;
+}
+
 /** The crash: feedback off, the piezo retracts, the motor backs off one step; events (ctrl_loop.c). */
 void vafm_ctrl_crash(vafm_ctrl *c);
 

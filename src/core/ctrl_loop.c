@@ -51,9 +51,7 @@ void vafm_ctrl_crash(vafm_ctrl *c)
     c->moving = 0;
     /* the motor stops and backs off one step (the piezo alone cannot free a tip the motor pressed in) */
     c->motor_target = fmin(c->motor_z + c->cp.motor_step_m, c->cp.motor_max_m);
-    c->z_target = 0.0;            /* the piezo retracts */
-    c->z_speed = c->cp.z_speed_m_per_s;
-    c->z_moving = 1;
+    vafm_ctrl_piezo_to(c, 0.0); /* the piezo retracts */
 }
 
 static void s_fail(vafm_ctrl *c, int reason)
@@ -63,9 +61,7 @@ static void s_fail(vafm_ctrl *c, int reason)
     c->state = VAFM_CTRL_IDLE;
     c->phase = VAFM_CTRL_ENGAGE_NONE;
     c->motor_target = c->motor_z;
-    c->z_target = 0.0;
-    c->z_speed = c->cp.z_speed_m_per_s;
-    c->z_moving = 1;
+    vafm_ctrl_piezo_to(c, 0.0);
 }
 
 /* the engage's state machine, at one sample boundary (before the motion) */
