@@ -830,13 +830,7 @@ static int s_advance(vafm_sim *s, size_t max_samples, uint64_t *budget, vafm_sam
             }
         } else {
             s->nblk++;
-            s->sample_index++;
-            s->clock_samples = s->scene_samples;
-            if (in_retract) {
-                s->retract_samples++;
-                if (force < s->sample_min_force)
-                    s->sample_min_force = force;
-            }
+            s_sample_done(s, force, in_retract);
         }
         const size_t iseg0 = s->iseg;
         if (s->phase == S_PH_LIVE)

@@ -144,6 +144,19 @@ static inline void s_start_retract_at(vafm_sim *s, double v_retract)
                                                    : 4.0 * fmax(s->uspr_turn - end, 0.0) + s->margin + 1.0;
 }
 
+/* One output sample is complete (force: its force, reduced): count it, move the pacing clock to the scene
+ * samples it covers, and keep the retract's sampled minimum (a plain sample and a decimated one alike). */
+static inline void s_sample_done(vafm_sim *s, double force, int in_retract)
+{
+    s->sample_index++;
+    s->clock_samples = s->scene_samples;
+    if (in_retract) {
+        s->retract_samples++;
+        if (force < s->sample_min_force)
+            s->sample_min_force = force;
+    }
+}
+
 /* sim_segments.c: a list run's sample boundary (force: the sample's, reduced); a segment's decimation: add
  * block slot j to the running sums (@return 1 once the output sample is complete), then write it to slot j. */
 void vafm_sim_list_logic(vafm_sim *s, double force);

@@ -252,11 +252,5 @@ void vafm_sim_dec_emit(vafm_sim *s, size_t j, int seg, int in_retract)
     s->bseg[j] = (uint8_t)seg;
     const double force = s->dec_sum[6] * w;
     s->dec_n = 0;
-    s->sample_index++;
-    s->clock_samples = s->scene_samples;
-    if (in_retract) {
-        s->retract_samples++;
-        if (force < s->sample_min_force)
-            s->sample_min_force = force;
-    }
+    s_sample_done(s, force, in_retract);
 }
