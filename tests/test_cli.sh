@@ -446,9 +446,12 @@ else bad "campaign with piezo hysteresis" "exit $rc $(head -c 300 "$TMP/err")"; 
 # kill -9 in the middle, then --resume: the result equals an uninterrupted run, curve for curve
 run campaign -n 50 "${GRID[@]}" --out "$TMP/ref.h5" -q
 full=$(stat -c %s "$TMP/ref.h5" 2>/dev/null || echo 0)
-# (the scalar kernel: it finishes curves one by one, so the file grows as they become durable; the batch
-# kernel appends ~16 at once and the size would say little about what the flusher made durable)
-"$VAFM" campaign -n 50 "${GRID[@]}" --out "$TMP/k.h5" -q --threads 1 --flush-interval 0.05 --kernel scalar >/dev/null 2>&1 &
+# (the scalar kernel: it finishes curves one by one, so the file grows as they are written; the batch
+# kernel appends ~16 at once and the size would say little about what the flusher made durable. A curve's
+# raw data reaches the file before the flush that commits it, and the whole campaign takes ~0.15 s on an idle
+# machine: with a 0.05 s interval the first flush could still be under way at 40% of the file, and a kill
+# there rightly leaves 0 curves. A flush every 2 ms makes curves durable as they come.)
+"$VAFM" campaign -n 50 "${GRID[@]}" --out "$TMP/k.h5" -q --threads 1 --flush-interval 0.002 --kernel scalar >/dev/null 2>&1 &
 pid=$!
 size=0
 while kill -0 "$pid" 2>/dev/null; do
