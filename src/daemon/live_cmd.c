@@ -249,11 +249,36 @@ static const char s_sample_doc[] = "the sample under the controller and under a 
                                    "uniform sample of the scene's material) or a map's fields as name=value pairs "
                                    "(\"pattern=stripes,period_m=4e-6,b_E_star_Pa=5e9\"), at most 1024 characters";
 
+/* Every setting of the controller's side, in `get`'s order: the ctrl_* table, monitor_rate_Hz, ctrl_sample. */
+static json_t *s_setting_names(void)
+{
+    json_t *a = json_array();
+    for (size_t i = 0; a && i < S_NCSET; i++) {
+        char nm[64];
+        snprintf(nm, sizeof nm, "ctrl_%s", s_csets[i].name);
+        json_array_append_new(a, json_string(nm));
+    }
+    json_array_append_new(a, json_string("monitor_rate_Hz"));
+    json_array_append_new(a, json_string("ctrl_sample"));
+    return a;
+}
+
+/* `get`'s info of one of them (unit, kind, doc). */
+static json_t *s_setting_info(const char *name)
+{
+    const s_cset *f = s_cset_find(name);
+    if (f)
+        return s_cset_info(f);
+    if (!strcmp(name, "ctrl_sample"))
+        return json_pack("{s:s,s:s,s:s}", "unit", "", "kind", "text", "doc", s_sample_doc);
+    return json_pack("{s:s,s:s,s:s}", "unit", "Hz", "kind", "real", "doc", s_monitor_doc);
+}
+
 json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
 {
     vafmd_live *L = d->live;
     vafmd_cmd c2 = *c;
-    json_t *names = NULL, *extra = json_array();
+    json_t *names = NULL, *extra = c->names ? json_array() : s_setting_names();
     if (c->names) { /* split the names: the controller's here, the rest to vafmd_get_values */
         names = json_array();
         size_t i;
@@ -264,14 +289,6 @@ json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
                               : names, n);
         }
         c2.names = names;
-    } else {
-        for (size_t i = 0; i < S_NCSET; i++) {
-            char nm[64];
-            snprintf(nm, sizeof nm, "ctrl_%s", s_csets[i].name);
-            json_array_append_new(extra, json_string(nm));
-        }
-        json_array_append_new(extra, json_string("monitor_rate_Hz"));
-        json_array_append_new(extra, json_string("ctrl_sample"));
     }
     json_t *v = vafmd_get_values(&d->scene, &d->set, &c2, e);
     json_decref(names);
@@ -285,17 +302,10 @@ json_t *vafmd_live_get(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     json_array_foreach(extra, i, n) {
         const char *s = json_string_value(n);
         const s_cset *f = s_cset_find(s);
-        if (!strcmp(s, "ctrl_sample")) {
-            json_object_set_new(vals, s, json_string(L->sample_text));
-            if (info)
-                json_object_set_new(info, s, json_pack("{s:s,s:s,s:s}", "unit", "", "kind", "text", "doc",
-                                                       s_sample_doc));
-            continue;
-        }
-        json_object_set_new(vals, s, f ? s_cset_value(&L->cp, f) : json_real(L->rate_ctl));
+        json_object_set_new(vals, s, f ? s_cset_value(&L->cp, f)
+                                       : !strcmp(s, "ctrl_sample") ? json_string(L->sample_text) : json_real(L->rate_ctl));
         if (info)
-            json_object_set_new(info, s, f ? s_cset_info(f) : json_pack("{s:s,s:s,s:s}", "unit", "Hz", "kind", "real",
-                                                                         "doc", s_monitor_doc));
+            json_object_set_new(info, s, s_setting_info(s));
     }
     json_decref(extra);
     return v;
@@ -556,18 +566,11 @@ int vafmd_live_config_key(const char *name)
 
 json_t *vafmd_live_settings_info(void)
 {
-    json_t *o = json_object();
-    for (size_t i = 0; o && i < S_NCSET; i++) {
-        char nm[64];
-        snprintf(nm, sizeof nm, "ctrl_%s", s_csets[i].name);
-        json_object_set_new(o, nm, s_cset_info(&s_csets[i]));
-    }
-    if (o) {
-        json_object_set_new(o, "monitor_rate_Hz", json_pack("{s:s,s:s,s:s}", "unit", "Hz", "kind", "real", "doc",
-                                                            s_monitor_doc));
-        json_object_set_new(o, "ctrl_sample", json_pack("{s:s,s:s,s:s}", "unit", "", "kind", "text", "doc",
-                                                        s_sample_doc));
-    }
+    json_t *o = json_object(), *names = s_setting_names(), *n;
+    size_t i;
+    json_array_foreach(names, i, n)
+        json_object_set_new(o, json_string_value(n), s_setting_info(json_string_value(n)));
+    json_decref(names);
     return o;
 }
 
