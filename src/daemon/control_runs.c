@@ -226,16 +226,8 @@ json_t *vafmd_control_start(vafmd *d, const vafmd_cmd *c, vafmd_err *e)
     sc.sim = sim;
     sc.segs = segs;
     sc.nseg = segs ? c->nseg : 0;
-    sc.start_json = vafmd_run_start_json(&p, &d->set, kind, run_id, sc.index, c->client_run_id, vafm_sim_dt(sim), NULL);
-    if (at_tip && sc.start_json) { /* run.start names the point: its scene (above) re-runs the curve exactly */
-        json_t *j = json_loads(sc.start_json, 0, NULL);
-        char *t = NULL;
-        if (j && !json_object_set(j, "sample", at_tip))
-            t = json_dumps(j, JSON_COMPACT);
-        json_decref(j);
-        free(sc.start_json);
-        sc.start_json = t;
-    }
+    sc.start_json = vafmd_run_start_json(&p, &d->set, kind, run_id, sc.index, c->client_run_id, vafm_sim_dt(sim), NULL,
+                                         at_tip);
     json_decref(at_tip);
     if (segs && sc.start_json) { /* run.start names the list: a block's segment is its position in it */
         json_t *j = json_loads(sc.start_json, 0, NULL);

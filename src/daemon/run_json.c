@@ -25,7 +25,7 @@ json_t *vafmd_channels_json(unsigned mask)
 }
 
 char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int kind, uint64_t run_id,
-                           uint64_t index, const char *client_run_id, double dt_s, json_t *camp)
+                           uint64_t index, const char *client_run_id, double dt_s, json_t *camp, json_t *sample)
 {
     size_t block_n = vafmd_block_samples(p->sample_rate_Hz, set->block_s);
     char *scene = malloc(65536);
@@ -57,6 +57,10 @@ char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int 
     json_object_set_new(start, "scene", scene_json ? scene_json : json_null());
     if (camp)
         json_object_set_new(start, "campaign", camp);
+    if (sample && json_object_set(start, "sample", sample)) { /* the point under the tip: its scene re-runs it */
+        json_decref(start);
+        return NULL;
+    }
     char *text = json_dumps(start, JSON_COMPACT);
     json_decref(start);
     return text;

@@ -21,8 +21,8 @@ json_t *vafmd_channels_json(unsigned mask);
 unsigned vafmd_live_channels(const vafm_params *p, const vafmd_settings *set);
 
 /** The "run.start" JSON text of a run (malloc'd; NULL on no memory). camp: the run's "campaign" object
- *  (stolen) or NULL. */
+ *  (stolen) or NULL; sample: a run from the live state's "sample" (borrowed) or NULL. */
 char *vafmd_run_start_json(const vafm_params *p, const vafmd_settings *set, int kind, uint64_t run_id,
-                           uint64_t index, const char *client_run_id, double dt_s, json_t *camp);
+                           uint64_t index, const char *client_run_id, double dt_s, json_t *camp, json_t *sample);
 
 #endif

@@ -669,14 +669,8 @@ static void s_camp_next(vafmd_st *x)
     c.camp = cp;
     memcpy(c.client_run_id, cp->client_run_id, sizeof c.client_run_id);
     c.start_json = vafmd_run_start_json(&pp, &cp->set, VAFMD_RUN_CURVE, c.run_id, g, cp->client_run_id,
-                                        vafm_sim_dt(cp->sim), cj);
-    if (c.start_json && cp->sample) { /* from the live state: the point under the tip, or the map's sample */
-        json_t *j = json_loads(c.start_json, 0, NULL);
-        char *t = j && !json_object_set(j, "sample", cp->sample) ? json_dumps(j, JSON_COMPACT) : NULL;
-        json_decref(j);
-        free(c.start_json);
-        c.start_json = t;
-    }
+                                        vafm_sim_dt(cp->sim), cj, cp->sample); /* from the live state: the point
+                                                                                 * under the tip, or the map's sample */
     if (!c.start_json) {
         vafmd_feed_curve_free(&c.feed);
         s_camp_end(x, "error", "out of memory", 1);
